@@ -1,0 +1,186 @@
+"""The core's description of one propagation problem: a static spec plus a dynamic pytree.
+
+``ForceModel`` is static (hashable; a jit static argument): which bodies exist, which
+act, which terms are on, integrator constants and the stopping condition.  ``Params``
+is a pytree of float64 arrays holding every number a study may differentiate or
+disperse (GMs, J2, spacecraft and propulsion values, thrust-arc controls and their
+biases, impulses).  ``build.py`` makes both from a validated deck; the numeric kernels
+only ever see these two objects, in km, s, kg, kW and rad.
+
+Thrust arcs (FRACAS EP, DETECT): arc ``k`` thrusts for ``t_on[k] <= t < t_off[k]``
+(seconds from the propagation epoch) with in-plane angle ``alpha`` and out-of-plane
+angle ``beta`` (rad) in EP's velocity frame (x along v, z along r x v, y = z x x) when
+``arc_frame[k] == 0``, or as right ascension / declination of an inertially fixed
+direction (ICRF) when ``arc_frame[k] == 1``; ``throttle`` scales thrust and mass flow.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from fracas import constants
+
+STOP_TIME = "time"
+STOP_SOI_ENTRY = "soi_entry"
+STOP_CLOSEST_APPROACH = "closest_approach"
+STOP_RADIUS = "radius"
+STOP_KINDS = (STOP_TIME, STOP_SOI_ENTRY, STOP_CLOSEST_APPROACH, STOP_RADIUS)
+
+POWER_SOLAR = "solar"
+POWER_NUCLEAR = "nuclear"
+
+FRAME_VELOCITY = 0  # EP's (v, (r x v) x v ... ) frame
+FRAME_INERTIAL = 1  # right ascension / declination in ICRF
+
+
+@dataclass(frozen=True)
+class IntegratorSettings:
+    """Encke/Nystrom control constants (Doc. 4 sec. 4.3; FRACAS INTEG).
+
+    c_nom: step constant in dt_nom = c_nom r_con^(3/2)/sqrt(mu) (dimensionless, 0.3 in Doc. 4)
+    dt_max_s: largest step (s); rect_ratio: rectify when |delta| > ratio |r_con| or
+    |nu| > ratio |v_con|; eps_t_s: time tolerance (s) for the final time and events;
+    max_steps: hard cap on loop iterations (a propagation that hits it reports status 2).
+    """
+
+    c_nom: float = 0.3
+    dt_max_s: float = 4000.0
+    rect_ratio: float = 0.01
+    eps_t_s: float = 1e-6
+    max_steps: int = 200_000
+
+
+@dataclass(frozen=True)
+class StopCondition:
+    """How a propagation ends besides the final time (FRACAS stopping conditions).
+
+    kind: 'time' | 'soi_entry' | 'closest_approach' | 'radius'; body: index into
+    ``ForceModel.bodies``; radius_km: for 'radius' (distance from ``body``).
+    """
+
+    kind: str = STOP_TIME
+    body: int = 0
+    radius_km: float = 0.0
+
+
+@dataclass(frozen=True)
+class ForceModel:
+    """Static structure of the force model (jit static argument; hashable).
+
+    bodies: names of every body with a position in the ephemeris table (index order);
+    primary: index of the initial primary (centre of the Encke conic and of the state);
+    third_bodies: indices acting as point-mass perturbers (never the current primary);
+    j2: J2 of the current primary on/off; srp: solar radiation pressure on/off;
+    thrust: any thrust arcs; velocity_dependent: the acceleration depends on v (thrust
+    in the velocity frame), so Nystrom needs its fourth evaluation;
+    power: 'solar' (P = P0 (1 AU / r_sun)^2) or 'nuclear' (P = P0 exp(-t/tau));
+    change_primary_at_soi: switch the primary when entering/leaving a sphere of influence.
+    """
+
+    bodies: tuple[str, ...] = ("earth",)
+    primary: int = 0
+    third_bodies: tuple[int, ...] = ()
+    j2: bool = False
+    srp: bool = False
+    thrust: bool = False
+    velocity_dependent: bool = False
+    power: str = POWER_SOLAR
+    change_primary_at_soi: bool = False
+    conic_bodies: tuple[int, ...] = ()  # bodies whose position comes from body_elements (EPHEM)
+    n_arcs: int = 0
+    n_impulses: int = 0
+    integrator: IntegratorSettings = field(default_factory=IntegratorSettings)
+    stop: StopCondition = field(default_factory=StopCondition)
+
+    def body_index(self, name: str) -> int:
+        return self.bodies.index(name)
+
+
+class Params(NamedTuple):
+    """Every dynamic number of a propagation (a pytree of float64 arrays).
+
+    Units: mu km^3/s^2; radius km; pole unit vectors; power kW; exhaust velocity km/s;
+    angles rad; times s from the propagation epoch; dv km/s; area m^2; isp s.
+    Per-body arrays have length ``len(ForceModel.bodies)``; per-arc arrays ``n_arcs``.
+    """
+
+    mu: np.ndarray  # (nb,) GM of each body
+    j2: np.ndarray  # (nb,) unnormalised J2
+    radius: np.ndarray  # (nb,) equatorial radius (J2 reference radius)
+    pole: np.ndarray  # (nb, 3) unit pole vectors (ICRF)
+    soi_radius: np.ndarray  # (nb,) sphere-of-influence radius (inf for the Sun)
+    parent: np.ndarray  # (nb,) index of the parent body (-1 for none); float for pytree uniformity
+    area_m2: np.ndarray  # () SRP area
+    cr: np.ndarray  # () reflectivity coefficient (1 absorber .. 2 mirror)
+    power_kw: np.ndarray  # () base power: at 1 AU (solar) or at t = 0 (nuclear)
+    power_decay_s: np.ndarray  # () nuclear e-folding time
+    efficiency: np.ndarray  # () thruster efficiency eta
+    exhaust_velocity_km_s: np.ndarray  # () c
+    thrust_scale: np.ndarray  # () overall thrust proportionality (1 nominal)
+    bias_in_rad: np.ndarray  # () overall in-plane pointing bias
+    bias_out_rad: np.ndarray  # () overall out-of-plane pointing bias
+    arc_t_on: np.ndarray  # (na,)
+    arc_t_off: np.ndarray  # (na,)
+    arc_alpha: np.ndarray  # (na,) in-plane angle / right ascension
+    arc_beta: np.ndarray  # (na,) out-of-plane angle / declination
+    arc_throttle: np.ndarray  # (na,) thrust level factor
+    arc_frame: np.ndarray  # (na,) 0 velocity frame, 1 inertial (float flags)
+    arc_thrust_scale: np.ndarray  # (na,) per-arc proportionality (1 nominal)
+    arc_bias_in_rad: np.ndarray  # (na,)
+    arc_bias_out_rad: np.ndarray  # (na,)
+    impulse_t: np.ndarray  # (ni,) time of each impulsive dV
+    impulse_dv: np.ndarray  # (ni, 3) dV in the frame of impulse_frame
+    impulse_frame: np.ndarray  # (ni,) 0 velocity frame, 1 inertial
+    impulse_isp_s: np.ndarray  # () specific impulse of the impulsive engine
+    body_elements: np.ndarray  # (nb, 6) heliocentric conic elements a km, e, i, raan, argp, M rad (EPHEM bodies)
+    body_elements_et: np.ndarray  # (nb,) TDB seconds past J2000 at which body_elements hold
+
+
+def default_params(model: ForceModel, **overrides) -> Params:
+    """Params with catalogue values for ``model.bodies`` and no thrust; keyword overrides."""
+    nb, na, ni = len(model.bodies), model.n_arcs, model.n_impulses
+    cat = [constants.BODIES[b] for b in model.bodies]
+    parent = [
+        float(model.bodies.index(b.parent)) if b.parent in model.bodies else -1.0 for b in cat
+    ]
+    f = np.float64
+    p = dict(
+        mu=np.array([b.mu_km3_s2 for b in cat], f),
+        j2=np.array([b.j2 for b in cat], f),
+        radius=np.array([b.radius_km for b in cat], f),
+        pole=np.array([constants.pole_unit_vector(b.name) for b in cat], f).reshape(nb, 3),
+        soi_radius=np.array([constants.soi_radius_km(b.name) for b in cat], f),
+        parent=np.array(parent, f),
+        area_m2=f(0.0),
+        cr=f(1.0),
+        power_kw=f(0.0),
+        power_decay_s=f(np.inf),
+        efficiency=f(1.0),
+        exhaust_velocity_km_s=f(30.0),
+        thrust_scale=f(1.0),
+        bias_in_rad=f(0.0),
+        bias_out_rad=f(0.0),
+        arc_t_on=np.zeros(na, f),
+        arc_t_off=np.zeros(na, f),
+        arc_alpha=np.zeros(na, f),
+        arc_beta=np.zeros(na, f),
+        arc_throttle=np.ones(na, f),
+        arc_frame=np.zeros(na, f),
+        arc_thrust_scale=np.ones(na, f),
+        arc_bias_in_rad=np.zeros(na, f),
+        arc_bias_out_rad=np.zeros(na, f),
+        impulse_t=np.zeros(ni, f),
+        impulse_dv=np.zeros((ni, 3), f),
+        impulse_frame=np.zeros(ni, f),
+        impulse_isp_s=f(300.0),
+        body_elements=np.zeros((nb, 6), f),
+        body_elements_et=np.zeros(nb, f),
+    )
+    for k, v in overrides.items():
+        if k not in p:
+            raise KeyError(f"unknown parameter {k!r}; known: {sorted(p)}")
+        p[k] = np.asarray(v, dtype=f)
+    return Params(**p)

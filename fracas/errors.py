@@ -1,0 +1,33 @@
+"""The one exception tree of fracas (edges only: config, io, cli).
+
+Every message names the file, the field, the value and what was expected; the command
+line prints it on one line and exits non-zero (traceback only under ``--debug``).
+"""
+
+from __future__ import annotations
+
+
+class FracasError(Exception):
+    """Base class of every error fracas reports to a user."""
+
+    exit_code = 2
+
+
+class DeckError(FracasError):
+    """A deck cannot be read or does not validate."""
+
+
+class ConfigError(FracasError):
+    """A validated deck asks for something the core cannot do (unknown body, time outside ephemeris)."""
+
+
+class StmFileError(FracasError):
+    """An STM file is missing, unreadable, incomplete or built from another trajectory."""
+
+
+class ConvergenceError(FracasError):
+    """An iteration (Kepler, event location, targeting) did not converge."""
+
+
+class NumericalError(FracasError):
+    """A propagation or covariance failed numerically (NaN, loss of positive-definiteness)."""

@@ -1,0 +1,1 @@
+"""Integration: the Encke/Nystrom propagator, sensitivities (STM, parameter matrix), batches."""

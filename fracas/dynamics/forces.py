@@ -1,0 +1,64 @@
+"""Perturbing accelerations, each a small pure function (km, s, kg; FRACAS GRAVFO, EP).
+
+Every function returns km/s^2 and is written for one position; batch with ``jax.vmap``.
+"""
+
+from __future__ import annotations
+
+from fracas import _jax  # noqa: F401
+import jax.numpy as jnp
+
+from fracas import constants
+
+
+def potter_f(q):
+    """Potter's f(q) = (1+q)^(3/2) - 1 = q (3 + 3q + q^2) / (1 + (1+q)^(3/2)), cancellation-free.
+
+    (Doc. 4 sec. 4.1; Battin 1964 sec. 9.3.)  Valid for every q > -1.
+    """
+    return q * (3.0 + q * (3.0 + q)) / (1.0 + (1.0 + q) ** 1.5)
+
+
+def point_mass_accel(r, mu):
+    """Two-body acceleration -mu r/|r|^3 (km/s^2) of a body of GM ``mu`` at the origin."""
+    rr = jnp.dot(r, r)
+    return -mu * r / (rr * jnp.sqrt(rr))
+
+
+def third_body_accel(r, rho, mu):
+    """Direct + indirect acceleration of a third body at ``rho`` (relative to the primary).
+
+    a = mu [(rho - r)/|rho - r|^3 - rho/|rho|^3], written as Battin's
+    a = -(mu/d^3) [r + f(q) rho] with q = r.(r - 2 rho)/rho^2 and d = |rho - r|, which does not
+    cancel when |r| << |rho| (Battin 1964 eq. 8.61; FRACAS GRAVFO).
+    """
+    rho2 = jnp.dot(rho, rho)
+    q = jnp.dot(r, r - 2.0 * rho) / rho2
+    d = rho - r
+    d2 = jnp.dot(d, d)
+    return -mu / (d2 * jnp.sqrt(d2)) * (r + potter_f(q) * rho)
+
+
+def j2_accel(r, mu, j2, radius, pole):
+    """Oblateness (J2) acceleration of the primary about its pole (Doc. 4 sec. 4.1, eq. for s_pert=1).
+
+    a = -(mu/r^2)(3/2) J2 (R/r)^2 [(1 - 5 sin^2 phi) i_r + 2 sin phi i_pole],
+    sin phi = i_r . i_pole (geocentric latitude).
+    """
+    rr = jnp.dot(r, r)
+    rn = jnp.sqrt(rr)
+    ir = r / rn
+    s = jnp.dot(ir, pole)
+    k = -1.5 * mu * j2 * radius * radius / (rr * rr)
+    return k * ((1.0 - 5.0 * s * s) * ir + 2.0 * s * pole)
+
+
+def srp_accel(r_from_sun, area_m2, mass_kg, cr):
+    """Solar radiation pressure, cannonball model, no shadow (km/s^2).
+
+    a = Cr (S/c) (A/m) (1 AU/r)^2 r_hat, with S/c = 4.54e-6 N/m^2 at 1 AU; r_from_sun is the
+    spacecraft position relative to the Sun (km).  N/kg = m/s^2 -> 1e-3 km/s^2.
+    """
+    rr = jnp.dot(r_from_sun, r_from_sun)
+    scale = cr * constants.SOLAR_PRESSURE_1AU_N_M2 * area_m2 / mass_kg * 1e-3 * constants.AU_KM**2
+    return scale * r_from_sun / (rr * jnp.sqrt(rr))

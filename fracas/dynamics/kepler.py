@@ -1,0 +1,167 @@
+"""Universal-variable conic propagation with f and g (Battin 1964, ch. 4; FRACAS CONIC/ENCON).
+
+The independent variable is the universal anomaly ``x`` (km^0.5), the dependent variable
+the time ``tau`` since the conic epoch (Doc. 4 sec. 4.1 names them x and tau; its Kepler
+routine, GN&C Eq. Doc. No. 3, was not available and is rebuilt here, see
+``shared/seeds/digests/encke-wmatrix.md`` sec. 6):
+
+    sqrt(mu) tau(x) = sigma0 x^2 C(xi) + (1 - alpha r0) x^3 S(xi) + r0 x,    xi = alpha x^2
+    r(x)            = x^2 C + sigma0 x (1 - xi S) + r0 (1 - xi C)         (= sqrt(mu) dtau/dx)
+
+with alpha = 2/r0 - v0^2/mu (1/a, negative for hyperbolas) and sigma0 = r0.v0/sqrt(mu).
+The Lagrange coefficients f, g, fdot, gdot give r = f r0 + g v0, v = fdot r0 + gdot v0.
+
+The root is found by the Laguerre-Conway iteration (Conway 1986; robust for ellipses,
+parabolas and hyperbolas, forward and backward, from a poor start) under
+``stop_gradient``; one final Newton step is taken with gradients so that forward- and
+reverse-mode AD give the exact implicit derivative dx/d(r0, v0, tau, mu).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from fracas import _jax  # noqa: F401  (float64, compilation cache)
+import jax
+import jax.numpy as jnp
+
+_SERIES_XI = 0.1  # |xi| below which C, S come from their Taylor series (no cancellation)
+_MAX_ITER = 60
+
+
+def stumpff(xi):
+    """Stumpff functions C(xi) = (1 - cos sqrt xi)/xi and S(xi) = (sqrt xi - sin sqrt xi)/xi^1.5.
+
+    Written without cancellation: 1 - cos y = 2 sin^2(y/2) (and cosh y - 1 = 2 sinh^2(y/2)),
+    and a 9-term Taylor series for |xi| < 0.1 (remainder < 1e-20).  Branches are guarded
+    (double ``where``) so that derivatives are finite everywhere.
+    """
+    small = jnp.abs(xi) < _SERIES_XI
+    # Taylor series: C = sum (-xi)^k/(2k+2)!, S = sum (-xi)^k/(2k+3)!
+    xs = jnp.where(small, xi, 0.0)
+    c_ser = jnp.zeros_like(xi)
+    s_ser = jnp.zeros_like(xi)
+    term_c = 0.5 * jnp.ones_like(xi)
+    term_s = jnp.ones_like(xi) / 6.0
+    for k in range(9):
+        c_ser = c_ser + term_c
+        s_ser = s_ser + term_s
+        term_c = -term_c * xs / ((2 * k + 3) * (2 * k + 4))
+        term_s = -term_s * xs / ((2 * k + 4) * (2 * k + 5))
+    pos = xi > 0
+    xe = jnp.where(small, 1.0, jnp.where(pos, xi, 1.0))
+    xh = jnp.where(small, -1.0, jnp.where(pos, -1.0, xi))
+    ye = jnp.sqrt(xe)
+    yh = jnp.sqrt(-xh)
+    c_ell = 2.0 * jnp.sin(0.5 * ye) ** 2 / xe
+    s_ell = (ye - jnp.sin(ye)) / (xe * ye)
+    c_hyp = 2.0 * jnp.sinh(0.5 * yh) ** 2 / (-xh)
+    s_hyp = (jnp.sinh(yh) - yh) / ((-xh) * yh)
+    c = jnp.where(small, c_ser, jnp.where(pos, c_ell, c_hyp))
+    s = jnp.where(small, s_ser, jnp.where(pos, s_ell, s_hyp))
+    return c, s
+
+
+def _time_of_x(x, r0, sigma0, alpha, sqrt_mu):
+    """sqrt(mu)*tau(x), r(x) and dr/dx for the universal Kepler equation."""
+    xi = alpha * x * x
+    c, s = stumpff(xi)
+    x2 = x * x
+    f = sigma0 * x2 * c + (1.0 - alpha * r0) * x2 * x * s + r0 * x
+    r = x2 * c + sigma0 * x * (1.0 - xi * s) + r0 * (1.0 - xi * c)
+    drdx = sigma0 * (1.0 - xi * c) + (1.0 - alpha * r0) * x * (1.0 - xi * s)
+    return f, r, drdx, c, s
+
+
+def initial_guess(r0, sigma0, alpha, sqrt_mu, tau):
+    """Starting x: sqrt(mu) tau alpha for ellipses, Vallado's log form for hyperbolas."""
+    x_ell = sqrt_mu * tau * alpha
+    a = 1.0 / jnp.where(alpha < 0, alpha, -1.0)  # negative semi-major axis (guarded)
+    sgn = jnp.where(tau >= 0, 1.0, -1.0)
+    arg = (-2.0 * sqrt_mu**2 * alpha * tau) / (
+        sigma0 * sqrt_mu + sgn * jnp.sqrt(sqrt_mu**2 * -a) * (1.0 - r0 * alpha)
+    )
+    arg = jnp.where(arg > 1e-300, arg, 1.0)
+    x_hyp = sgn * jnp.sqrt(-a) * jnp.log(arg)
+    x_par = sqrt_mu * tau / r0
+    x0 = jnp.where(alpha > 1e-12, x_ell, jnp.where(alpha < -1e-12, x_hyp, x_par))
+    return jnp.where(jnp.isfinite(x0), x0, x_par)
+
+
+def solve_universal_x(r0, sigma0, alpha, sqrt_mu, tau, x_start, rtol=1e-15):
+    """Root x of sqrt(mu) tau(x) = sqrt(mu) tau by Laguerre-Conway (n = 5), gradient-free.
+
+    Returns (x, n_iter).  Converged when |dx| <= rtol * max(|x|, 1) or after 60 iterations.
+    """
+    target = sqrt_mu * tau
+    n = 5.0
+
+    def cond(c):
+        x, dx, k = c
+        return (jnp.abs(dx) > rtol * jnp.maximum(jnp.abs(x), 1.0)) & (k < _MAX_ITER)
+
+    def body(c):
+        x, _, k = c
+        f, r, drdx, _, _ = _time_of_x(x, r0, sigma0, alpha, sqrt_mu)
+        fx = f - target
+        disc = jnp.abs((n - 1.0) ** 2 * r * r - n * (n - 1.0) * fx * drdx)
+        denom = r + jnp.sign(r) * jnp.sqrt(disc)
+        dx = -n * fx / jnp.where(denom == 0.0, 1.0, denom)
+        return x + dx, dx, k + 1
+
+    x, _, k = jax.lax.while_loop(
+        cond, body, (x_start, jnp.ones_like(x_start), jnp.zeros((), jnp.int32))
+    )
+    return x, k
+
+
+class ConicState(NamedTuple):
+    """Result of a conic propagation: r km, v km/s, the universal anomaly x and f, g coefficients."""
+
+    r: jax.Array
+    v: jax.Array
+    x: jax.Array
+    f: jax.Array
+    g: jax.Array
+    fdot: jax.Array
+    gdot: jax.Array
+
+
+def kepler_fg(r0_vec, v0_vec, tau, mu, x_start=None) -> ConicState:
+    """Propagate (r0, v0) on its conic by ``tau`` seconds (any sign; any conic) (FRACAS CONIC).
+
+    ``x_start`` warm-starts the iteration (for example x' + sqrt(mu)(tau - tau')/|r(tau')|
+    from the previous solve, as the Encke integrator does).  Differentiable in every
+    argument (implicit-function derivative of x).
+    """
+    r0 = jnp.linalg.norm(r0_vec)
+    sqrt_mu = jnp.sqrt(mu)
+    sigma0 = jnp.dot(r0_vec, v0_vec) / sqrt_mu
+    alpha = 2.0 / r0 - jnp.dot(v0_vec, v0_vec) / mu
+    if x_start is None:
+        x_start = initial_guess(r0, sigma0, alpha, sqrt_mu, tau)
+    sg = jax.lax.stop_gradient
+    x_star, _ = solve_universal_x(
+        sg(r0), sg(sigma0), sg(alpha), sg(sqrt_mu), sg(tau), sg(x_start)
+    )
+    x_star = sg(x_star)
+    # one Newton step with gradients: exact implicit derivative, value unchanged at the root
+    f, r, _, _, _ = _time_of_x(x_star, r0, sigma0, alpha, sqrt_mu)
+    x = x_star + (sqrt_mu * tau - f) / r
+    xi = alpha * x * x
+    c, s = stumpff(xi)
+    x2 = x * x
+    r = x2 * c + sigma0 * x * (1.0 - xi * s) + r0 * (1.0 - xi * c)
+    f_l = 1.0 - x2 * c / r0
+    g_l = tau - x2 * x * s / sqrt_mu
+    fdot = sqrt_mu * x * (xi * s - 1.0) / (r0 * r)
+    gdot = 1.0 - x2 * c / r
+    r_vec = f_l * r0_vec + g_l * v0_vec
+    v_vec = fdot * r0_vec + gdot * v0_vec
+    return ConicState(r_vec, v_vec, x, f_l, g_l, fdot, gdot)
+
+
+def kepler(r0_vec, v0_vec, tau, mu):
+    """Conic state (r km, v km/s) after ``tau`` seconds (convenience wrapper of kepler_fg)."""
+    out = kepler_fg(r0_vec, v0_vec, tau, mu)
+    return out.r, out.v

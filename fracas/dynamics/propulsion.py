@@ -1,0 +1,56 @@
+"""Low-thrust propulsion: power, thrust magnitude, mass flow and pointing (FRACAS EP, POWER).
+
+Power (FRACAS POWER; its text did not survive the scan, rebuilt from sec. 3.1 and App. 9.1):
+  solar array   P = P0 (1 AU / r_sun)^2           (P0 = power at 1 AU, kW)
+  nuclear       P = P0 exp(-t / tau_decay)       (t s since the propagation epoch)
+Thrust (FRACAS EP):  T = 2 eta P / c;  mass flow  mdot = -T / c.
+Canonical units: P in kW = 1e-3 kg km^2/s^3, so T [kg km/s^2] = 2e-3 eta P_kW / c_km_s.
+
+Pointing: in EP's velocity frame the thrust unit vector is
+  u = A [cos(beta) cos(alpha), cos(beta) sin(alpha), sin(beta)]
+with A = [v_hat, (h x v)_hat, h_hat] (columns), h = r x v (FRACAS EP matrix [A]); alpha is
+the in-plane angle from the velocity toward (h x v) and beta the out-of-plane angle toward
+h.  Inertially fixed pointing uses alpha = right ascension, beta = declination (ICRF).
+"""
+
+from __future__ import annotations
+
+from fracas import _jax  # noqa: F401
+import jax.numpy as jnp
+
+from fracas import constants
+
+
+def power_kw(p0_kw, r_from_sun_km, t_s, decay_s, solar: bool):
+    """Available power (kW): solar (1/r^2 from 1 AU) or nuclear (exponential decay) (FRACAS POWER)."""
+    if solar:
+        rr = jnp.dot(r_from_sun_km, r_from_sun_km)
+        return p0_kw * constants.AU_KM**2 / rr
+    return p0_kw * jnp.exp(-t_s / decay_s)
+
+
+def thrust_magnitude(power, efficiency, exhaust_velocity_km_s):
+    """Thrust T = 2 eta P / c in kg km/s^2 (= kN) for P in kW and c in km/s (FRACAS EP)."""
+    return 2e-3 * efficiency * power / exhaust_velocity_km_s
+
+
+def velocity_frame(r, v):
+    """EP's rotation matrix [v_hat, (h x v)_hat, h_hat] (columns), h = r x v (FRACAS EP)."""
+    h = jnp.cross(r, v)
+    x = v / jnp.linalg.norm(v)
+    z = h / jnp.linalg.norm(h)
+    y = jnp.cross(z, x)
+    return jnp.stack([x, y, z], axis=1)
+
+
+def angles_to_unit(alpha, beta):
+    """[cos b cos a, cos b sin a, sin b]: unit vector from in-plane / out-of-plane angles (rad)."""
+    cb = jnp.cos(beta)
+    return jnp.stack([cb * jnp.cos(alpha), cb * jnp.sin(alpha), jnp.sin(beta)])
+
+
+def thrust_direction(r, v, alpha, beta, inertial):
+    """Unit thrust vector in the inertial frame; ``inertial`` (0/1 float) selects RA/Dec pointing."""
+    u_local = angles_to_unit(alpha, beta)
+    u_vel = velocity_frame(r, v) @ u_local
+    return jnp.where(inertial > 0.5, u_local, u_vel)

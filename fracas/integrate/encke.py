@@ -376,6 +376,7 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
     """Integrate from c.t to t_end (either direction), stopping early at the stop condition."""
     st = model.integrator
     eps_t = st.eps_t_s
+    t_end = jnp.asarray(t_end, jnp.float64)
     direction = jnp.where(t_end >= c.t, 1.0, -1.0)
     breaks = _break_candidates(params)
 
@@ -391,9 +392,9 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
         dt_nom = st.c_nom * rc_n * jnp.sqrt(rc_n / mu)
         # next break in the direction of motion (DETECT)
         ahead = (breaks - c.t) * direction > eps_t
-        t_brk = jnp.where(ahead, breaks, t_end)
-        dist_brk = jnp.min(jnp.abs(t_brk - c.t), initial=jnp.inf)
-        span = jnp.minimum(jnp.abs(t_end - c.t), dist_brk)
+        # (t_end is appended so the min is never over an empty set: no inf tangents)
+        t_brk = jnp.concatenate([jnp.where(ahead, breaks, t_end), t_end[None]])
+        span = jnp.min(jnp.abs(t_brk - c.t))
         dt_normal = direction * jnp.minimum(jnp.minimum(span, dt_nom), st.dt_max_s)
         # Newton step on the event being located
         r = c.rc + c.delta

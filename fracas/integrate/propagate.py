@@ -15,6 +15,7 @@ propagation and every derivative (including d/dmu through the conic) is exact.
 
 from __future__ import annotations
 
+import dataclasses
 from functools import partial
 from typing import NamedTuple, Sequence
 
@@ -23,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fracas.dynamics.model import ForceModel, Params
+from fracas.dynamics.model import ForceModel, IntegratorSettings, Params
 from fracas.integrate import encke
 from fracas.params import get_values, set_values
 
@@ -76,9 +77,43 @@ def _finish(model, outs, c_final, t_out):
     )
 
 
-@partial(jax.jit, static_argnums=(0,))
+def split_model(model: ForceModel):
+    """(static model, dynamic integrator settings): c_nom, dt_max, the rectification ratio,
+    eps_t and max_steps are traced values, so changing them does not recompile."""
+    st = model.integrator
+    dyn = (
+        jnp.float64(st.c_nom),
+        jnp.float64(st.dt_max_s),
+        jnp.float64(st.rect_ratio),
+        jnp.float64(st.eps_t_s),
+        jnp.int32(st.max_steps),
+    )
+    return dataclasses.replace(model, integrator=IntegratorSettings()), dyn
+
+
+def join_model(static: ForceModel, dyn) -> ForceModel:
+    """Inverse of :func:`split_model` inside a trace."""
+    c_nom, dt_max, ratio, eps_t, max_steps = dyn
+    return dataclasses.replace(
+        static,
+        integrator=IntegratorSettings(
+            c_nom=c_nom, dt_max_s=dt_max, rect_ratio=ratio, eps_t_s=eps_t, max_steps=max_steps
+        ),
+    )
+
+
 def propagate(model: ForceModel, params: Params, ephem, epoch_et_s, x0, t_out) -> Trajectory:
-    """Propagate x0 (at t_out[0], s from the epoch ``epoch_et_s`` TDB s past J2000) through t_out."""
+    """Propagate x0 (at t_out[0], s from the epoch ``epoch_et_s`` TDB s past J2000) through t_out.
+
+    Jitted once per static model structure (integrator constants are traced).
+    """
+    static, dyn = split_model(model)
+    return _propagate(static, dyn, params, ephem, epoch_et_s, x0, t_out)
+
+
+@partial(jax.jit, static_argnums=(0,))
+def _propagate(static: ForceModel, dyn, params: Params, ephem, epoch_et_s, x0, t_out) -> Trajectory:
+    model = join_model(static, dyn)
     t_out = jnp.asarray(t_out, jnp.float64)
     x0 = jnp.asarray(x0, jnp.float64)
     c0, rs = encke.init_carry(model, params, ephem, epoch_et_s, t_out[0], x0)
@@ -95,15 +130,21 @@ def propagate(model: ForceModel, params: Params, ephem, epoch_et_s, x0, t_out) -
     return _finish(model, outs, c_final, t_out)
 
 
-@partial(jax.jit, static_argnums=(0, 6))
 def propagate_with_sensitivities(
-    model: ForceModel, params: Params, ephem, epoch_et_s, x0, t_out, param_labels: tuple[str, ...] = ()
+    model: ForceModel, params: Params, ephem, epoch_et_s, x0, t_out, param_labels: Sequence[str] = ()
 ) -> tuple[Trajectory, Sensitivities]:
     """As :func:`propagate`, plus STMs and parameter matrices by forward-mode AD (FRACAS STMGEN).
 
     ``param_labels``: labels from :mod:`fracas.params` (e.g. ``"mu[sun]"``, ``"thrust_scale"``,
     ``"arc_bias_in_rad[0]"``); the parameter matrices have one column per label.
     """
+    static, dyn = split_model(model)
+    return _propagate_sens(static, dyn, params, ephem, epoch_et_s, x0, t_out, tuple(param_labels))
+
+
+@partial(jax.jit, static_argnums=(0, 7))
+def _propagate_sens(static, dyn, params, ephem, epoch_et_s, x0, t_out, param_labels):
+    model = join_model(static, dyn)
     t_out = jnp.asarray(t_out, jnp.float64)
     x0 = jnp.asarray(x0, jnp.float64)
     labels = tuple(param_labels)

@@ -483,12 +483,24 @@ def state_of(c: Carry):
 def restart_from_state(model, params, c: Carry, x) -> Carry:
     """Carry whose deviations reproduce state ``x`` on the carry's conic (continuation with a
     differentiable entry point: delta = r - r_con(tau; mu), so derivatives of the next segment
-    with respect to x and to mu are exact while the primal equals the continued propagation)."""
+    with respect to x and to mu are exact while the primal equals the continued propagation).
+
+    At a conic epoch (tau = 0, e.g. the start) the conic itself is rebuilt from ``x``, so the
+    derivative is that of exactly the map a finite-difference run computes."""
     mu = params.mu[c.primary]
     sg = jax.lax.stop_gradient
     tau = c.t - c.t_rect
     cs = kepler_fg(c.r0, c.v0, tau, mu, sg(c.x_kep))
-    # when tau == 0 the conic is exactly (r0, v0)
-    rc = jnp.where(tau == 0.0, c.r0, cs.r)
-    vc = jnp.where(tau == 0.0, c.v0, cs.v)
-    return c._replace(rc=rc, vc=vc, delta=x[:3] - rc, nu=x[3:6] - vc, m=x[6])
+    at_epoch = tau == 0.0
+    r, v = x[:3], x[3:6]
+    rc = jnp.where(at_epoch, r, cs.r)
+    vc = jnp.where(at_epoch, v, cs.v)
+    return c._replace(
+        r0=jnp.where(at_epoch, r, c.r0),
+        v0=jnp.where(at_epoch, v, c.v0),
+        rc=rc,
+        vc=vc,
+        delta=jnp.where(at_epoch, jnp.zeros(3), r - rc),
+        nu=jnp.where(at_epoch, jnp.zeros(3), v - vc),
+        m=x[6],
+    )

@@ -1,0 +1,321 @@
+"""Deck -> core objects: the one place where units convert.
+
+:func:`build_propagation` turns a validated :class:`~fracas.config.trajectory.TrajectoryDeck`
+(days, degrees, Isp in s, frames as written) into a :class:`Problem`: a static
+:class:`~fracas.dynamics.model.ForceModel`, a :class:`~fracas.dynamics.model.Params` pytree
+and the initial state, all in km, s, kg, kW, rad and ICRF axes, plus the ephemeris table
+over the propagation window when any body's position is needed.
+
+Conversions made here (and nowhere else):
+  * days -> s (``constants.DAY_S``); degrees -> rad;
+  * Isp -> exhaust velocity c = Isp g0 (``constants.G0_KM_S2``);
+  * decay_days -> e-folding time tau in s (nuclear power);
+  * initial state: elements / spherical -> Cartesian (``fracas.dynamics.elements``), then
+    ECLIPJ2000 -> ICRF by R1(-eps), BODY_EQUATOR -> ICRF by A^T with A the planet
+    equatorial matrix of the centre's IAU pole;
+  * conic-body elements given in ECLIPJ2000 are rotated to ICRF-referenced elements;
+  * epochs (ISO TDB or Julian date) -> TDB s past J2000.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fracas import constants
+from fracas.config.trajectory import TrajectoryDeck, epoch_to_julian_date
+from fracas.dynamics.model import (
+    FRAME_INERTIAL,
+    FRAME_VELOCITY,
+    POWER_NUCLEAR,
+    POWER_SOLAR,
+    ForceModel,
+    IntegratorSettings,
+    Params,
+    StopCondition,
+    default_params,
+)
+from fracas.errors import ConfigError
+
+__all__ = ["Problem", "build_propagation", "output_times_s", "model_bodies"]
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Everything one propagation needs, in canonical units (km, s, kg, kW, rad; ICRF).
+
+    model, params: the core's static spec and dynamic pytree; ephem: DE421 table over the
+    propagation window (None when no body position is needed); epoch_et_s: TDB s past J2000
+    of t = 0; x0 (7,): r km, v km/s, mass kg relative to the primary; t_out (n,): output
+    times, s from the epoch; param_labels: columns of the parameter sensitivity matrices;
+    sensitivities: whether to propagate the STM and parameter matrices.
+    """
+
+    model: ForceModel
+    params: Params
+    ephem: object | None
+    epoch_et_s: float
+    x0: np.ndarray
+    t_out: np.ndarray
+    param_labels: tuple[str, ...] = ()
+    sensitivities: bool = False
+    # descriptive
+    title: str = ""
+    source_path: str | None = None
+    source_text: str | None = None
+    centre: str = ""
+    frame: str = "ICRF"
+    final_time_s: float = 0.0
+    info: dict = field(default_factory=dict)
+
+
+def _src(deck: TrajectoryDeck) -> str:
+    return deck.source_path or "<deck>"
+
+
+def model_bodies(deck: TrajectoryDeck) -> tuple[str, ...]:
+    """Bodies whose GM/position the propagation needs, in catalogue order.
+
+    The centre; third bodies; conic bodies; the stop body; the Sun when solar power drives
+    thrust arcs or SRP is on; with change_primary_at_soi, the parents of all of these (the
+    primary a spacecraft leaving a sphere of influence falls back to).
+    """
+    need = {deck.initial_state.centre, *deck.forces.third_bodies, *deck.forces.conic_bodies}
+    if deck.stop.body:
+        need.add(deck.stop.body)
+    solar = deck.propulsion is not None and deck.propulsion.power_source == "solar"
+    if deck.forces.srp or (solar and deck.thrust_arc):
+        need.add("sun")
+    if deck.forces.change_primary_at_soi:
+        for name in list(need):
+            parent = constants.BODIES[name].parent
+            while parent is not None:
+                need.add(parent)
+                parent = constants.BODIES[parent].parent
+    return tuple(b for b in constants.BODIES if b in need)
+
+
+def output_times_s(deck: TrajectoryDeck) -> np.ndarray:
+    """Sorted, de-duplicated output times (s from the epoch) from ``[output]``; t = 0 first."""
+    out = deck.output
+    dur = deck.duration_days
+    days = [0.0, *out.times_days]  # the propagation starts at the first output time
+    if out.include_final:
+        days.append(dur)
+    if out.step_days is not None:
+        n = int(math.floor(dur / out.step_days * (1.0 + 1e-12)))
+        days.extend(k * out.step_days for k in range(n + 1))
+    t = np.unique(np.clip(np.asarray(days, dtype=np.float64), 0.0, dur) * constants.DAY_S)
+    keep = np.concatenate([[True], np.diff(t) > 1e-6])  # merge times within a microsecond
+    return t[keep]
+
+
+def _rotation_to_icrf(frame: str, centre: str) -> np.ndarray:
+    from fracas.dynamics import elements as el
+
+    if frame == "EME2000":
+        return np.eye(3)
+    if frame == "ECLIPJ2000":
+        return np.asarray(el.ecliptic_to_equatorial_matrix())
+    if frame == "BODY_EQUATOR":
+        return np.asarray(el.planet_equatorial_matrix(np.array(constants.pole_unit_vector(centre)))).T
+    raise AssertionError(frame)
+
+
+def _initial_state(deck: TrajectoryDeck, mu_centre: float) -> tuple[np.ndarray, np.ndarray]:
+    """Initial r (km), v (km/s) relative to the centre, ICRF axes."""
+    from fracas.dynamics import elements as el
+
+    st = deck.initial_state
+    rad = math.radians
+    if st.cartesian is not None:
+        r = np.asarray(st.cartesian.r_km, dtype=np.float64)
+        v = np.asarray(st.cartesian.v_km_s, dtype=np.float64)
+    elif st.elements is not None:
+        e = st.elements
+        if e.mean_anomaly_deg is not None:
+            m = rad(e.mean_anomaly_deg)
+        else:
+            m = float(el.true_to_mean_anomaly(rad(e.true_anomaly_deg), e.e))
+        vec = np.array([e.a_km, e.e, rad(e.i_deg), rad(e.raan_deg), rad(e.argp_deg), m])
+        r, v = (np.asarray(x, dtype=np.float64) for x in el.elements_to_cartesian(vec, mu_centre))
+    else:
+        s = st.spherical
+        r, v = (
+            np.asarray(x, dtype=np.float64)
+            for x in el.spherical_to_cartesian(
+                s.r_km, rad(s.lat_deg), rad(s.lon_deg), s.v_km_s, rad(s.gamma_deg), rad(s.sigma_deg)
+            )
+        )
+    rot = _rotation_to_icrf(st.frame, st.centre)
+    return rot @ r, rot @ v
+
+
+def _conic_elements(deck: TrajectoryDeck, bodies: tuple[str, ...], mu: np.ndarray):
+    """(nb, 6) ICRF-referenced heliocentric elements (rad) and (nb,) their epochs (TDB s)."""
+    from fracas.dynamics import elements as el
+
+    nb = len(bodies)
+    elems = np.zeros((nb, 6))
+    et = np.zeros(nb)
+    mu_sun = float(mu[bodies.index("sun")]) if "sun" in bodies else constants.BODIES["sun"].mu_km3_s2
+    for name, c in deck.forces.conic_bodies.items():
+        k = bodies.index(name)
+        rad = math.radians
+        vec = np.array([c.a_km, c.e, rad(c.i_deg), rad(c.raan_deg), rad(c.argp_deg), rad(c.mean_anomaly_deg)])
+        if c.frame == "ECLIPJ2000":
+            rot = np.asarray(el.ecliptic_to_equatorial_matrix())
+            r, v = (np.asarray(x) for x in el.elements_to_cartesian(vec, mu_sun))
+            vec = np.asarray(el.cartesian_to_elements(rot @ r, rot @ v, mu_sun), dtype=np.float64)
+        elems[k] = vec
+        et[k] = (epoch_to_julian_date(c.epoch) - constants.J2000_JD) * constants.DAY_S
+    return elems, et
+
+
+def build_propagation(deck: TrajectoryDeck) -> Problem:
+    """Validated deck -> :class:`Problem` in canonical units (see the module docstring)."""
+    src = _src(deck)
+    st, sc, f, prop = deck.initial_state, deck.spacecraft, deck.forces, deck.propulsion
+    bodies = model_bodies(deck)
+    idx = bodies.index
+    centre = st.centre
+
+    # --- epoch and final time
+    if deck.epoch.iso is not None:
+        from fracas.dynamics.ephemeris import calendar_to_et
+
+        epoch_et = float(calendar_to_et(deck.epoch.iso))
+    else:
+        epoch_et = (deck.epoch.julian_date - constants.J2000_JD) * constants.DAY_S
+    t_final = deck.duration_days * constants.DAY_S
+
+    # --- static model
+    ig = deck.integrator
+    stop_body = deck.stop.body or centre
+    model = ForceModel(
+        bodies=bodies,
+        primary=idx(centre),
+        third_bodies=tuple(idx(b) for b in bodies if b in f.third_bodies),
+        j2=f.j2,
+        srp=f.srp,
+        thrust=bool(deck.thrust_arc),
+        velocity_dependent=any(a.frame == "velocity" for a in deck.thrust_arc),
+        power=(prop.power_source if prop is not None else POWER_SOLAR),
+        change_primary_at_soi=f.change_primary_at_soi,
+        conic_bodies=tuple(idx(b) for b in bodies if b in f.conic_bodies),
+        n_arcs=len(deck.thrust_arc),
+        n_impulses=len(deck.impulse),
+        integrator=IntegratorSettings(
+            c_nom=ig.c_nom,
+            dt_max_s=ig.dt_max_s,
+            rect_ratio=ig.rect_ratio,
+            eps_t_s=ig.eps_t_s,
+            max_steps=ig.max_steps,
+        ),
+        stop=StopCondition(
+            kind=deck.stop.condition,
+            body=idx(stop_body),
+            radius_km=float(deck.stop.radius_km or 0.0),
+        ),
+    )
+
+    # --- dynamic parameters
+    base = default_params(model)
+    mu, j2, radius = (np.array(a, dtype=np.float64) for a in (base.mu, base.j2, base.radius))
+    for name, ov in f.overrides.items():
+        if name not in bodies:
+            raise ConfigError(
+                f"{src}: forces.overrides.{name}: body \"{name}\" is not in the force model "
+                f"({', '.join(bodies)}); add it to forces.third_bodies or remove the override"
+            )
+        k = idx(name)
+        if ov.mu_km3_s2 is not None:
+            mu[k] = ov.mu_km3_s2
+        if ov.j2 is not None:
+            j2[k] = ov.j2
+        if ov.radius_km is not None:
+            radius[k] = ov.radius_km
+    over: dict = dict(mu=mu, j2=j2, radius=radius, area_m2=sc.area_m2, cr=sc.cr)
+    if prop is not None:
+        c = prop.exhaust_velocity_km_s if prop.exhaust_velocity_km_s is not None else prop.isp_s * constants.G0_KM_S2
+        decay = prop.decay_days * constants.DAY_S if (prop.power_source == POWER_NUCLEAR and prop.decay_days) else math.inf
+        over.update(
+            power_kw=prop.power_kw,
+            power_decay_s=decay,
+            efficiency=prop.efficiency,
+            exhaust_velocity_km_s=c,
+            thrust_scale=prop.thrust_scale,
+        )
+    arcs = deck.thrust_arc
+    if arcs:
+        over.update(
+            arc_t_on=[a.start_days * constants.DAY_S for a in arcs],
+            arc_t_off=[a.stop_days * constants.DAY_S for a in arcs],
+            arc_alpha=[math.radians(a.alpha_deg) for a in arcs],
+            arc_beta=[math.radians(a.beta_deg) for a in arcs],
+            arc_throttle=[a.throttle for a in arcs],
+            arc_frame=[FRAME_VELOCITY if a.frame == "velocity" else FRAME_INERTIAL for a in arcs],
+        )
+    imps = deck.impulse
+    if imps:
+        over.update(
+            impulse_t=[i.time_days * constants.DAY_S for i in imps],
+            impulse_dv=np.array([i.dv_km_s for i in imps], dtype=np.float64).reshape(len(imps), 3),
+            impulse_frame=[FRAME_VELOCITY if i.frame == "velocity" else FRAME_INERTIAL for i in imps],
+            impulse_isp_s=imps[0].isp_s,
+        )
+    if f.conic_bodies:
+        over["body_elements"], over["body_elements_et"] = _conic_elements(deck, bodies, mu)
+    params = default_params(model, **over)
+
+    # --- initial state (relative to the centre, ICRF)
+    r0, v0 = _initial_state(deck, float(mu[idx(centre)]))
+    x0 = np.concatenate([r0, v0, [sc.mass_kg]]).astype(np.float64)
+    if not np.all(np.isfinite(x0)):
+        raise ConfigError(f"{src}: initial_state: the state converts to non-finite numbers {x0.tolist()}")
+
+    # --- ephemeris: whenever a body other than the Sun and the conic bodies needs a position
+    need_ephem = len(bodies) > 1 and any(b != "sun" and b not in f.conic_bodies for b in bodies)
+    ephem = None
+    if need_ephem:
+        from fracas.dynamics.ephemeris import build_ephemeris
+
+        try:
+            ephem = build_ephemeris(bodies, epoch_et, epoch_et + t_final)
+        except ConfigError as exc:
+            raise ConfigError(f"{src}: {exc}") from None
+
+    # --- sensitivities
+    labels = tuple(deck.output.sensitivities)
+    if labels:
+        from fracas.params import parse_label
+
+        for k, label in enumerate(labels):
+            try:
+                parse_label(label, model)
+            except Exception as exc:  # noqa: BLE001 - any parse failure is a deck problem
+                raise ConfigError(f"{src}: output.sensitivities[{k}] = \"{label}\": {exc}") from None
+
+    return Problem(
+        model=model,
+        params=params,
+        ephem=ephem,
+        epoch_et_s=epoch_et,
+        x0=x0,
+        t_out=output_times_s(deck),
+        param_labels=labels,
+        sensitivities=bool(labels) or deck.output.stm,
+        title=deck.title,
+        source_path=deck.source_path,
+        source_text=deck.source_text,
+        centre=centre,
+        final_time_s=t_final,
+        info={
+            "epoch": deck.epoch.iso if deck.epoch.iso is not None else f"JD {deck.epoch.julian_date} TDB",
+            "input_frame": st.frame,
+            "input_state": st.kind,
+            "ephemeris": "DE421" if ephem is not None else "none",
+        },
+    )

@@ -1,0 +1,698 @@
+"""The trajectory deck: a TOML file describing one propagation (FRACAS TOM ``$DATA``, sec. 3.1).
+
+Validated into frozen pydantic models in the units a user writes (days, degrees, kW,
+Isp in s); :mod:`fracas.build` is the one place these convert to the core's km, s, kg,
+rad.  No JAX here.  Layout (every section but ``[epoch]``, ``[initial_state]``,
+``[spacecraft]`` and ``[stop]`` is optional)::
+
+    title = "LEO with J2"                      # free text
+    [epoch]           iso = "2030-01-01T00:00:00"   (TDB)   | julian_date = 2462502.5 (TDB)
+    [initial_state]   centre = "earth", frame = "EME2000" | "ECLIPJ2000" | "BODY_EQUATOR"
+                      and exactly one of the tables
+      [initial_state.cartesian]  r_km = [x, y, z], v_km_s = [vx, vy, vz]
+      [initial_state.elements]   a_km, e, i_deg, raan_deg, argp_deg,
+                                 mean_anomaly_deg | true_anomaly_deg
+      [initial_state.spherical]  r_km, lat_deg, lon_deg, v_km_s, gamma_deg, sigma_deg
+    [spacecraft]      mass_kg, area_m2 = 0, cr = 1
+    [propulsion]      power_source = "solar" | "nuclear", power_kw, decay_days (nuclear),
+                      efficiency, exhaust_velocity_km_s | isp_s, thrust_scale = 1
+    [[thrust_arc]]    start_days, stop_days, frame = "velocity" | "inertial",
+                      alpha_deg = 0, beta_deg = 0, throttle = 1
+    [[impulse]]       time_days, dv_km_s = [3], frame = "velocity" | "inertial", isp_s = 300
+    [forces]          third_bodies = [], j2 = false, srp = false, change_primary_at_soi = false
+      [forces.overrides.BODY]     mu_km3_s2, j2, radius_km   (each optional)
+      [forces.conic_bodies.BODY]  a_km, e, i_deg, raan_deg, argp_deg, mean_anomaly_deg,
+                                  epoch = ISO string | Julian date (TDB),
+                                  frame = "EME2000" | "ECLIPJ2000" (of the angles)
+    [integrator]      c_nom = 0.3, dt_max_s = 4000, rect_ratio = 0.01, eps_t_s = 1e-6,
+                      max_steps = 200000
+    [stop]            duration_days | final_epoch (ISO string or Julian date, TDB),
+                      condition = "time" | "soi_entry" | "closest_approach" | "radius",
+                      body, radius_km
+    [output]          times_days = [], step_days, include_final = true
+                      (t = 0 is always the first output), sensitivities = ["mu[earth]", ...], stm = false
+
+The primary body of the propagation (centre of the Encke conic) is the initial-state
+centre.  :func:`load_deck` turns every problem into :class:`fracas.errors.DeckError` with
+one line ``path: field.path = value: what was expected``.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import re
+import tomllib
+import types
+import typing
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    PlainValidator,
+    PrivateAttr,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+from fracas.constants import BODIES, J2000_JD
+from fracas.errors import DeckError
+
+__all__ = [
+    "TrajectoryDeck",
+    "load_deck",
+    "parse_deck",
+    "epoch_to_julian_date",
+    "FieldProblem",
+]
+
+BODY_NAMES = tuple(BODIES)
+_J2000_DATETIME = _dt.datetime(2000, 1, 1, 12, 0, 0)
+
+
+class FieldProblem(ValueError):
+    """A validation failure that knows which (sub)field it concerns and its offending value.
+
+    ``field`` is a path relative to the model being validated (``("stop", "radius_km")``);
+    :func:`format_validation_error` appends it to pydantic's location.
+    """
+
+    def __init__(self, field: tuple[str | int, ...] | str, value: Any, expected: str):
+        self.field = (field,) if isinstance(field, str) else tuple(field)
+        self.value = value
+        self.expected = expected
+        super().__init__(expected)
+
+
+class _Given(str):
+    """A value printed as is in an error line (the set of keys given in a table)."""
+
+
+def _given(model: BaseModel, keys: tuple[str, ...]) -> _Given:
+    return _Given("{" + ", ".join(k for k in keys if getattr(model, k) is not None) + "}")
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _parse_iso(text: str) -> _dt.datetime:
+    s = text.strip()
+    if s.upper().endswith("TDB"):
+        s = s[:-3].rstrip()
+    if not re.fullmatch(r"\d{4}-\d{2}-\d{2}([T ]\d{2}:\d{2}(:\d{2}(\.\d{1,9})?)?)?", s):
+        raise ValueError(s)
+    # datetime keeps microseconds: trim finer digits.
+    m = re.match(r"(.*\.\d{1,6})\d*$", s)
+    if m:
+        s = m.group(1)
+    t = _dt.datetime.fromisoformat(s)
+    return t
+
+
+def _iso_value(v: Any) -> str:
+    """A TDB calendar epoch: an ISO string (or a TOML local date/datetime) -> 'YYYY-MM-DDTHH:MM:SS[.ffffff]'."""
+    if isinstance(v, _dt.datetime):
+        if v.tzinfo is not None:
+            raise ValueError("must be a TDB calendar date without a UTC offset")
+        return v.isoformat()
+    if isinstance(v, _dt.date):
+        return _dt.datetime(v.year, v.month, v.day).isoformat()
+    if not isinstance(v, str):
+        raise ValueError("must be an ISO calendar date string such as \"2030-01-01T00:00:00\" (TDB)")
+    try:
+        return _parse_iso(v).isoformat()
+    except ValueError:
+        raise ValueError(
+            "must be an ISO calendar date such as \"2030-01-01T00:00:00\" (TDB)"
+        ) from None
+
+
+def _epoch_value(v: Any) -> str | float:
+    """An epoch written either as an ISO TDB string/date or as a Julian date (TDB) number."""
+    if isinstance(v, bool):
+        raise ValueError("must be an ISO calendar date string (TDB) or a Julian date number")
+    if isinstance(v, (int, float)):
+        if not math.isfinite(v) or not (1_000_000.0 < v < 5_000_000.0):
+            raise ValueError("a Julian date must lie between 1e6 and 5e6")
+        return float(v)
+    if isinstance(v, (str, _dt.date)):
+        return _iso_value(v)
+    raise ValueError("must be an ISO calendar date string (TDB) or a Julian date number")
+
+
+def epoch_to_julian_date(value: str | float) -> float:
+    """Julian date (TDB) of an ISO TDB string or a Julian date number (no leap seconds in TDB)."""
+    if isinstance(value, str):
+        dt = _parse_iso(value) - _J2000_DATETIME
+        return J2000_JD + dt.days + (dt.seconds + dt.microseconds * 1e-6) / 86_400.0
+    return float(value)
+
+
+def _body_name(v: Any) -> str:
+    if not isinstance(v, str):
+        raise ValueError(f"must be a body name, one of {', '.join(BODY_NAMES)}")
+    name = v.strip().lower()
+    if name not in BODIES:
+        raise ValueError(f"must be a known body, one of {', '.join(BODY_NAMES)}")
+    return name
+
+
+BodyName = Annotated[str, PlainValidator(_body_name)]
+IsoEpoch = Annotated[str, PlainValidator(_iso_value)]
+EpochValue = Annotated[Any, PlainValidator(_epoch_value)]
+
+
+def _vector3(v: Any) -> list[float]:
+    ok = isinstance(v, list) and len(v) == 3
+    ok = ok and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+    if not ok:
+        raise ValueError("must be a list of 3 numbers")
+    if not all(math.isfinite(x) for x in v):
+        raise ValueError("must be finite numbers")
+    return [float(x) for x in v]
+
+
+Vector3 = Annotated[list[float], PlainValidator(_vector3)]
+PositiveFloat = Annotated[float, Field(gt=0)]
+
+_LABEL_RE = re.compile(r"^[a-z][a-z0-9_]*(\[[A-Za-z0-9_]+(,[A-Za-z0-9_]+)*\])?$")
+
+
+def _check_label(v: str) -> str:
+    if not _LABEL_RE.match(v):
+        raise ValueError(
+            'must be a parameter label such as "mu[sun]", "thrust_scale" or "arc_thrust_scale[0]"'
+        )
+    return v
+
+
+ParamLabel = Annotated[str, AfterValidator(_check_label)]
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True, allow_inf_nan=False)
+
+
+# --------------------------------------------------------------------------- sections
+
+
+class Epoch(_Section):
+    """Propagation epoch, TDB: an ISO calendar string or a Julian date (exactly one)."""
+
+    iso: IsoEpoch | None = None
+    julian_date: Annotated[float, Field(gt=1_000_000.0, lt=5_000_000.0)] | None = None
+
+    @model_validator(mode="after")
+    def _one(self) -> Epoch:
+        if (self.iso is None) == (self.julian_date is None):
+            raise FieldProblem((), _given(self, ("iso", "julian_date")), "give exactly one of iso, julian_date")
+        return self
+
+    @property
+    def jd(self) -> float:
+        return epoch_to_julian_date(self.iso if self.iso is not None else self.julian_date)
+
+
+class Cartesian(_Section):
+    r_km: Vector3
+    v_km_s: Vector3
+
+    @field_validator("r_km")
+    @classmethod
+    def _nonzero(cls, v: list[float]) -> list[float]:
+        if math.hypot(*v) == 0.0:
+            raise ValueError("must not be the zero vector")
+        return v
+
+
+class Elements(_Section):
+    """Classical elements about the centre (a < 0 for hyperbolas, e >= 0, e != 1)."""
+
+    a_km: float
+    e: Annotated[float, Field(ge=0)]
+    i_deg: Annotated[float, Field(ge=0, le=180)]
+    raan_deg: float = 0.0
+    argp_deg: float = 0.0
+    mean_anomaly_deg: float | None = None
+    true_anomaly_deg: float | None = None
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Elements:
+        if (self.mean_anomaly_deg is None) == (self.true_anomaly_deg is None):
+            raise FieldProblem(
+                (), _given(self, ("mean_anomaly_deg", "true_anomaly_deg")),
+                "give exactly one of mean_anomaly_deg, true_anomaly_deg",
+            )
+        if abs(self.e - 1.0) < 1e-12:
+            raise FieldProblem("e", self.e, "parabolic orbits (e = 1) are not supported")
+        if self.e < 1.0 and self.a_km <= 0.0:
+            raise FieldProblem("a_km", self.a_km, "must be > 0 for an ellipse (e < 1)")
+        if self.e > 1.0 and self.a_km >= 0.0:
+            raise FieldProblem("a_km", self.a_km, "must be < 0 for a hyperbola (e > 1)")
+        if self.e > 1.0 and self.true_anomaly_deg is not None:
+            limit = math.degrees(math.acos(-1.0 / self.e))
+            nu = (self.true_anomaly_deg + 180.0) % 360.0 - 180.0
+            if abs(nu) >= limit:
+                raise FieldProblem(
+                    "true_anomaly_deg", self.true_anomaly_deg,
+                    f"must satisfy |nu| < {limit:.6g} deg (the hyperbola's asymptote) for e = {self.e:g}",
+                )
+        return self
+
+
+class Spherical(_Section):
+    """Position/velocity in spherical form: flight-path angle gamma from the local
+    horizontal, azimuth sigma from north towards east."""
+
+    r_km: PositiveFloat
+    lat_deg: Annotated[float, Field(ge=-90, le=90)]
+    lon_deg: float
+    v_km_s: Annotated[float, Field(ge=0)]
+    gamma_deg: Annotated[float, Field(ge=-90, le=90)]
+    sigma_deg: float
+
+
+class InitialState(_Section):
+    centre: BodyName
+    frame: Literal["EME2000", "ECLIPJ2000", "BODY_EQUATOR"] = "EME2000"
+    cartesian: Cartesian | None = None
+    elements: Elements | None = None
+    spherical: Spherical | None = None
+
+    @model_validator(mode="after")
+    def _exactly_one(self) -> InitialState:
+        given = _given(self, ("cartesian", "elements", "spherical"))
+        if given.count(",") != 0 or given == "{}":
+            raise FieldProblem(
+                (), given,
+                "give exactly one of the tables cartesian, elements, spherical",
+            )
+        return self
+
+    @property
+    def kind(self) -> str:
+        return next(k for k in ("cartesian", "elements", "spherical") if getattr(self, k) is not None)
+
+
+class Spacecraft(_Section):
+    mass_kg: PositiveFloat
+    area_m2: Annotated[float, Field(ge=0)] = 0.0
+    cr: Annotated[float, Field(ge=0, le=2)] = 1.0
+
+
+class Propulsion(_Section):
+    """Electric propulsion: thrust T = 2 eta P / c, mass flow T / c (FRACAS EP)."""
+
+    power_source: Literal["solar", "nuclear"] = "solar"
+    power_kw: PositiveFloat
+    decay_days: PositiveFloat | None = None
+    efficiency: Annotated[float, Field(gt=0, le=1)]
+    exhaust_velocity_km_s: PositiveFloat | None = None
+    isp_s: PositiveFloat | None = None
+    thrust_scale: Annotated[float, Field(ge=0)] = 1.0
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Propulsion:
+        if (self.exhaust_velocity_km_s is None) == (self.isp_s is None):
+            raise FieldProblem(
+                (), _given(self, ("exhaust_velocity_km_s", "isp_s")),
+                "give exactly one of exhaust_velocity_km_s, isp_s",
+            )
+        if self.decay_days is not None and self.power_source != "nuclear":
+            raise FieldProblem("decay_days", self.decay_days, 'only for power_source = "nuclear"')
+        return self
+
+
+class ThrustArc(_Section):
+    """Thrust on for start_days <= t < stop_days (days from the epoch); alpha/beta are the
+    in-plane/out-of-plane angles in the velocity frame, or right ascension/declination
+    of an inertial (ICRF) direction."""
+
+    start_days: Annotated[float, Field(ge=0)]
+    stop_days: Annotated[float, Field(ge=0)]
+    frame: Literal["velocity", "inertial"] = "velocity"
+    alpha_deg: float = 0.0
+    beta_deg: Annotated[float, Field(ge=-90, le=90)] = 0.0
+    throttle: Annotated[float, Field(ge=0, le=1)] = 1.0
+
+    @model_validator(mode="after")
+    def _ordered(self) -> ThrustArc:
+        if self.stop_days <= self.start_days:
+            raise FieldProblem("stop_days", self.stop_days, f"must be > start_days = {self.start_days:g}")
+        return self
+
+
+class Impulse(_Section):
+    time_days: Annotated[float, Field(ge=0)]
+    dv_km_s: Vector3
+    frame: Literal["velocity", "inertial"] = "velocity"
+    isp_s: PositiveFloat = 300.0
+
+
+class BodyOverride(_Section):
+    mu_km3_s2: PositiveFloat | None = None
+    j2: float | None = None
+    radius_km: PositiveFloat | None = None
+
+
+class ConicBody(_Section):
+    """Heliocentric conic elements standing in for the body's ephemeris (FRACAS EPHEM)."""
+
+    a_km: PositiveFloat
+    e: Annotated[float, Field(ge=0, lt=1)]
+    i_deg: Annotated[float, Field(ge=0, le=180)]
+    raan_deg: float
+    argp_deg: float
+    mean_anomaly_deg: float
+    epoch: EpochValue
+    frame: Literal["EME2000", "ECLIPJ2000"] = "EME2000"
+
+
+def _check_body_keys(v: dict[str, Any]) -> dict[str, Any]:
+    out = {}
+    for key, val in v.items():
+        try:
+            name = _body_name(key)
+        except ValueError as exc:
+            raise FieldProblem((key,), key, str(exc)) from None
+        out[name] = val
+    return out
+
+
+class Forces(_Section):
+    third_bodies: list[BodyName] = []
+    j2: bool = False
+    srp: bool = False
+    change_primary_at_soi: bool = False
+    overrides: Annotated[dict[str, BodyOverride], AfterValidator(_check_body_keys)] = {}
+    conic_bodies: Annotated[dict[str, ConicBody], AfterValidator(_check_body_keys)] = {}
+
+    @field_validator("third_bodies")
+    @classmethod
+    def _unique(cls, v: list[str]) -> list[str]:
+        for k, name in enumerate(v):
+            if name in v[:k]:
+                raise FieldProblem((k,), name, "listed twice")
+        return v
+
+
+class Integrator(_Section):
+    """Encke/Nystrom constants (see fracas.dynamics.model.IntegratorSettings)."""
+
+    c_nom: Annotated[float, Field(gt=0, le=2)] = 0.3
+    dt_max_s: PositiveFloat = 4000.0
+    rect_ratio: Annotated[float, Field(gt=0, lt=1)] = 0.01
+    eps_t_s: PositiveFloat = 1e-6
+    max_steps: Annotated[int, Field(ge=1, le=100_000_000)] = 200_000
+
+
+class Stop(_Section):
+    duration_days: PositiveFloat | None = None
+    final_epoch: EpochValue | None = None
+    condition: Literal["time", "soi_entry", "closest_approach", "radius"] = "time"
+    body: BodyName | None = None
+    radius_km: PositiveFloat | None = None
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Stop:
+        if (self.duration_days is None) == (self.final_epoch is None):
+            raise FieldProblem(
+                (), _given(self, ("duration_days", "final_epoch")),
+                "give exactly one of duration_days, final_epoch",
+            )
+        if self.condition in ("soi_entry", "closest_approach") and self.body is None:
+            raise FieldProblem("body", None, f'required for condition = "{self.condition}"')
+        if self.condition == "radius" and self.radius_km is None:
+            raise FieldProblem("radius_km", None, 'required for condition = "radius"')
+        if self.condition != "radius" and self.radius_km is not None:
+            raise FieldProblem("radius_km", self.radius_km, 'only for condition = "radius"')
+        if self.condition == "time" and self.body is not None:
+            raise FieldProblem("body", self.body, 'not used for condition = "time"')
+        return self
+
+
+class Output(_Section):
+    times_days: list[Annotated[float, Field(ge=0)]] = []
+    step_days: PositiveFloat | None = None
+    include_final: bool = True
+    sensitivities: list[ParamLabel] = []
+    stm: bool = False
+
+    @field_validator("sensitivities")
+    @classmethod
+    def _unique(cls, v: list[str]) -> list[str]:
+        for k, label in enumerate(v):
+            if label in v[:k]:
+                raise FieldProblem((k,), label, "listed twice")
+        return v
+
+
+class TrajectoryDeck(_Section):
+    """A whole trajectory deck (frozen).  ``source_path``/``source_text`` say where it came from."""
+
+    title: str = ""
+    epoch: Epoch
+    initial_state: InitialState
+    spacecraft: Spacecraft
+    propulsion: Propulsion | None = None
+    thrust_arc: list[ThrustArc] = []
+    impulse: list[Impulse] = []
+    forces: Forces = Forces()
+    integrator: Integrator = Integrator()
+    stop: Stop
+    output: Output = Output()
+
+    _source_path: str | None = PrivateAttr(None)
+    _source_text: str | None = PrivateAttr(None)
+
+    @property
+    def source_path(self) -> str | None:
+        return self._source_path
+
+    @property
+    def source_text(self) -> str | None:
+        return self._source_text
+
+    @property
+    def primary(self) -> str:
+        return self.initial_state.centre
+
+    @property
+    def duration_days(self) -> float:
+        """Final time in days from the epoch."""
+        if self.stop.duration_days is not None:
+            return self.stop.duration_days
+        return epoch_to_julian_date(self.stop.final_epoch) - self.epoch.jd
+
+    @model_validator(mode="after")
+    def _cross_checks(self) -> TrajectoryDeck:
+        dur = self.duration_days
+        if dur <= 0.0:
+            raise FieldProblem(("stop", "final_epoch"), self.stop.final_epoch, "must be after the epoch")
+        centre = self.initial_state.centre
+        f = self.forces
+        if centre in f.third_bodies:
+            k = f.third_bodies.index(centre)
+            raise FieldProblem(("forces", "third_bodies", k), centre, f"is the primary (initial_state.centre = \"{centre}\"); it cannot also be a third body")
+        if self.thrust_arc and self.propulsion is None:
+            raise FieldProblem(("propulsion",), None, "a [propulsion] section is required when thrust arcs are given")
+        prev = None
+        for k, arc in enumerate(self.thrust_arc):
+            if prev is not None and arc.start_days < prev.stop_days:
+                raise FieldProblem(
+                    ("thrust_arc", k, "start_days"), arc.start_days,
+                    f"must be >= thrust_arc[{k - 1}].stop_days = {prev.stop_days:g} (arcs ordered, not overlapping)",
+                )
+            if arc.stop_days > dur * (1 + 1e-12):
+                raise FieldProblem(("thrust_arc", k, "stop_days"), arc.stop_days, f"must be <= the final time, {dur:g} days")
+            prev = arc
+        for k, imp in enumerate(self.impulse):
+            if imp.time_days > dur * (1 + 1e-12):
+                raise FieldProblem(("impulse", k, "time_days"), imp.time_days, f"must be <= the final time, {dur:g} days")
+            if k > 0 and imp.time_days < self.impulse[k - 1].time_days:
+                raise FieldProblem(("impulse", k, "time_days"), imp.time_days, f"must be >= impulse[{k - 1}].time_days (impulses in time order)")
+            if imp.isp_s != self.impulse[0].isp_s:
+                raise FieldProblem(("impulse", k, "isp_s"), imp.isp_s, f"must equal impulse[0].isp_s = {self.impulse[0].isp_s:g} (one impulsive engine)")
+        if f.srp and self.spacecraft.area_m2 <= 0.0:
+            raise FieldProblem(("spacecraft", "area_m2"), self.spacecraft.area_m2, "must be > 0 when forces.srp = true")
+        for name in f.conic_bodies:
+            if name == "sun":
+                raise FieldProblem(("forces", "conic_bodies", name), name, "the Sun cannot have heliocentric conic elements")
+            if name != centre and name not in f.third_bodies and name != self.stop.body:
+                raise FieldProblem(("forces", "conic_bodies", name), name, "must be the centre, a third body or the stop body")
+        for k, t in enumerate(self.output.times_days):
+            if t > dur * (1 + 1e-12):
+                raise FieldProblem(("output", "times_days", k), t, f"must be <= the final time, {dur:g} days")
+        if self.stop.condition == "soi_entry" and self.stop.body == centre:
+            raise FieldProblem(("stop", "body"), self.stop.body, "must differ from the centre for soi_entry")
+        return self
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def _fmt_value(v: Any) -> str:
+    if isinstance(v, _Given):
+        return str(v)
+    if isinstance(v, (_dt.date, _dt.datetime)):
+        s = v.isoformat()
+    else:
+        try:
+            s = json.dumps(v, default=str)
+        except (TypeError, ValueError):
+            s = repr(v)
+    return s if len(s) <= 80 else s[:77] + "..."
+
+
+def _fmt_loc(loc: tuple) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif part == "[key]":
+            continue
+        else:
+            out += ("." if out else "") + str(part)
+    return out or "<deck>"
+
+
+def _strip(ann: Any) -> Any:
+    """Drop Annotated and Optional wrappers from a type annotation."""
+    while True:
+        origin = typing.get_origin(ann)
+        if origin is Annotated:
+            ann = typing.get_args(ann)[0]
+        elif origin in (typing.Union, types.UnionType):
+            args = [a for a in typing.get_args(ann) if a is not type(None)]
+            if len(args) != 1:
+                return ann
+            ann = args[0]
+        else:
+            return ann
+
+
+def _model_at(loc: tuple) -> type[BaseModel] | None:
+    """The pydantic model class that the location ``loc`` points into (best effort)."""
+    cur: Any = TrajectoryDeck
+    for part in loc:
+        cur = _strip(cur)
+        origin = typing.get_origin(cur)
+        if origin is list:
+            cur = typing.get_args(cur)[0]
+        elif origin is dict:
+            cur = typing.get_args(cur)[1]
+        elif isinstance(cur, type) and issubclass(cur, BaseModel) and part in cur.model_fields:
+            cur = cur.model_fields[part].annotation
+        else:
+            return None
+    cur = _strip(cur)
+    return cur if isinstance(cur, type) and issubclass(cur, BaseModel) else None
+
+
+def _num(x: Any) -> str:
+    return f"{x:g}" if isinstance(x, (int, float)) else str(x)
+
+
+def _expected(err: dict) -> str:
+    typ, ctx = err["type"], err.get("ctx") or {}
+    if typ == "missing":
+        return "required"
+    if typ == "greater_than":
+        return f"must be > {_num(ctx['gt'])}"
+    if typ == "greater_than_equal":
+        return f"must be >= {_num(ctx['ge'])}"
+    if typ == "less_than":
+        return f"must be < {_num(ctx['lt'])}"
+    if typ == "less_than_equal":
+        return f"must be <= {_num(ctx['le'])}"
+    if typ in ("too_short", "too_long"):
+        lo, hi = ctx.get("min_length"), ctx.get("max_length")
+        if lo is not None and lo == hi:
+            return f"must have exactly {lo} entries"
+        return err["msg"].replace("Input should have", "must have").replace("List should have", "must have")
+    if typ in ("float_type", "float_parsing"):
+        return "must be a number"
+    if typ in ("int_type", "int_parsing", "int_from_float"):
+        return "must be an integer"
+    if typ == "bool_type":
+        return "must be true or false"
+    if typ == "string_type":
+        return "must be a string"
+    if typ == "list_type":
+        return "must be a list"
+    if typ in ("dict_type", "model_type", "model_attributes_type"):
+        return "must be a table"
+    if typ == "finite_number":
+        return "must be a finite number"
+    msg = err["msg"]
+    for prefix in ("Value error, ", "Assertion failed, "):
+        if msg.startswith(prefix):
+            msg = msg[len(prefix):]
+    return msg.replace("Input should be", "must be")
+
+
+def format_validation_error(exc: ValidationError, source: str) -> str:
+    """One line for the first error of ``exc``: ``source: field.path = value: expected``."""
+    errs = exc.errors()
+    err = errs[0]
+    loc = tuple(err["loc"])
+    value = err.get("input")
+    expected = _expected(err)
+    problem = (err.get("ctx") or {}).get("error")
+    if isinstance(problem, FieldProblem):
+        loc = loc + problem.field
+        value = problem.value
+        expected = problem.expected
+    if err["type"] == "extra_forbidden":
+        parent = _model_at(loc[:-1])
+        known = ", ".join(parent.model_fields) if parent is not None else ""
+        expected = "unknown field" + (f" (expected one of: {known})" if known else "")
+    field = _fmt_loc(loc)
+    if value is None or err["type"] == "missing":
+        line = f"{source}: {field}: {expected}"
+    else:
+        line = f"{source}: {field} = {_fmt_value(value)}: {expected}"
+    if len(errs) > 1:
+        line += f" (and {len(errs) - 1} more error{'s' if len(errs) > 2 else ''})"
+    return line
+
+
+def parse_deck(text: str, source: str = "<deck>") -> TrajectoryDeck:
+    """Validate TOML text; any problem -> DeckError('source: field = value: expected')."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise DeckError(f"{source}: TOML syntax error: {exc}") from None
+    try:
+        deck = TrajectoryDeck.model_validate(data)
+    except ValidationError as exc:
+        raise DeckError(format_validation_error(exc, source)) from None
+    deck._source_path = source
+    deck._source_text = text
+    return deck
+
+
+def load_deck(path: str | Path) -> TrajectoryDeck:
+    """Read and validate a trajectory deck; every failure is a one-line DeckError."""
+    p = Path(path)
+    source = str(path)
+    try:
+        raw = p.read_bytes()
+    except FileNotFoundError:
+        raise DeckError(f"{source}: no such file") from None
+    except IsADirectoryError:
+        raise DeckError(f"{source}: is a directory, expected a TOML deck file") from None
+    except OSError as exc:
+        raise DeckError(f"{source}: cannot read: {exc.strerror or exc}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise DeckError(f"{source}: not UTF-8 text (byte {exc.start})") from None
+    return parse_deck(text, source)

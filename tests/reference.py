@@ -26,18 +26,38 @@ def _eph():
 def helio_position(body: str, et_s: float) -> np.ndarray:
     """Heliocentric ICRF position (km) of a body from jplephem directly (DE421)."""
     e = _eph()
-    jd = 2451545.0 + et_s / 86400.0
-    sun = e.position("sun", jd)
+    # two-part Julian date: a single JD float resolves only ~5e-5 s
+    jd = (2451545.0, et_s / 86400.0)
+    sun = e.position("sun", *jd)
     if body == "sun":
         return np.zeros(3)
     if body in ("earth", "moon"):
-        emb = e.position("earthmoon", jd)
-        moon = e.position("moon", jd)
+        emb = e.position("earthmoon", *jd)
+        moon = e.position("moon", *jd)
         emrat = e.EMRAT
         pos = emb - moon / (1.0 + emrat) if body == "earth" else emb + moon * emrat / (1.0 + emrat)
     else:
-        pos = e.position(body, jd)
+        pos = e.position(body, *jd)
     return np.ravel(pos - sun)
+
+
+def helio_velocity(body: str, et_s: float) -> np.ndarray:
+    """Heliocentric ICRF velocity (km/s) from jplephem's own Chebyshev derivative (DE421).
+
+    (A finite difference of jplephem positions is no good here: its positions jitter by
+    ~5e-6 km with the time argument, which a 2 s difference turns into 2e-6 km/s.)"""
+    e = _eph()
+    jd = (2451545.0, et_s / 86400.0)
+    vel = lambda name: np.ravel(e.position_and_velocity(name, *jd)[1]) / 86400.0  # noqa: E731
+    if body == "sun":
+        return np.zeros(3)
+    if body in ("earth", "moon"):
+        emrat = e.EMRAT
+        emb, moon = vel("earthmoon"), vel("moon")
+        v = emb - moon / (1.0 + emrat) if body == "earth" else emb + moon * emrat / (1.0 + emrat)
+    else:
+        v = vel(body)
+    return v - vel("sun")
 
 
 def cowell_rhs_factory(mu_primary, primary="sun", third=(), mus=None, j2=None, thrust=None, epoch_et=0.0):

@@ -1,0 +1,30 @@
+# Two entry points (README.md): `make demo` and `make test`; each creates .venv if needed.
+PY ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+$(STAMP): pyproject.toml
+	test -d $(VENV) || $(PY) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet -e ".[test]"
+	touch $(STAMP)
+
+.PHONY: venv demo test bench clean
+venv: $(STAMP)
+
+demo: $(STAMP)
+	mkdir -p out
+	$(BIN)/fracas propagate namelists/leo_j2.toml -o out/leo_j2.h5 --plot out/leo_j2.png
+	$(BIN)/fracas propagate namelists/earth_mars_sep.toml -o out/earth_mars_sep.h5 --plot out/earth_mars_sep.png
+	$(BIN)/fracas propagate namelists/near_earth_spiral.toml -o out/near_earth_spiral.h5 --plot out/near_earth_spiral.png
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+bench: $(STAMP)
+	$(BIN)/pip install --quiet -e ".[bench]"
+	$(BIN)/python benchmarks/bench_core.py --quick
+
+clean:
+	rm -rf out .pytest_cache

@@ -1,0 +1,213 @@
+"""Many propagations in one compiled call: ``jax.vmap`` over initial states (and parameters),
+chunked to bound memory and sharded over every host device (dispersions, Monte Carlo, grids).
+
+    tr = propagate_batch(model, params, ephem, epoch_et_s, x0s, t_out)          # x0s (N, 7)
+    tr, sens = propagate_batch(..., with_sensitivities=True, param_labels=("mu[sun]",))
+
+The N initial states are cut into chunks of ``chunk_size`` rows (fewer when N is smaller:
+then one chunk of N rows, rounded up to a multiple of the device count); the last chunk is
+padded with copies of its last row, so every chunk has the same shape and the batched
+program is traced and compiled once per (chunk shape, model, options).  Each chunk runs as
+one ``vmap`` of :func:`fracas.integrate.propagate.propagate` (or of
+``propagate_with_sensitivities``): a single ``while_loop`` whose lanes advance together until
+the slowest lane is done, so the cost of a chunk is (largest step count in the chunk) x (chunk
+size); group similar propagations into the same batch.
+
+Parallelism.  XLA's CPU backend runs one while loop on one thread, so a vmapped propagation
+uses one core however large the batch.  To use several cores, the process must expose several
+*host devices*, which XLA only does when ``XLA_FLAGS`` contains
+``--xla_force_host_platform_device_count=N`` **before jax is first imported** (see
+:func:`host_devices`).  With more than one device each chunk is split over them with
+``jax.shard_map``: every device runs its own while loop on its slice of the chunk, with no
+communication between devices (a plain ``NamedSharding`` of a vmapped while loop would
+all-reduce the loop condition at every iteration and keep the devices in lock step).
+
+Batched parameters.  ``params_axes`` says which ``Params`` leaves carry the batch on their
+axis 0 (one value per propagation), like ``in_axes`` of ``jax.vmap``: ``None`` (all shared,
+the default), ``0`` (every leaf batched), a dict ``{field: 0}`` or a ``Params`` whose fields are
+``0`` or ``None``.
+
+Outputs are numpy arrays (host memory, one chunk resident on the device at a time) with the
+batch as their leading axis: a :class:`~fracas.integrate.propagate.Trajectory` (and a
+:class:`~fracas.integrate.propagate.Sensitivities`) whose every field has shape (N, ...).
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Sequence
+
+from fracas import _jax  # noqa: F401  (float64, compilation cache)
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, PartitionSpec as P
+
+from fracas.dynamics.model import ForceModel, Params
+from fracas.integrate.propagate import Sensitivities, Trajectory, propagate, propagate_with_sensitivities
+
+_AXIS = "batch"
+
+
+def host_devices(backend: str | None = None) -> list:
+    """The devices a batch is split over: ``jax.devices(backend)`` (default backend).
+
+    On CPU this is one device per ``--xla_force_host_platform_device_count`` (default 1), a
+    flag XLA reads once, when jax initialises its CPU client; it has to be in ``XLA_FLAGS``
+    before ``import jax``.  ``fracas._jax`` may set it from ``os.cpu_count()`` (or from
+    ``$FRACAS_HOST_DEVICES``) when the user has not set it, e.g.::
+
+        import os
+        n = os.environ.get("FRACAS_HOST_DEVICES") or str(os.cpu_count() or 1)
+        flags = os.environ.get("XLA_FLAGS", "")
+        if "xla_force_host_platform_device_count" not in flags:
+            os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={n}".strip()
+
+    Several host devices do not slow single propagations (they run on device 0).  On a GPU
+    backend this returns the GPUs.
+    """
+    return list(jax.devices(backend))
+
+
+def _normalise_axes(params_axes) -> tuple:
+    """Per-field axis (0 or None) of ``Params``, as a hashable tuple."""
+    fields = Params._fields
+    if params_axes is None:
+        axes = (None,) * len(fields)
+    elif isinstance(params_axes, int):
+        axes = (params_axes,) * len(fields)
+    elif isinstance(params_axes, Params):
+        axes = tuple(params_axes)
+    elif isinstance(params_axes, dict):
+        unknown = set(params_axes) - set(fields)
+        if unknown:
+            raise KeyError(f"unknown Params fields in params_axes: {sorted(unknown)}")
+        axes = tuple(params_axes.get(f) for f in fields)
+    else:
+        raise TypeError("params_axes: None, 0, a dict {field: 0} or a Params of 0/None")
+    for f, a in zip(fields, axes):
+        if a not in (None, 0):
+            raise ValueError(f"params_axes[{f!r}] = {a!r}: only 0 (batched on axis 0) or None")
+    return axes
+
+
+@functools.lru_cache(maxsize=64)
+def _batched_fn(model: ForceModel, with_sens: bool, labels: tuple, axes: tuple, devices: tuple):
+    """The jitted, vmapped (and, over several devices, shard_mapped) propagation of one chunk."""
+    in_axes_p = Params(*axes)
+
+    if with_sens:
+
+        def one(params, ephem, epoch, x0, t_out):
+            return propagate_with_sensitivities(model, params, ephem, epoch, x0, t_out, labels)
+
+    else:
+
+        def one(params, ephem, epoch, x0, t_out):
+            return propagate(model, params, ephem, epoch, x0, t_out)
+
+    vm = jax.vmap(one, in_axes=(in_axes_p, None, None, 0, None))
+    if len(devices) == 1:
+        return jax.jit(vm)  # placed on devices[0] by the caller's device_put
+    mesh = Mesh(np.array(devices), (_AXIS,))
+    p_spec = Params(*[P(_AXIS) if a == 0 else P() for a in axes])
+    sm = _shard_map(vm, mesh, in_specs=(p_spec, P(), P(), P(_AXIS), P()), out_specs=P(_AXIS))
+    return jax.jit(sm)
+
+
+def _shard_map(f, mesh, in_specs, out_specs):
+    """``jax.shard_map`` (new API) or ``jax.experimental.shard_map.shard_map`` (older jax)."""
+    if hasattr(jax, "shard_map"):
+        try:
+            return jax.shard_map(f, mesh=mesh, in_specs=in_specs, out_specs=out_specs, check_vma=False)
+        except TypeError:  # pragma: no cover - jax without check_vma
+            return jax.shard_map(f, mesh=mesh, in_specs=in_specs, out_specs=out_specs)
+    from jax.experimental.shard_map import shard_map  # pragma: no cover
+
+    return shard_map(f, mesh=mesh, in_specs=in_specs, out_specs=out_specs, check_rep=False)
+
+
+def _pad_rows(a: np.ndarray, start: int, stop: int, size: int) -> np.ndarray:
+    """Rows start:stop of ``a``, padded to ``size`` rows with copies of the last row."""
+    part = a[start:stop]
+    if part.shape[0] < size:
+        pad = np.repeat(part[-1:], size - part.shape[0], axis=0)
+        part = np.concatenate([part, pad], axis=0)
+    return part
+
+
+def chunk_rows(n: int, chunk_size: int, n_devices: int) -> int:
+    """Rows per chunk: ``min(chunk_size, n)`` rounded up to a multiple of ``n_devices``."""
+    rows = max(1, min(int(chunk_size), int(n)))
+    return -(-rows // n_devices) * n_devices
+
+
+def propagate_batch(
+    model: ForceModel,
+    params: Params,
+    ephem,
+    epoch_et_s,
+    x0s,
+    t_out,
+    chunk_size: int = 4096,
+    with_sensitivities: bool = False,
+    param_labels: Sequence[str] = (),
+    params_axes=None,
+    devices: Sequence | None = None,
+):
+    """Propagate every row of ``x0s`` (N, 7) through ``t_out`` (shared output times).
+
+    Same conventions and outputs as :func:`~fracas.integrate.propagate.propagate` (and, with
+    ``with_sensitivities``, :func:`~fracas.integrate.propagate.propagate_with_sensitivities`
+    with ``param_labels``; no labels gives the 7x7 STMs only), with a leading batch axis of
+    length N on every output field (numpy arrays).  ``params_axes`` batches ``Params`` leaves
+    (see the module docstring); ``devices`` overrides :func:`host_devices` (e.g. one device
+    to compare against a sharded run).  Returns a ``Trajectory``, or ``(Trajectory,
+    Sensitivities)`` when ``with_sensitivities``.
+    """
+    x0s = np.asarray(x0s, dtype=np.float64)
+    if x0s.ndim != 2 or x0s.shape[1] != 7:
+        raise ValueError(f"x0s must have shape (N, 7), got {x0s.shape}")
+    n = x0s.shape[0]
+    if n == 0:
+        raise ValueError("x0s is empty")
+    axes = _normalise_axes(params_axes)
+    devs = tuple(devices) if devices is not None else tuple(host_devices())
+    if not devs:
+        raise ValueError("no devices")
+    params = Params(*[np.asarray(v, np.float64) if a == 0 else v for v, a in zip(params, axes)])
+    for f, v, a in zip(Params._fields, params, axes):
+        if a == 0 and (v.ndim == 0 or v.shape[0] != n):
+            raise ValueError(f"params.{f} is batched (params_axes) but its axis 0 is not N = {n}")
+    fn = _batched_fn(model, bool(with_sensitivities), tuple(param_labels), axes, devs)
+    rows = chunk_rows(n, chunk_size, len(devs))
+    t_out = jnp.asarray(t_out, jnp.float64)
+    epoch = jnp.asarray(epoch_et_s, jnp.float64)
+    single = devs[0] if len(devs) == 1 else None
+
+    def launch(start):
+        stop = min(start + rows, n)
+        xs = _pad_rows(x0s, start, stop, rows)
+        ps = Params(*[_pad_rows(v, start, stop, rows) if a == 0 else v for v, a in zip(params, axes)])
+        args = (ps, ephem, epoch, xs, t_out)
+        if single is not None:
+            args = jax.device_put(args, single)
+        return stop - start, fn(*args)
+
+    # double buffering: chunk k+1 is dispatched before chunk k is copied to the host
+    pieces = []
+    pending = launch(0)
+    for start in range(rows, n, rows):
+        nxt = launch(start)
+        pieces.append(_to_host(*pending))
+        pending = nxt
+    pieces.append(_to_host(*pending))
+    out = jax.tree_util.tree_map(lambda *a: np.concatenate(a, axis=0), *pieces)
+    return out
+
+
+def _to_host(n_valid, out):
+    return jax.tree_util.tree_map(lambda a: np.asarray(a)[:n_valid], out)
+
+
+__all__ = ["propagate_batch", "host_devices", "chunk_rows", "Trajectory", "Sensitivities"]

@@ -84,6 +84,8 @@ def initial_guess(r0, sigma0, alpha, sqrt_mu, tau):
     arg = jnp.where(arg > 1e-300, arg, 1.0)
     x_hyp = sgn * jnp.sqrt(-a) * jnp.log(arg)
     x_par = sqrt_mu * tau / r0
+    # the log form is for long times; within ~|a| of the start the linear guess is better
+    x_hyp = jnp.where(jnp.abs(x_par) < jnp.sqrt(-a), x_par, x_hyp)
     x0 = jnp.where(alpha > 1e-12, x_ell, jnp.where(alpha < -1e-12, x_hyp, x_par))
     return jnp.where(jnp.isfinite(x0), x0, x_par)
 

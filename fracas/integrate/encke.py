@@ -311,11 +311,21 @@ def _apply_impulses(model, params, c: Carry, t_prev, direction, eps_t) -> Carry:
     hit = (jnp.abs(params.impulse_t - c.t) < eps_t) & (jnp.abs(params.impulse_t - t_prev) >= eps_t)
     r = c.rc + c.delta
     v = c.vc + c.nu
-    frame = propulsion.velocity_frame(r, v)
-    dv_vel = jnp.einsum("ij,kj->ki", frame, params.impulse_dv)
-    dv = jnp.where(params.impulse_frame[:, None] > 0.5, params.impulse_dv, dv_vel)
     hitf = hit.astype(jnp.float64)
-    dv_tot = direction * jnp.sum(hitf[:, None] * dv, axis=0)
+
+    def total_dv(v_pre):
+        # velocity-frame impulses are defined on the pre-impulse velocity (FRACAS EP frame)
+        frame = propulsion.velocity_frame(r, v_pre)
+        dv_vel = jnp.einsum("ij,kj->ki", frame, params.impulse_dv)
+        dv = jnp.where(params.impulse_frame[:, None] > 0.5, params.impulse_dv, dv_vel)
+        return jnp.sum(hitf[:, None] * dv, axis=0)
+
+    # forward: v+ = v- + dV(v-); backward: solve v- = v+ - dV(v-) by fixed-point iteration
+    # (contraction rate ~|dV|/|v|; 8 passes reach roundoff for |dV| < 0.1 |v|)
+    v_pre = v
+    for _ in range(8):
+        v_pre = jnp.where(direction > 0, v, v - total_dv(v_pre))
+    dv_tot = direction * total_dv(v_pre)
     ve = params.impulse_isp_s * constants.G0_KM_S2
     dlnm = -direction * jnp.sum(hitf * jnp.linalg.norm(params.impulse_dv, axis=1)) / ve
     return c._replace(nu=c.nu + dv_tot, m=c.m * jnp.exp(dlnm))

@@ -46,6 +46,11 @@ from jax.sharding import Mesh, PartitionSpec as P
 from fracas.dynamics.model import ForceModel, Params
 from fracas.integrate.propagate import Sensitivities, Trajectory, propagate, propagate_with_sensitivities
 
+try:  # integrator constants as traced values: one executable for every c_nom, dt_max ...
+    from fracas.integrate.propagate import join_model, split_model
+except ImportError:  # pragma: no cover - older core: the whole model is static
+    join_model = split_model = None
+
 _AXIS = "batch"
 
 
@@ -91,27 +96,41 @@ def _normalise_axes(params_axes) -> tuple:
     return axes
 
 
+def _split(model: ForceModel):
+    """(static model, traced integrator constants) when the core supports it, else (model, ())."""
+    if split_model is None:
+        return model, ()
+    return split_model(model)
+
+
 @functools.lru_cache(maxsize=64)
-def _batched_fn(model: ForceModel, with_sens: bool, labels: tuple, axes: tuple, devices: tuple):
-    """The jitted, vmapped (and, over several devices, shard_mapped) propagation of one chunk."""
+def _batched_fn(static: ForceModel, with_sens: bool, labels: tuple, axes: tuple, devices: tuple):
+    """The jitted, vmapped (and, over several devices, shard_mapped) propagation of one chunk.
+
+    ``static`` is the model without its integrator constants, which arrive as the traced
+    argument ``dyn``: changing c_nom or dt_max reuses the executable.
+    """
     in_axes_p = Params(*axes)
+
+    def model_of(dyn):
+        return static if split_model is None else join_model(static, dyn)
 
     if with_sens:
 
-        def one(params, ephem, epoch, x0, t_out):
-            return propagate_with_sensitivities(model, params, ephem, epoch, x0, t_out, labels)
+        def one(dyn, params, ephem, epoch, x0, t_out):
+            return propagate_with_sensitivities(model_of(dyn), params, ephem, epoch, x0, t_out, labels)
 
     else:
 
-        def one(params, ephem, epoch, x0, t_out):
-            return propagate(model, params, ephem, epoch, x0, t_out)
+        def one(dyn, params, ephem, epoch, x0, t_out):
+            return propagate(model_of(dyn), params, ephem, epoch, x0, t_out)
 
-    vm = jax.vmap(one, in_axes=(in_axes_p, None, None, 0, None))
+    vm = jax.vmap(one, in_axes=(None, in_axes_p, None, None, 0, None))
     if len(devices) == 1:
         return jax.jit(vm)  # placed on devices[0] by the caller's device_put
     mesh = Mesh(np.array(devices), (_AXIS,))
     p_spec = Params(*[P(_AXIS) if a == 0 else P() for a in axes])
-    sm = _shard_map(vm, mesh, in_specs=(p_spec, P(), P(), P(_AXIS), P()), out_specs=P(_AXIS))
+    sm = _shard_map(vm, mesh, in_specs=(P(), p_spec, P(), P(), P(_AXIS), P()), out_specs=P(_AXIS))
     return jax.jit(sm)
 
 
@@ -179,7 +198,8 @@ def propagate_batch(
     for f, v, a in zip(Params._fields, params, axes):
         if a == 0 and (v.ndim == 0 or v.shape[0] != n):
             raise ValueError(f"params.{f} is batched (params_axes) but its axis 0 is not N = {n}")
-    fn = _batched_fn(model, bool(with_sensitivities), tuple(param_labels), axes, devs)
+    static, dyn = _split(model)
+    fn = _batched_fn(static, bool(with_sensitivities), tuple(param_labels), axes, devs)
     rows = chunk_rows(n, chunk_size, len(devs))
     t_out = jnp.asarray(t_out, jnp.float64)
     epoch = jnp.asarray(epoch_et_s, jnp.float64)
@@ -189,7 +209,7 @@ def propagate_batch(
         stop = min(start + rows, n)
         xs = _pad_rows(x0s, start, stop, rows)
         ps = Params(*[_pad_rows(v, start, stop, rows) if a == 0 else v for v, a in zip(params, axes)])
-        args = (ps, ephem, epoch, xs, t_out)
+        args = (dyn, ps, ephem, epoch, xs, t_out)
         if single is not None:
             args = jax.device_put(args, single)
         return stop - start, fn(*args)

@@ -62,10 +62,40 @@ def stumpff(xi):
     return c, s
 
 
-def _time_of_x(x, r0, sigma0, alpha, sqrt_mu):
+_REDUCTIONS = 5  # stumpff_reduced: series at xi/4^5, exact to |xi| <= 1024 (y <= 32 rad)
+
+
+def stumpff_reduced(xi):
+    """C(xi), S(xi) with no transcendental function: the 9-term Taylor series at xi/4^5 and five
+    angle doublings (y -> 2y, xi -> 4 xi), for either sign of xi:
+
+        c0' = 2 c0^2 - 1,  c1' = c0 c1,  c2' = c1^2 / 2,  c3' = (c2 + c0 c3) / 4
+
+    with c0 = cos y, c1 = sin(y)/y, c2 = C, c3 = S (y = sqrt xi; cosh/sinh for xi < 0).  Exact
+    to a few ulp for |xi| <= 1024, which covers every Encke half-step (|xi| ~ (n dt/2)^2).
+    Polynomial only, so it vectorises where sin/sinh do not (about 8x faster on CPU).
+    """
+    z = xi * (0.25**_REDUCTIONS)
+    c2 = jnp.zeros_like(xi)
+    c3 = jnp.zeros_like(xi)
+    tc = 0.5 * jnp.ones_like(xi)
+    ts = jnp.ones_like(xi) / 6.0
+    for k in range(9):
+        c2 = c2 + tc
+        c3 = c3 + ts
+        tc = -tc * z / ((2 * k + 3) * (2 * k + 4))
+        ts = -ts * z / ((2 * k + 4) * (2 * k + 5))
+    c0 = 1.0 - z * c2
+    c1 = 1.0 - z * c3
+    for _ in range(_REDUCTIONS):
+        c0, c1, c2, c3 = 2.0 * c0 * c0 - 1.0, c0 * c1, 0.5 * c1 * c1, 0.25 * (c2 + c0 * c3)
+    return c2, c3
+
+
+def _time_of_x(x, r0, sigma0, alpha, sqrt_mu, stumpff_fn=stumpff):
     """sqrt(mu)*tau(x), r(x) and dr/dx for the universal Kepler equation."""
     xi = alpha * x * x
-    c, s = stumpff(xi)
+    c, s = stumpff_fn(xi)
     x2 = x * x
     f = sigma0 * x2 * c + (1.0 - alpha * r0) * x2 * x * s + r0 * x
     r = x2 * c + sigma0 * x * (1.0 - xi * s) + r0 * (1.0 - xi * c)
@@ -129,13 +159,21 @@ class ConicState(NamedTuple):
     gdot: jax.Array
 
 
-def kepler_fg(r0_vec, v0_vec, tau, mu, x_start=None) -> ConicState:
+def kepler_fg(
+    r0_vec, v0_vec, tau, mu, x_start=None, n_newton: int | None = None, short_arc: bool = False
+) -> ConicState:
     """Propagate (r0, v0) on its conic by ``tau`` seconds (any sign; any conic) (FRACAS CONIC).
 
-    ``x_start`` warm-starts the iteration (for example x' + sqrt(mu)(tau - tau')/|r(tau')|
-    from the previous solve, as the Encke integrator does).  Differentiable in every
-    argument (implicit-function derivative of x).
+    ``x_start`` warm-starts the iteration (for example a Taylor prediction from the previous
+    solve, as the Encke integrator does).  ``n_newton`` (static): take exactly that many
+    Newton steps from ``x_start`` instead of iterating Laguerre-Conway to convergence; only
+    for starts already close to the root (the integrator's predictor is O(dt^3) accurate,
+    so three Newton steps reach roundoff).  Differentiable in every argument
+    (implicit-function derivative of x).  ``short_arc`` (static) uses :func:`stumpff_reduced`
+    (valid while |alpha x^2| <= 1024, i.e. arcs of up to ~5 revolutions; the integrator's
+    half steps are ~0.15 rad).
     """
+    sf = stumpff_reduced if short_arc else stumpff
     r0 = jnp.linalg.norm(r0_vec)
     sqrt_mu = jnp.sqrt(mu)
     sigma0 = jnp.dot(r0_vec, v0_vec) / sqrt_mu
@@ -143,15 +181,22 @@ def kepler_fg(r0_vec, v0_vec, tau, mu, x_start=None) -> ConicState:
     if x_start is None:
         x_start = initial_guess(r0, sigma0, alpha, sqrt_mu, tau)
     sg = jax.lax.stop_gradient
-    x_star, _ = solve_universal_x(
-        sg(r0), sg(sigma0), sg(alpha), sg(sqrt_mu), sg(tau), sg(x_start)
-    )
+    if n_newton is None:
+        x_star, _ = solve_universal_x(
+            sg(r0), sg(sigma0), sg(alpha), sg(sqrt_mu), sg(tau), sg(x_start)
+        )
+    else:
+        x_star = sg(x_start)
+        a_r0, a_s0, a_al, a_sm, a_tau = sg(r0), sg(sigma0), sg(alpha), sg(sqrt_mu), sg(tau)
+        for _ in range(n_newton):
+            f, r, _, _, _ = _time_of_x(x_star, a_r0, a_s0, a_al, a_sm, sf)
+            x_star = x_star + (a_sm * a_tau - f) / r
     x_star = sg(x_star)
     # one Newton step with gradients: exact implicit derivative, value unchanged at the root
-    f, r, _, _, _ = _time_of_x(x_star, r0, sigma0, alpha, sqrt_mu)
+    f, r, _, _, _ = _time_of_x(x_star, r0, sigma0, alpha, sqrt_mu, sf)
     x = x_star + (sqrt_mu * tau - f) / r
     xi = alpha * x * x
-    c, s = stumpff(xi)
+    c, s = sf(xi)
     x2 = x * x
     r = x2 * c + sigma0 * x * (1.0 - xi * s) + r0 * (1.0 - xi * c)
     f_l = 1.0 - x2 * c / r0

@@ -12,11 +12,28 @@ import os
 _configured = False
 
 
+def _host_device_flag() -> None:
+    """Expose one XLA host device per CPU core (``$FRACAS_HOST_DEVICES`` overrides), so that
+    batches can be sharded over cores (XLA runs one vmapped while loop on one thread).  Must
+    happen before jax is first imported; has no effect afterwards and never overrides a
+    count already in ``XLA_FLAGS``.  Single propagations run on device 0 either way."""
+    import sys
+
+    if "jax" in sys.modules:
+        return
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "xla_force_host_platform_device_count" in flags:
+        return
+    n = os.environ.get("FRACAS_HOST_DEVICES") or str(os.cpu_count() or 1)
+    os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={int(n)}".strip()
+
+
 def configure() -> None:
     """Enable float64 and the persistent compilation cache (idempotent)."""
     global _configured
     if _configured:
         return
+    _host_device_flag()
     import jax
 
     jax.config.update("jax_enable_x64", True)

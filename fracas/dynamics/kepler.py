@@ -29,6 +29,20 @@ _SERIES_XI = 0.1  # |xi| below which C, S come from their Taylor series (no canc
 _MAX_ITER = 60
 
 
+def _stumpff_series(xi, n_terms: int = 9):
+    """Taylor series C = sum (-xi)^k/(2k+2)!, S = sum (-xi)^k/(2k+3)! (remainder < 1e-20 for |xi| < 0.1)."""
+    c = jnp.zeros_like(xi)
+    s = jnp.zeros_like(xi)
+    tc = 0.5 * jnp.ones_like(xi)
+    ts = jnp.ones_like(xi) / 6.0
+    for k in range(n_terms):
+        c = c + tc
+        s = s + ts
+        tc = -tc * xi / ((2 * k + 3) * (2 * k + 4))
+        ts = -ts * xi / ((2 * k + 4) * (2 * k + 5))
+    return c, s
+
+
 def stumpff(xi):
     """Stumpff functions C(xi) = (1 - cos sqrt xi)/xi and S(xi) = (sqrt xi - sin sqrt xi)/xi^1.5.
 
@@ -37,17 +51,7 @@ def stumpff(xi):
     (double ``where``) so that derivatives are finite everywhere.
     """
     small = jnp.abs(xi) < _SERIES_XI
-    # Taylor series: C = sum (-xi)^k/(2k+2)!, S = sum (-xi)^k/(2k+3)!
-    xs = jnp.where(small, xi, 0.0)
-    c_ser = jnp.zeros_like(xi)
-    s_ser = jnp.zeros_like(xi)
-    term_c = 0.5 * jnp.ones_like(xi)
-    term_s = jnp.ones_like(xi) / 6.0
-    for k in range(9):
-        c_ser = c_ser + term_c
-        s_ser = s_ser + term_s
-        term_c = -term_c * xs / ((2 * k + 3) * (2 * k + 4))
-        term_s = -term_s * xs / ((2 * k + 4) * (2 * k + 5))
+    c_ser, s_ser = _stumpff_series(jnp.where(small, xi, 0.0))
     pos = xi > 0
     xe = jnp.where(small, 1.0, jnp.where(pos, xi, 1.0))
     xh = jnp.where(small, -1.0, jnp.where(pos, -1.0, xi))
@@ -76,15 +80,7 @@ def stumpff_reduced(xi):
     Polynomial only, so it vectorises where sin/sinh do not (about 8x faster on CPU).
     """
     z = xi * (0.25**_REDUCTIONS)
-    c2 = jnp.zeros_like(xi)
-    c3 = jnp.zeros_like(xi)
-    tc = 0.5 * jnp.ones_like(xi)
-    ts = jnp.ones_like(xi) / 6.0
-    for k in range(9):
-        c2 = c2 + tc
-        c3 = c3 + ts
-        tc = -tc * z / ((2 * k + 3) * (2 * k + 4))
-        ts = -ts * z / ((2 * k + 4) * (2 * k + 5))
+    c2, c3 = _stumpff_series(z)
     c0 = 1.0 - z * c2
     c1 = 1.0 - z * c3
     for _ in range(_REDUCTIONS):

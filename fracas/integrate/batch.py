@@ -13,11 +13,11 @@ one ``vmap`` of :func:`fracas.integrate.propagate.propagate` (or of
 the slowest lane is done, so the cost of a chunk is (largest step count in the chunk) x (chunk
 size); group similar propagations into the same batch.
 
-Parallelism.  XLA's CPU backend runs one while loop on one thread, so a vmapped propagation
-uses one core however large the batch.  To use several cores, the process must expose several
-*host devices*, which XLA only does when ``XLA_FLAGS`` contains
-``--xla_force_host_platform_device_count=N`` **before jax is first imported** (see
-:func:`host_devices`).  With more than one device each chunk is split over them with
+Parallelism.  XLA's CPU backend advances one while loop on one device; it may overlap
+independent operations of the loop body on other threads, but that does not scale with the
+batch.  To use several cores, the process must expose several *host devices*, which XLA only
+does when ``XLA_FLAGS`` contains ``--xla_force_host_platform_device_count=N`` **before jax is
+first imported** (``fracas._jax`` sets it; see :func:`host_devices`).  With more than one device each chunk is split over them with
 ``jax.shard_map``: every device runs its own while loop on its slice of the chunk, with no
 communication between devices (a plain ``NamedSharding`` of a vmapped while loop would
 all-reduce the loop condition at every iteration and keep the devices in lock step).
@@ -59,14 +59,11 @@ def host_devices(backend: str | None = None) -> list:
 
     On CPU this is one device per ``--xla_force_host_platform_device_count`` (default 1), a
     flag XLA reads once, when jax initialises its CPU client; it has to be in ``XLA_FLAGS``
-    before ``import jax``.  ``fracas._jax`` may set it from ``os.cpu_count()`` (or from
-    ``$FRACAS_HOST_DEVICES``) when the user has not set it, e.g.::
-
-        import os
-        n = os.environ.get("FRACAS_HOST_DEVICES") or str(os.cpu_count() or 1)
-        flags = os.environ.get("XLA_FLAGS", "")
-        if "xla_force_host_platform_device_count" not in flags:
-            os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={n}".strip()
+    before ``import jax``.  ``fracas._jax`` sets it to ``$FRACAS_HOST_DEVICES`` or
+    ``os.cpu_count()`` when fracas is imported before jax and ``XLA_FLAGS`` has no count.
+    XLA's CPU runtime may run independent operations of one program concurrently, but a
+    vmapped ``while_loop`` advances on one device: sharding gave 1.5x on 2 (shared) cores in
+    ``benchmarks/results_cpu.txt``.
 
     Several host devices do not slow single propagations (they run on device 0).  On a GPU
     backend this returns the GPUs.

@@ -414,8 +414,12 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
 
     def normal_step(c: Carry):
         p = c.primary
-        rc_n = jnp.linalg.norm(c.rc)
-        dt_nom = st.c_nom * rc_n * jnp.sqrt(rc_n / params.mu[p])
+        # The nominal step is a control choice, not part of the dynamics: no derivative flows
+        # through it, so sensitivities are the variational equations integrated with the
+        # same steps (FRACAS INTEG integrates the STM alongside the state).  Breaks (thrust
+        # switches, impulses, outputs) keep theirs: d/d(switch time) is a real derivative.
+        rc_n = jax.lax.stop_gradient(jnp.linalg.norm(c.rc))
+        dt_nom = st.c_nom * rc_n * jnp.sqrt(rc_n / jax.lax.stop_gradient(params.mu[p]))
         # next break in the direction of motion (DETECT)
         ahead = (breaks - c.t) * direction > eps_t
         # (t_end is appended so the min is never over an empty set: no inf tangents)

@@ -81,12 +81,17 @@ def split_model(model: ForceModel):
     """(static model, dynamic integrator settings): c_nom, dt_max, the rectification ratio,
     eps_t and max_steps are traced values, so changing them does not recompile."""
     st = model.integrator
+    # numpy scalars (creating jax scalars here costs ~0.2 ms each per call); traced values
+    # (settings batched by propagate_batch) pass through as they are
+    def scalar(v, dtype):
+        return v if isinstance(v, jax.core.Tracer) else dtype(v)
+
     dyn = (
-        jnp.float64(st.c_nom),
-        jnp.float64(st.dt_max_s),
-        jnp.float64(st.rect_ratio),
-        jnp.float64(st.eps_t_s),
-        jnp.int32(st.max_steps),
+        scalar(st.c_nom, np.float64),
+        scalar(st.dt_max_s, np.float64),
+        scalar(st.rect_ratio, np.float64),
+        scalar(st.eps_t_s, np.float64),
+        scalar(st.max_steps, np.int32),
     )
     return dataclasses.replace(model, integrator=IntegratorSettings()), dyn
 

@@ -353,7 +353,7 @@ def _chebyshev(coef, x, n_coef):
 def _segment_and_x(table: EphemerisTable, et):
     """Per body (segment index k, normalised time x in [-1, 1] inside coverage)."""
     dt = et - table.et_start
-    k = jnp.clip(jnp.floor(dt / table.seg_len), 0, table.nseg - 1)
+    k = jnp.clip(jnp.floor(dt / table.seg_len), 0.0, (table.nseg - 1).astype(dt.dtype))
     tau = dt - k * table.seg_len
     x = 2.0 * tau / table.seg_len - 1.0
     return k.astype(jnp.int32), x

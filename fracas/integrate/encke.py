@@ -218,7 +218,7 @@ def event_functions(model: ForceModel, params: Params, r, v, primary, bodies_pos
             rb = r + rp - bodies_pos[b]
             dist = jnp.linalg.norm(rb)
             soi = params.soi_radius[b]
-            entry = jnp.where(params.parent[b] == primary, dist - soi, _INACTIVE)
+            entry = jnp.where(params.parent[b] == primary.astype(jnp.float64), dist - soi, _INACTIVE)
             exit_ = jnp.where(
                 (primary == b) & (params.parent[b] >= 0), soi - jnp.linalg.norm(r), _INACTIVE
             )

@@ -346,7 +346,10 @@ def _apply_impulses(model, params, c: Carry, t_prev, direction, eps_t) -> Carry:
     dv_tot = direction * total_dv(v_pre)
     ve = params.impulse_isp_s * constants.G0_KM_S2
     dlnm = -direction * jnp.sum(hitf * jnp.linalg.norm(params.impulse_dv, axis=1)) / ve
-    return c._replace(nu=c.nu + dv_tot, m=c.m * jnp.exp(dlnm))
+    c = c._replace(nu=c.nu + dv_tot, m=c.m * jnp.exp(dlnm))
+    # a new osculating conic after an impulse (Apollo practice), so the deviation equations
+    # do not carry the dV as a large deviation
+    return _rectify(c, jnp.inf, force=jnp.any(hit))
 
 
 # ---------------------------------------------------------------------- propagation

@@ -22,8 +22,10 @@ ET0 = calendar_to_et("2031-03-01T00:00:00")
 
 def test_impulses_in_both_frames():
     """Two impulses (velocity frame at 2000 s, inertial at 4000 s, Isp 320 s): the state after
-    6000 s matches DOP853 restarted with v += dV at the same times (1 mm: c_nom 0.02 two-body
-    truncation is ~1e-5 km), and the mass follows the rocket equation to 1e-12 relative."""
+    6000 s matches DOP853 restarted with v += dV at the same times to 1 mm (with no
+    perturbation Encke reproduces the conic exactly, so only roundoff and the reference's own
+    ~1e-8 km error remain), backward through the impulses returns to the start to 1 mm, and the
+    mass follows the rocket equation to 1e-12 relative."""
     m = ForceModel(bodies=("earth",), n_impulses=2, integrator=IntegratorSettings(c_nom=0.02))
     dv_vel = np.array([0.05, 0.01, -0.02])
     dv_in = np.array([-0.01, 0.03, 0.02])
@@ -43,13 +45,13 @@ def test_impulses_in_both_frames():
     y = integrate_piecewise(rhs, y, [2000.0, 4000.0])
     y[3:6] += dv_in
     y = integrate_piecewise(rhs, y, [4000.0, 6000.0])
-    assert np.linalg.norm(np.asarray(tr.x_final[:3]) - y[:3]) < 1e-3
+    assert np.linalg.norm(np.asarray(tr.x_final[:3]) - y[:3]) < 1e-6
     ve = 320.0 * C.G0_KM_S2
     m_ref = 1000.0 * np.exp(-(np.linalg.norm(dv_vel) + np.linalg.norm(dv_in)) / ve)
     assert abs(float(tr.x_final[6]) - m_ref) / m_ref < 1e-12
     # backward through the same impulses returns to the start (mass too)
     back = propagate(m, p, None, 0.0, np.asarray(tr.x_final), np.array([6000.0, 0.0]))
-    assert np.linalg.norm(np.asarray(back.x_final[:3]) - X0[:3]) < 1e-3
+    assert np.linalg.norm(np.asarray(back.x_final[:3]) - X0[:3]) < 1e-6
     assert abs(float(back.x_final[6]) - 1000.0) < 1e-9
 
 

@@ -35,7 +35,7 @@ batch as their leading axis: a :class:`~fracas.integrate.propagate.Trajectory` (
 from __future__ import annotations
 
 import functools
-from typing import Sequence
+from typing import Callable, Sequence
 
 from fracas import _jax  # noqa: F401  (float64, compilation cache)
 import jax
@@ -170,6 +170,7 @@ def propagate_batch(
     param_labels: Sequence[str] = (),
     params_axes=None,
     devices: Sequence | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ):
     """Propagate every row of ``x0s`` (N, 7) through ``t_out`` (shared output times).
 
@@ -178,8 +179,9 @@ def propagate_batch(
     with ``param_labels``; no labels gives the 7x7 STMs only), with a leading batch axis of
     length N on every output field (numpy arrays).  ``params_axes`` batches ``Params`` leaves
     (see the module docstring); ``devices`` overrides :func:`host_devices` (e.g. one device
-    to compare against a sharded run).  Returns a ``Trajectory``, or ``(Trajectory,
-    Sensitivities)`` when ``with_sensitivities``.
+    to compare against a sharded run).  ``progress(done, total)`` is called after every chunk
+    (the command line and Monte Carlo drivers hang a progress bar on it).  Returns a
+    ``Trajectory``, or ``(Trajectory, Sensitivities)`` when ``with_sensitivities``.
     """
     x0s = np.asarray(x0s, dtype=np.float64)
     if x0s.ndim != 2 or x0s.shape[1] != 7:
@@ -213,12 +215,21 @@ def propagate_batch(
 
     # double buffering: chunk k+1 is dispatched before chunk k is copied to the host
     pieces = []
+    done = 0
+
+    def collect(pending):
+        nonlocal done
+        pieces.append(_to_host(*pending))
+        done += pending[0]
+        if progress is not None:
+            progress(done, n)
+
     pending = launch(0)
     for start in range(rows, n, rows):
         nxt = launch(start)
-        pieces.append(_to_host(*pending))
+        collect(pending)
         pending = nxt
-    pieces.append(_to_host(*pending))
+    collect(pending)
     out = jax.tree_util.tree_map(lambda *a: np.concatenate(a, axis=0), *pieces)
     return out
 

@@ -75,7 +75,10 @@ def test_chunking_with_padding_gives_the_same_results():
     x0s = _states(5, seed=1)
     whole = propagate_batch(MODEL, PARAMS, None, 0.0, x0s, T_OUT, devices=host_devices()[:1])
     # chunks of 2 rows: (0,1) (2,3) (4, pad); the padded row must not leak into the outputs
-    chunked = propagate_batch(MODEL, PARAMS, None, 0.0, x0s, T_OUT, chunk_size=2, devices=host_devices()[:1])
+    seen = []
+    chunked = propagate_batch(MODEL, PARAMS, None, 0.0, x0s, T_OUT, chunk_size=2, devices=host_devices()[:1],
+                              progress=lambda done, total: seen.append((done, total)))
+    assert seen == [(2, 5), (4, 5), (5, 5)]  # one progress report per chunk, padding not counted
     assert chunked.x.shape == whole.x.shape
     _close_states(chunked.x, whole.x)
     np.testing.assert_array_equal(chunked.n_steps, whole.n_steps)

@@ -567,7 +567,7 @@ def main() -> None:  # noqa: C901 - a linear script
     rows = []
     for n in leo_sizes:
         rep = 3 if n <= 1000 else (1 if QUICK else 2)  # 10,000 = 10 chunks of 1,000
-        r = run_batch(f"LEO", m_leo, LEO_P, None, 0.0, x_leo_big[:n], LEO_T, leo_chunk, False, one_dev, rep,
+        r = run_batch("LEO", m_leo, LEO_P, None, 0.0, x_leo_big[:n], LEO_T, leo_chunk, False, one_dev, rep,
                       y_leo, n_ref_leo)
         rows.append(batch_row(r))
     r = run_batch("LEO + STM", m_leo, LEO_P, None, 0.0, x_leo_big[:leo_stm_n], LEO_T, leo_chunk, True, one_dev, 1,

@@ -43,7 +43,6 @@ import jax.numpy as jnp  # noqa: E402
 import fracas.dynamics.kepler as K  # noqa: E402
 import fracas.integrate.encke as E  # noqa: E402
 import fracas.integrate.propagate as PR  # noqa: E402
-from fracas.dynamics.model import ForceModel, IntegratorSettings, default_params  # noqa: E402
 
 DAY = 86400.0
 

@@ -255,7 +255,6 @@ def _nystrom_step(model, params, ephem, epoch_et, c: Carry, dt, ctl: StepControl
     p = c.primary
     mu = params.mu[p]
     sqrt_mu = jnp.sqrt(mu)
-    tau = c.t - c.t_rect
     t = c.t
     # stage 1 (t)
     pos1, _ = body_states(model, params, ephem, epoch_et + t)
@@ -528,7 +527,6 @@ def restart_from_state(model, params, c: Carry, x) -> Carry:
     At a conic epoch (tau = 0, e.g. the start) the conic itself is rebuilt from ``x``, so the
     derivative is that of exactly the map a finite-difference run computes."""
     mu = params.mu[c.primary]
-    sg = jax.lax.stop_gradient
     tau = c.t - c.t_rect
     cs = kepler_fg(c.r0, c.v0, tau, mu)
     at_epoch = tau == 0.0

@@ -8,9 +8,10 @@ primary body (epoch t_rect, state r0, v0), with Potter's f(q) for the central te
     q = delta.(delta - 2 r) / r.r                                   (Doc. 4 eq. 4.1-3)
 
 The conic is rectified when |delta| > ratio |r_con| or |nu| > ratio |v_con| (ratio 0.01).
-Each Nystrom step (Doc. 4 sec. 4.3) costs two Kepler solves (t + dt/2, t + dt, warm started
-from the previous universal anomaly) and three acceleration evaluations, four when the
-acceleration depends on velocity (thrust in the velocity frame).  Mass is integrated with
+Each Nystrom step (Doc. 4 sec. 4.3) costs two short-arc Kepler solves (conic advanced
+t -> t + dt/2 -> t + dt, each from a third-order prediction of the universal anomaly) and
+three acceleration evaluations, four when the acceleration depends on velocity (thrust in
+the velocity frame).  Every impulse starts a new osculating conic.  Mass is integrated with
 the same stages (classical RK4 weights; mdot depends only on t and r, so stages 2 and 3
 share it).  Steps follow dt = +-min(|t_F - t|, c_nom r_con^(3/2)/sqrt(mu), dt_max) and
 are broken exactly at thrust switches, impulses and output times (FRACAS DETECT).

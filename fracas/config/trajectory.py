@@ -385,6 +385,14 @@ def _check_body_keys(v: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+
+def _no_repeats(v: list[str]) -> list[str]:
+    """A list field's entries must be distinct (names the index of the repeat)."""
+    for k, item in enumerate(v):
+        if item in v[:k]:
+            raise FieldProblem((k,), item, "listed twice")
+    return v
+
 class Forces(_Section):
     third_bodies: list[BodyName] = []
     j2: bool = False
@@ -393,13 +401,7 @@ class Forces(_Section):
     overrides: Annotated[dict[str, BodyOverride], AfterValidator(_check_body_keys)] = {}
     conic_bodies: Annotated[dict[str, ConicBody], AfterValidator(_check_body_keys)] = {}
 
-    @field_validator("third_bodies")
-    @classmethod
-    def _unique(cls, v: list[str]) -> list[str]:
-        for k, name in enumerate(v):
-            if name in v[:k]:
-                raise FieldProblem((k,), name, "listed twice")
-        return v
+    _unique = field_validator("third_bodies")(classmethod(lambda cls, v: _no_repeats(v)))
 
 
 class Integrator(_Section):
@@ -444,13 +446,7 @@ class Output(_Section):
     sensitivities: list[ParamLabel] = []
     stm: bool = False
 
-    @field_validator("sensitivities")
-    @classmethod
-    def _unique(cls, v: list[str]) -> list[str]:
-        for k, label in enumerate(v):
-            if label in v[:k]:
-                raise FieldProblem((k,), label, "listed twice")
-        return v
+    _unique = field_validator("sensitivities")(classmethod(lambda cls, v: _no_repeats(v)))
 
 
 class TrajectoryDeck(_Section):

@@ -242,6 +242,10 @@ BAD = {
         None, "[forces]\nsrp = true\n",
         "spacecraft.area_m2 = 0.0: must be > 0 when forces.srp = true",
     ),
+    "repeated third body": (
+        None, '[forces]\nthird_bodies = ["moon", "moon"]\n',
+        'forces.third_bodies[1] = "moon": listed twice',
+    ),
 }
 
 

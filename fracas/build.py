@@ -25,7 +25,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fracas import constants
-from fracas.config.trajectory import TrajectoryDeck, epoch_to_julian_date
+from fracas.config.trajectory import TrajectoryDeck
+from fracas.timescales import epoch_to_et
 from fracas.dynamics.model import (
     FRAME_INERTIAL,
     FRAME_VELOCITY,
@@ -170,7 +171,7 @@ def _conic_elements(deck: TrajectoryDeck, bodies: tuple[str, ...], mu: np.ndarra
             r, v = (np.asarray(x) for x in el.elements_to_cartesian(vec, mu_sun))
             vec = np.asarray(el.cartesian_to_elements(rot @ r, rot @ v, mu_sun), dtype=np.float64)
         elems[k] = vec
-        et[k] = (epoch_to_julian_date(c.epoch) - constants.J2000_JD) * constants.DAY_S
+        et[k] = epoch_to_et(c.epoch)
     return elems, et
 
 
@@ -183,12 +184,7 @@ def build_propagation(deck: TrajectoryDeck) -> Problem:
     centre = st.centre
 
     # --- epoch and final time
-    if deck.epoch.iso is not None:
-        from fracas.dynamics.ephemeris import calendar_to_et
-
-        epoch_et = float(calendar_to_et(deck.epoch.iso))
-    else:
-        epoch_et = (deck.epoch.julian_date - constants.J2000_JD) * constants.DAY_S
+    epoch_et = deck.epoch.et
     t_final = deck.duration_days * constants.DAY_S
 
     # --- static model

@@ -61,19 +61,18 @@ from pydantic import (
     model_validator,
 )
 
-from fracas.constants import BODIES, J2000_JD
-from fracas.errors import DeckError
+from fracas.constants import BODIES, DAY_S
+from fracas.errors import ConfigError, DeckError
+from fracas.timescales import calendar_to_et, epoch_to_et
 
 __all__ = [
     "TrajectoryDeck",
     "load_deck",
     "parse_deck",
-    "epoch_to_julian_date",
     "FieldProblem",
 ]
 
 BODY_NAMES = tuple(BODIES)
-_J2000_DATETIME = _dt.datetime(2000, 1, 1, 12, 0, 0)
 
 
 class FieldProblem(ValueError):
@@ -101,20 +100,6 @@ def _given(model: BaseModel, keys: tuple[str, ...]) -> _Given:
 # --------------------------------------------------------------------------- helpers
 
 
-def _parse_iso(text: str) -> _dt.datetime:
-    s = text.strip()
-    if s.upper().endswith("TDB"):
-        s = s[:-3].rstrip()
-    if not re.fullmatch(r"\d{4}-\d{2}-\d{2}([T ]\d{2}:\d{2}(:\d{2}(\.\d{1,9})?)?)?", s):
-        raise ValueError(s)
-    # datetime keeps microseconds: trim finer digits.
-    m = re.match(r"(.*\.\d{1,6})\d*$", s)
-    if m:
-        s = m.group(1)
-    t = _dt.datetime.fromisoformat(s)
-    return t
-
-
 def _iso_value(v: Any) -> str:
     """A TDB calendar epoch: an ISO string (or a TOML local date/datetime) -> 'YYYY-MM-DDTHH:MM:SS[.ffffff]'."""
     if isinstance(v, _dt.datetime):
@@ -125,12 +110,14 @@ def _iso_value(v: Any) -> str:
         return _dt.datetime(v.year, v.month, v.day).isoformat()
     if not isinstance(v, str):
         raise ValueError("must be an ISO calendar date string such as \"2030-01-01T00:00:00\" (TDB)")
+    text = v.strip()
     try:
-        return _parse_iso(v).isoformat()
-    except ValueError:
+        calendar_to_et(text)  # the one calendar conversion (fracas.timescales)
+    except ConfigError:
         raise ValueError(
             "must be an ISO calendar date such as \"2030-01-01T00:00:00\" (TDB)"
         ) from None
+    return re.sub(r"\s*TDB$", "", text, flags=re.IGNORECASE)
 
 
 def _epoch_value(v: Any) -> str | float:
@@ -144,14 +131,6 @@ def _epoch_value(v: Any) -> str | float:
     if isinstance(v, (str, _dt.date)):
         return _iso_value(v)
     raise ValueError("must be an ISO calendar date string (TDB) or a Julian date number")
-
-
-def epoch_to_julian_date(value: str | float) -> float:
-    """Julian date (TDB) of an ISO TDB string or a Julian date number (no leap seconds in TDB)."""
-    if isinstance(value, str):
-        dt = _parse_iso(value) - _J2000_DATETIME
-        return J2000_JD + dt.days + (dt.seconds + dt.microseconds * 1e-6) / 86_400.0
-    return float(value)
 
 
 def _body_name(v: Any) -> str:
@@ -215,8 +194,9 @@ class Epoch(_Section):
         return self
 
     @property
-    def jd(self) -> float:
-        return epoch_to_julian_date(self.iso if self.iso is not None else self.julian_date)
+    def et(self) -> float:
+        """TDB seconds past J2000."""
+        return epoch_to_et(self.iso if self.iso is not None else self.julian_date)
 
 
 class Cartesian(_Section):
@@ -484,7 +464,7 @@ class TrajectoryDeck(_Section):
         """Final time in days from the epoch."""
         if self.stop.duration_days is not None:
             return self.stop.duration_days
-        return epoch_to_julian_date(self.stop.final_epoch) - self.epoch.jd
+        return (epoch_to_et(self.stop.final_epoch) - self.epoch.et) / DAY_S
 
     @model_validator(mode="after")
     def _cross_checks(self) -> TrajectoryDeck:

@@ -72,7 +72,8 @@ class ForceModel:
 
     bodies: names of every body with a position in the ephemeris table (index order);
     primary: index of the initial primary (centre of the Encke conic and of the state);
-    third_bodies: indices acting as point-mass perturbers (never the current primary);
+    third_bodies: indices acting as point-mass perturbers (never the current primary); with
+    change_primary_at_soi every body of the model acts (the primary left behind keeps pulling);
     j2: J2 of the current primary on/off; srp: solar radiation pressure on/off;
     thrust: any thrust arcs; velocity_dependent: the acceleration depends on v (thrust
     in the velocity frame), so Nystrom needs its fourth evaluation;

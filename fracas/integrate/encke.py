@@ -124,6 +124,17 @@ def step_controls(model: ForceModel, params: Params, t_mid) -> StepControls:
     return StepControls(factor, alpha, beta, inertial)
 
 
+def acting_third_bodies(model: ForceModel) -> tuple[int, ...]:
+    """Bodies that can act as point-mass perturbers (the current primary is masked at run time).
+
+    With primary changes every body of the model gravitates: the primary left behind at a
+    sphere of influence (e.g. the Sun after entering Mars's) must keep acting as a third body.
+    """
+    if model.change_primary_at_soi:
+        return tuple(range(len(model.bodies)))
+    return tuple(model.third_bodies)
+
+
 def perturbation(model: ForceModel, params: Params, t, r, v, primary, bodies_pos, ctl: StepControls):
     """Perturbing acceleration split as (a_free, force, mdot) so that a_d = a_free + force/m.
 
@@ -138,7 +149,7 @@ def perturbation(model: ForceModel, params: Params, t, r, v, primary, bodies_pos
             r, params.mu[primary], params.j2[primary], params.radius[primary], params.pole[primary]
         )
     rp = bodies_pos[primary]
-    for b in model.third_bodies:
+    for b in acting_third_bodies(model):
         rho = bodies_pos[b] - rp
         # the current primary is never its own third body (rho = 0): select a harmless rho
         is_p = primary == b

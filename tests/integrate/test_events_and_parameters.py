@@ -92,7 +92,7 @@ def test_leaving_earth_sphere_of_influence():
     body) to 0.01 km."""
     bodies = ("sun", "earth")
     m = ForceModel(
-        bodies=bodies, primary=1, third_bodies=(0, 1), change_primary_at_soi=True,
+        bodies=bodies, primary=1, third_bodies=(0,), change_primary_at_soi=True,
         integrator=IntegratorSettings(c_nom=0.02, dt_max_s=3600.0),
     )
     p = default_params(m)

@@ -70,7 +70,7 @@ def _mars_approach(stop, change_primary=False):
     u = (aim - r_rel) / np.linalg.norm(aim - r_rel)
     x0 = np.concatenate([rm + r_rel, vm + 3.0 * u, [500.0]])
     m = ForceModel(
-        bodies=bodies, primary=0, third_bodies=(0, 1) if change_primary else (1,),
+        bodies=bodies, primary=0, third_bodies=(1,),  # with primary changes the Sun acts too
         change_primary_at_soi=change_primary, stop=stop,
         integrator=IntegratorSettings(c_nom=0.02, dt_max_s=3600.0),
     )

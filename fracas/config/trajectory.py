@@ -100,6 +100,12 @@ def _given(model: BaseModel, keys: tuple[str, ...]) -> _Given:
 # --------------------------------------------------------------------------- helpers
 
 
+def _exactly_one(model: BaseModel, keys: tuple[str, ...], what: str = "") -> None:
+    """Raise the one-line deck error unless exactly one of ``keys`` is given."""
+    if sum(getattr(model, k) is not None for k in keys) != 1:
+        raise FieldProblem((), _given(model, keys), f"give exactly one of {what}{', '.join(keys)}")
+
+
 def _iso_value(v: Any) -> str:
     """A TDB calendar epoch: an ISO string (or a TOML local date/datetime) -> 'YYYY-MM-DDTHH:MM:SS[.ffffff]'."""
     if isinstance(v, _dt.datetime):
@@ -189,8 +195,7 @@ class Epoch(_Section):
 
     @model_validator(mode="after")
     def _one(self) -> Epoch:
-        if (self.iso is None) == (self.julian_date is None):
-            raise FieldProblem((), _given(self, ("iso", "julian_date")), "give exactly one of iso, julian_date")
+        _exactly_one(self, ("iso", "julian_date"))
         return self
 
     @property
@@ -224,11 +229,7 @@ class Elements(_Section):
 
     @model_validator(mode="after")
     def _consistent(self) -> Elements:
-        if (self.mean_anomaly_deg is None) == (self.true_anomaly_deg is None):
-            raise FieldProblem(
-                (), _given(self, ("mean_anomaly_deg", "true_anomaly_deg")),
-                "give exactly one of mean_anomaly_deg, true_anomaly_deg",
-            )
+        _exactly_one(self, ("mean_anomaly_deg", "true_anomaly_deg"))
         if abs(self.e - 1.0) < 1e-12:
             raise FieldProblem("e", self.e, "parabolic orbits (e = 1) are not supported")
         if self.e < 1.0 and self.a_km <= 0.0:
@@ -266,13 +267,8 @@ class InitialState(_Section):
     spherical: Spherical | None = None
 
     @model_validator(mode="after")
-    def _exactly_one(self) -> InitialState:
-        given = _given(self, ("cartesian", "elements", "spherical"))
-        if given.count(",") != 0 or given == "{}":
-            raise FieldProblem(
-                (), given,
-                "give exactly one of the tables cartesian, elements, spherical",
-            )
+    def _one_table(self) -> InitialState:
+        _exactly_one(self, ("cartesian", "elements", "spherical"), what="the tables ")
         return self
 
     @property
@@ -299,11 +295,7 @@ class Propulsion(_Section):
 
     @model_validator(mode="after")
     def _consistent(self) -> Propulsion:
-        if (self.exhaust_velocity_km_s is None) == (self.isp_s is None):
-            raise FieldProblem(
-                (), _given(self, ("exhaust_velocity_km_s", "isp_s")),
-                "give exactly one of exhaust_velocity_km_s, isp_s",
-            )
+        _exactly_one(self, ("exhaust_velocity_km_s", "isp_s"))
         if self.decay_days is not None and self.power_source != "nuclear":
             raise FieldProblem("decay_days", self.decay_days, 'only for power_source = "nuclear"')
         return self
@@ -403,11 +395,7 @@ class Stop(_Section):
 
     @model_validator(mode="after")
     def _consistent(self) -> Stop:
-        if (self.duration_days is None) == (self.final_epoch is None):
-            raise FieldProblem(
-                (), _given(self, ("duration_days", "final_epoch")),
-                "give exactly one of duration_days, final_epoch",
-            )
+        _exactly_one(self, ("duration_days", "final_epoch"))
         if self.condition in ("soi_entry", "closest_approach") and self.body is None:
             raise FieldProblem("body", None, f'required for condition = "{self.condition}"')
         if self.condition == "radius" and self.radius_km is None:

@@ -119,21 +119,3 @@ def set_values(params: Params, labels: Sequence[str], values, model: ForceModel)
         cur = upd.get(name, jnp.asarray(getattr(params, name), jnp.float64))
         upd[name] = cur.at[idx].set(values[j]) if idx else values[j] + 0.0 * cur
     return params._replace(**upd)
-
-
-def all_labels(model: ForceModel, include_controls: bool = False) -> tuple[str, ...]:
-    """Every sensitivity label that makes sense for ``model`` (for STM files and listings)."""
-    out = [f"mu[{b}]" for b in model.bodies]
-    if model.j2:
-        out.append(f"j2[{model.bodies[model.primary]}]")
-    if model.srp:
-        out.append("cr")
-    if model.thrust:
-        out += ["thrust_scale", "bias_in_rad", "bias_out_rad", "exhaust_velocity_km_s", "power_kw", "efficiency"]
-        for k in range(model.n_arcs):
-            out += [f"arc_thrust_scale[{k}]", f"arc_bias_in_rad[{k}]", f"arc_bias_out_rad[{k}]"]
-            if include_controls:
-                out += [f"arc_t_on[{k}]", f"arc_t_off[{k}]", f"arc_alpha[{k}]", f"arc_beta[{k}]", f"arc_throttle[{k}]"]
-    for b in model.conic_bodies:
-        out += [f"body_elements[{model.bodies[b]},{e}]" for e in ELEMENT_NAMES]
-    return tuple(out)

@@ -387,18 +387,12 @@ def body_states(table: EphemerisTable, et_s):
     return fn(et)
 
 
-def body_positions(table: EphemerisTable, et_s):
-    """Heliocentric ICRF positions (km) only (same conventions as :func:`body_states`)."""
-    return body_states(table, et_s)[0]
-
-
 # --- calendar <-> TDB seconds past J2000: fracas.timescales (re-exported here) --------
 
 
 __all__ = [
     "BODY_NAMES",
     "EphemerisTable",
-    "body_positions",
     "body_states",
     "build_ephemeris",
     "calendar_to_et",

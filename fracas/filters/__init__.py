@@ -1,0 +1,1 @@
+"""Filter algebra (FRACAS PROP, FILTER, KSGAIN, WLSGAN, DYNO, DERY): pure functions of arrays."""

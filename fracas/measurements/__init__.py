@@ -1,0 +1,1 @@
+"""Measurement models and partials (FRACAS TRAKM, STAPRL, MENO): pure functions of arrays."""

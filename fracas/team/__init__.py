@@ -1,0 +1,1 @@
+"""TEAM: linear covariance error analysis (event schedule, STM file reuse, generalized covariance)."""

@@ -541,9 +541,9 @@ def _strip(ann: Any) -> Any:
             return ann
 
 
-def _model_at(loc: tuple) -> type[BaseModel] | None:
+def _model_at(loc: tuple, root: type[BaseModel] | None = None) -> type[BaseModel] | None:
     """The pydantic model class that the location ``loc`` points into (best effort)."""
-    cur: Any = TrajectoryDeck
+    cur: Any = root or TrajectoryDeck
     for part in loc:
         cur = _strip(cur)
         origin = typing.get_origin(cur)
@@ -601,7 +601,7 @@ def _expected(err: dict) -> str:
     return msg.replace("Input should be", "must be")
 
 
-def format_validation_error(exc: ValidationError, source: str) -> str:
+def format_validation_error(exc: ValidationError, source: str, root: type[BaseModel] | None = None) -> str:
     """One line for the first error of ``exc``: ``source: field.path = value: expected``."""
     errs = exc.errors()
     err = errs[0]
@@ -614,7 +614,7 @@ def format_validation_error(exc: ValidationError, source: str) -> str:
         value = problem.value
         expected = problem.expected
     if err["type"] == "extra_forbidden":
-        parent = _model_at(loc[:-1])
+        parent = _model_at(loc[:-1], root)
         known = ", ".join(parent.model_fields) if parent is not None else ""
         expected = "unknown field" + (f" (expected one of: {known})" if known else "")
     field = _fmt_loc(loc)

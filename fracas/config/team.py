@@ -1,0 +1,372 @@
+"""The TEAM deck: one linear covariance study (FRACAS $ERRCON, $ERTRAJ, $ERANAL, $GENCOV, sec. 3.2).
+
+Validated into frozen pydantic models in the units an analyst writes (days, hours, m,
+mm/s, deg, µrad); :mod:`fracas.team.setup` converts to km, s, rad.  No JAX here.
+Layout (only ``[ertraj]`` is required)::
+
+    title = "Mercury approach"
+    [errcon]       build_stm = false, analysis = true,       ($ERRCON)
+                   propagation = "phi" | "pdot",  stm_file = "stm_files/x.h5"
+    [ertraj]       deck = "trajectory.toml"   (relative to this file)      ($ERTRAJ)
+                   pdot_step_hours = 2.4      (PDOT integration step)
+    [stm]          parameters = [...]  (extra labels the STM file should carry for later
+                   studies), grid_hours (extra uniform grid of file times)
+    [filter]       type = "kalman_schmidt" | "wls" | "user", user_gain = "module:function",
+                   square_root = false, min_elevation_deg = 0, start_days = 0, stop_days
+    [a_priori]     position_sigma_km = [3] | position_rss_km, velocity_sigma_km_s = [3] |
+                   velocity_rss_km_s, mass_sigma_kg = 0, from_punch = "file.h5"
+    [[parameter]]  label, sigma (in the label's unit), role = "solve_for" | "consider" | "ignore"
+    [thrust_noise] proportionality = {sigma, tau_days}, in_plane_deg = {sigma, tau_days},
+                   out_of_plane_deg = {sigma, tau_days}     (Gauss-Markov, App. 9.3)
+    [[station]]    name, radius_km, latitude_deg, longitude_deg  (override/add; <= 9 in all)
+    [[tracking]]   type, stations = [..], start_days, stop_days, interval_hours, sigma
+                   (range types: m; Doppler types: mm/s; azimuth/elevation: deg;
+                    star_planet_angle, planet_diameter: µrad), body, star_ra_deg, star_dec_deg
+    [[event]]      type = "eigenvector" | "propagation" | "prediction",
+                   times_days = [..] | start_days + stop_days + interval_days,
+                   predict_to_days (prediction)
+    [print]        every = 1 (print every n-th measurement event), correlations = true,
+                   process_noise = true
+    [punch]        times_days = [..], file = "out/knowledge.h5"
+    [gencov]       enabled = true, a_priori = {...}, [[gencov.parameter]] (true sigma of a study
+                   parameter, or a new role = "ignore" one), thrust_noise = {...},
+                   measurement_sigma = {type = sigma}                         ($GENCOV)
+    [output]       results = "out/x_team.h5", plot = "out/x_team.png"
+
+Consider parameters are split by the catalogue: labels the dynamics depend on are dynamic
+consider (u), measurement labels (station locations, biases) are measurement consider (v).
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
+
+from fracas.config.trajectory import FieldProblem, ParamLabel, PositiveFloat, Vector3, format_validation_error
+from fracas.errors import DeckError
+
+__all__ = ["TeamDeck", "load_team_deck", "parse_team_deck", "is_team_text", "MEASUREMENT_TYPES", "SIGMA_UNITS"]
+
+MEASUREMENT_TYPES = (
+    "range2", "doppler2", "range3", "doppler3", "diff_range", "diff_doppler",
+    "azimuth", "elevation", "star_planet_angle", "planet_diameter",
+)
+#: unit of ``sigma`` in a [[tracking]] entry, per type, and the factor to km, km/s or rad
+SIGMA_UNITS = {
+    "range2": ("m", 1e-3), "range3": ("m", 1e-3), "diff_range": ("m", 1e-3),
+    "doppler2": ("mm/s", 1e-6), "doppler3": ("mm/s", 1e-6), "diff_doppler": ("mm/s", 1e-6),
+    "azimuth": ("deg", 0.017453292519943295), "elevation": ("deg", 0.017453292519943295),
+    "star_planet_angle": ("urad", 1e-6), "planet_diameter": ("urad", 1e-6),
+}
+N_STATIONS = {
+    "range2": 1, "doppler2": 1, "azimuth": 1, "elevation": 1,
+    "range3": 2, "doppler3": 2, "diff_range": 2, "diff_doppler": 2,
+    "star_planet_angle": 0, "planet_diameter": 0,
+}
+MAX_STATIONS = 9
+NonNeg = Annotated[float, Field(ge=0)]
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True, allow_inf_nan=False)
+
+
+class ErrCon(_Section):
+    """$ERRCON: what this run does."""
+
+    build_stm: bool = False
+    analysis: bool = True
+    propagation: Literal["phi", "pdot"] = "phi"
+    stm_file: str | None = None
+
+
+class ErTraj(_Section):
+    """$ERTRAJ: the reference trajectory deck (the core's TOML) and PDOT's integration step."""
+
+    deck: str
+    pdot_step_hours: PositiveFloat = 2.4
+
+
+class StmSection(_Section):
+    parameters: list[ParamLabel] = []
+    grid_hours: PositiveFloat | None = None
+
+
+class FilterSection(_Section):
+    type: Literal["kalman_schmidt", "wls", "user"] = "kalman_schmidt"
+    user_gain: str | None = None
+    square_root: bool = False
+    min_elevation_deg: Annotated[float, Field(ge=-90, le=90)] = 0.0
+    start_days: NonNeg = 0.0
+    stop_days: PositiveFloat | None = None
+
+    @model_validator(mode="after")
+    def _user(self) -> FilterSection:
+        if self.type == "user" and not self.user_gain:
+            raise FieldProblem("user_gain", None, 'required for type = "user" (a "module:function" name)')
+        if self.user_gain and not re.match(r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$", self.user_gain):
+            raise FieldProblem("user_gain", self.user_gain, 'must be "module:function"')
+        if self.stop_days is not None and self.stop_days <= self.start_days:
+            raise FieldProblem("stop_days", self.stop_days, "must be after start_days")
+        return self
+
+
+class APriori(_Section):
+    """A-priori knowledge of the spacecraft state (1σ, ICRF axes)."""
+
+    position_sigma_km: Vector3 | None = None
+    position_rss_km: PositiveFloat | None = None
+    velocity_sigma_km_s: Vector3 | None = None
+    velocity_rss_km_s: PositiveFloat | None = None
+    mass_sigma_kg: NonNeg = 0.0
+    from_punch: str | None = None
+
+    @model_validator(mode="after")
+    def _consistent(self) -> APriori:
+        if self.from_punch is None:
+            for a, b in (("position_sigma_km", "position_rss_km"), ("velocity_sigma_km_s", "velocity_rss_km_s")):
+                if (getattr(self, a) is None) == (getattr(self, b) is None):
+                    raise FieldProblem((), None, f"give exactly one of {a}, {b} (or from_punch)")
+        for a in ("position_sigma_km", "velocity_sigma_km_s"):
+            v = getattr(self, a)
+            if v is not None and min(v) < 0:
+                raise FieldProblem(a, v, "sigmas must be >= 0")
+        return self
+
+    def sigmas(self) -> tuple[list[float], list[float]]:
+        """(position sigma km (3), velocity sigma km/s (3)); an RSS value is split equally."""
+        s3 = 3.0 ** 0.5
+        pos = self.position_sigma_km or [self.position_rss_km / s3] * 3
+        vel = self.velocity_sigma_km_s or [self.velocity_rss_km_s / s3] * 3
+        return list(pos), list(vel)
+
+
+class Parameter(_Section):
+    label: ParamLabel
+    sigma: NonNeg
+    role: Literal["solve_for", "consider", "ignore"]
+
+
+class NoiseComponent(_Section):
+    sigma: NonNeg
+    tau_days: PositiveFloat
+
+
+class ThrustNoise(_Section):
+    """Gauss-Markov thrust errors: proportionality (fraction), pointing (deg); τ in days."""
+
+    proportionality: NoiseComponent | None = None
+    in_plane_deg: NoiseComponent | None = None
+    out_of_plane_deg: NoiseComponent | None = None
+
+
+class StationDef(_Section):
+    name: Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]*$")]
+    radius_km: Annotated[float, Field(gt=6000, lt=7000)]
+    latitude_deg: Annotated[float, Field(ge=-90, le=90)]
+    longitude_deg: Annotated[float, Field(ge=-360, le=360)]
+
+
+class Tracking(_Section):
+    type: Literal[MEASUREMENT_TYPES]  # type: ignore[valid-type]
+    stations: list[str] = []
+    start_days: NonNeg
+    stop_days: NonNeg
+    interval_hours: PositiveFloat
+    sigma: PositiveFloat
+    body: str | None = None
+    star_ra_deg: float | None = None
+    star_dec_deg: float | None = None
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Tracking:
+        need = N_STATIONS[self.type]
+        if len(self.stations) != need:
+            raise FieldProblem("stations", self.stations, f'type "{self.type}" needs {need} station{"s" if need != 1 else ""}')
+        if need == 2 and self.stations[0] == self.stations[1]:
+            raise FieldProblem("stations", self.stations, "the two stations must differ")
+        if self.stop_days < self.start_days:
+            raise FieldProblem("stop_days", self.stop_days, "must be >= start_days")
+        if need == 0 and not self.body:
+            raise FieldProblem("body", None, f'required for type "{self.type}" (the observed body)')
+        if self.type == "star_planet_angle" and (self.star_ra_deg is None or self.star_dec_deg is None):
+            raise FieldProblem("star_ra_deg", None, "star_ra_deg and star_dec_deg are required for star_planet_angle")
+        return self
+
+
+class Event(_Section):
+    type: Literal["eigenvector", "propagation", "prediction"]
+    times_days: list[NonNeg] = []
+    start_days: NonNeg | None = None
+    stop_days: NonNeg | None = None
+    interval_days: PositiveFloat | None = None
+    predict_to_days: PositiveFloat | None = None
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Event:
+        rng = (self.start_days, self.stop_days, self.interval_days)
+        if not self.times_days and any(v is None for v in rng):
+            raise FieldProblem((), None, "give times_days, or start_days + stop_days + interval_days")
+        if self.type == "prediction" and self.predict_to_days is None:
+            raise FieldProblem("predict_to_days", None, "required for a prediction event")
+        if self.type != "prediction" and self.predict_to_days is not None:
+            raise FieldProblem("predict_to_days", self.predict_to_days, "only for prediction events")
+        return self
+
+    def times(self) -> list[float]:
+        out = list(self.times_days)
+        if self.start_days is not None and self.stop_days is not None and self.interval_days:
+            n = int((self.stop_days - self.start_days) / self.interval_days + 1e-9)
+            out += [self.start_days + k * self.interval_days for k in range(n + 1)]
+        return sorted(set(out))
+
+
+class PrintSection(_Section):
+    every: Annotated[int, Field(ge=1)] = 1
+    correlations: bool = True
+    process_noise: bool = True
+
+
+class Punch(_Section):
+    times_days: list[NonNeg]
+    file: str
+
+
+class GenCovParameter(_Section):
+    label: ParamLabel
+    sigma: NonNeg
+    role: Literal["ignore"] | None = None
+
+
+class GenCov(_Section):
+    """$GENCOV: only what the real world does differently from the filter's assumptions."""
+
+    enabled: bool = True
+    a_priori: APriori | None = None
+    parameter: list[GenCovParameter] = []
+    thrust_noise: ThrustNoise | None = None
+    measurement_sigma: dict[str, PositiveFloat] = {}
+
+    @field_validator("measurement_sigma")
+    @classmethod
+    def _types(cls, v: dict[str, float]) -> dict[str, float]:
+        for k in v:
+            if k not in MEASUREMENT_TYPES:
+                raise ValueError(f'unknown measurement type "{k}" (expected one of: {", ".join(MEASUREMENT_TYPES)})')
+        return v
+
+
+class OutputSection(_Section):
+    results: str | None = None
+    plot: str | None = None
+
+
+class TeamDeck(_Section):
+    """A whole TEAM deck (frozen)."""
+
+    title: str = ""
+    errcon: ErrCon = ErrCon()
+    ertraj: ErTraj
+    stm: StmSection = StmSection()
+    filter: FilterSection = FilterSection()
+    a_priori: APriori | None = None
+    parameter: list[Parameter] = []
+    thrust_noise: ThrustNoise = ThrustNoise()
+    station: list[StationDef] = []
+    tracking: list[Tracking] = []
+    event: list[Event] = []
+    print: PrintSection = PrintSection()
+    punch: Punch | None = None
+    gencov: GenCov | None = None
+    output: OutputSection = OutputSection()
+
+    _source_path: str | None = PrivateAttr(None)
+    _source_text: str | None = PrivateAttr(None)
+
+    @property
+    def source_path(self) -> str | None:
+        return self._source_path
+
+    @property
+    def source_text(self) -> str | None:
+        return self._source_text
+
+    def resolve(self, rel: str) -> Path:
+        """A path named in the deck, relative to the deck's folder."""
+        p = Path(rel)
+        if p.is_absolute() or self._source_path is None:
+            return p
+        return Path(self._source_path).parent / p
+
+    @model_validator(mode="after")
+    def _cross_checks(self) -> TeamDeck:
+        if self.errcon.analysis and self.a_priori is None:
+            raise FieldProblem("a_priori", None, "required when errcon.analysis = true")
+        seen: dict[str, int] = {}
+        for k, p in enumerate(self.parameter):
+            if p.label in seen:
+                raise FieldProblem(("parameter", k, "label"), p.label, f"repeats parameter[{seen[p.label]}]")
+            seen[p.label] = k
+        if self.gencov is not None:
+            for k, g in enumerate(self.gencov.parameter):
+                if g.label not in seen and g.role != "ignore":
+                    raise FieldProblem(("gencov", "parameter", k, "label"), g.label,
+                                       'is not a study parameter; add role = "ignore" to make it an ignore parameter')
+                if g.label in seen and g.role == "ignore":
+                    raise FieldProblem(("gencov", "parameter", k, "role"), "ignore",
+                                       f"{g.label} is already a study parameter (parameter[{seen[g.label]}])")
+        names = [s.name for s in self.station]
+        if len(set(names)) != len(names):
+            raise FieldProblem("station", names, "station names must be unique")
+        builtin = {"goldstone", "madrid", "canberra"}
+        if len(builtin | set(names)) > MAX_STATIONS:
+            raise FieldProblem("station", names, f"at most {MAX_STATIONS} stations in all (including the 3 DSN defaults)")
+        known = builtin | set(names)
+        for k, t in enumerate(self.tracking):
+            for j, s in enumerate(t.stations):
+                if s not in known:
+                    raise FieldProblem(("tracking", k, "stations", j), s, f"unknown station (expected one of: {', '.join(sorted(known))})")
+        return self
+
+
+def parse_team_deck(text: str, source: str = "<deck>") -> TeamDeck:
+    """Validate TOML text; any problem -> DeckError('source: field = value: expected')."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise DeckError(f"{source}: TOML syntax error: {exc}") from None
+    try:
+        deck = TeamDeck.model_validate(data)
+    except ValidationError as exc:
+        raise DeckError(format_validation_error(exc, source, TeamDeck)) from None
+    deck._source_path = source
+    deck._source_text = text
+    return deck
+
+
+def is_team_text(text: str) -> bool:
+    """Whether TOML text is a TEAM deck (it has an [ertraj] table) rather than a trajectory deck."""
+    try:
+        return "ertraj" in tomllib.loads(text)
+    except tomllib.TOMLDecodeError:
+        return False
+
+
+def load_team_deck(path: str | Path) -> TeamDeck:
+    """Read and validate a TEAM deck; every failure is a one-line DeckError."""
+    p = Path(path)
+    try:
+        text = p.read_bytes().decode("utf-8")
+    except FileNotFoundError:
+        raise DeckError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise DeckError(f"{path}: is a directory, expected a TOML deck file") from None
+    except UnicodeDecodeError as exc:
+        raise DeckError(f"{path}: not UTF-8 text (byte {exc.start})") from None
+    except OSError as exc:
+        raise DeckError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    return parse_team_deck(text, str(path))

@@ -1,0 +1,423 @@
+"""Observation matrices for the TEAM engine (FRACAS TRAKM, section 5.3.22, and MENO, 5.3.9).
+
+Boundary module: numpy in, numpy out; the arithmetic runs in one jitted JAX kernel per
+measurement kind (compiled once per process, then reused), built from
+:mod:`fracas.measurements.models` and :mod:`fracas.measurements.stations`.
+
+TRAKM linearises y = h(x, s, u, v, w) about the nominal: dy = H_x dx + H_p dp.  Here H has
+``nx`` spacecraft-state columns (r km, v km/s, then mass etc. with zero partials) followed by
+one column per parameter label (TRAKM's single H_p "rearranged column by column" is the
+caller's business).  Measurement-parameter labels:
+
+    station_radius_km[NAME]   km     station geocentric radius   (via STAPRL)
+    station_lat_rad[NAME]     rad    station geocentric latitude (via STAPRL)
+    station_lon_rad[NAME]     rad    station east longitude      (via STAPRL)
+    range_bias_km[NAME]       km     range bias of station NAME
+    doppler_bias_km_s[NAME]   km/s   Doppler (range-rate) bias of station NAME
+    azimuth_bias_rad[NAME]    rad    azimuth bias of station NAME
+    elevation_bias_rad[NAME]  rad    elevation bias of station NAME
+    qvlbi_timing_km           km     c dt   (+ in range3, - in diff_range; TRAKM eqs. 9, 11)
+    qvlbi_frequency_km_s      km/s   c df/f (+ in doppler3, - in diff_doppler; eqs. 10, 12)
+    star_planet_bias_rad      rad    star-planet angle bias
+    diameter_bias_rad         rad    apparent-diameter bias
+
+Biases enter with unit partials (TRAKM eq. 8 and its closing remark): 2-way kinds use their
+station's bias, 3-way kinds both stations' (+1 each), differenced kinds station 1 minus
+station 2.  Any other label (a dynamic parameter) gets a zero column, except labels in
+``Geometry.body_r_partials``: for the spacecraft-based kinds their column is
+d h / d body_r . d body_r / d param (TRAKM eqs. 35, 39).  Predicted ``values`` are the
+bias-free model values (nominal biases are zero).
+
+R = diag(sigma^2) (MENO: the white-noise variance of each measurement's data type).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from fracas import _jax  # noqa: F401  (x64 first)
+import jax
+import jax.numpy as jnp
+
+from fracas.measurements import models
+from fracas.measurements.stations import Station, station_partials, station_state
+
+__all__ = [
+    "STATION_LABELS",
+    "GLOBAL_LABELS",
+    "Observation",
+    "Geometry",
+    "ObservationBatch",
+    "is_measurement_label",
+    "measurement_label_unit",
+    "check_measurement_label",
+    "observation_matrix",
+]
+
+# name -> unit, for labels indexed by a station name (name[STATION]).
+STATION_LABELS = {
+    "station_radius_km": "km",
+    "station_lat_rad": "rad",
+    "station_lon_rad": "rad",
+    "range_bias_km": "km",
+    "doppler_bias_km_s": "km/s",
+    "azimuth_bias_rad": "rad",
+    "elevation_bias_rad": "rad",
+}
+# name -> unit, for unindexed labels.
+GLOBAL_LABELS = {
+    "qvlbi_timing_km": "km",
+    "qvlbi_frequency_km_s": "km/s",
+    "star_planet_bias_rad": "rad",
+    "diameter_bias_rad": "rad",
+}
+_KIND_UNITS = {
+    "range2": "km", "doppler2": "km/s", "range3": "km", "doppler3": "km/s",
+    "diff_range": "km", "diff_doppler": "km/s", "azimuth": "rad", "elevation": "rad",
+    "star_planet_angle": "rad", "planet_diameter": "rad",
+}
+_LABEL = re.compile(r"^([a-z_0-9]+)(?:\[([^\]\[]+)\])?$")
+_STATION_PARAM_INDEX = {"station_radius_km": 0, "station_lat_rad": 1, "station_lon_rad": 2}
+
+
+def _valid_forms() -> str:
+    forms = [f"{n}[<station>]" for n in STATION_LABELS] + list(GLOBAL_LABELS)
+    return ", ".join(forms)
+
+
+def _split(label: str) -> tuple[str, str | None] | None:
+    m = _LABEL.match(label.strip()) if isinstance(label, str) else None
+    if m is None:
+        return None
+    name, idx = m.group(1), m.group(2)
+    if name in STATION_LABELS and idx is not None and idx.strip():
+        return name, idx.strip()
+    if name in GLOBAL_LABELS and idx is None:
+        return name, None
+    return None
+
+
+def is_measurement_label(label: str) -> bool:
+    """True if ``label`` has the form of a measurement-parameter label (any station name)."""
+    return _split(label) is not None
+
+
+def measurement_label_unit(label: str) -> str:
+    """Unit of a measurement-parameter label ('km', 'km/s' or 'rad'); KeyError if unknown."""
+    parts = _split(label)
+    if parts is None:
+        raise KeyError(f"{label!r} is not a measurement-parameter label; valid forms: {_valid_forms()}")
+    name = parts[0]
+    return STATION_LABELS.get(name) or GLOBAL_LABELS[name]
+
+
+def check_measurement_label(label: str, station_names) -> None:
+    """Raise KeyError, naming the valid forms and stations, unless ``label`` is a valid
+    measurement-parameter label whose station (if any) is in ``station_names``."""
+    names = sorted(station_names)
+    parts = _split(label)
+    if parts is None:
+        raise KeyError(
+            f"unknown measurement-parameter label {label!r}: expected one of {_valid_forms()}"
+            f" (stations: {', '.join(names) or 'none'})"
+        )
+    if parts[1] is not None and parts[1] not in names:
+        raise KeyError(
+            f"measurement-parameter label {label!r}: station {parts[1]!r} is not one of "
+            f"{', '.join(names) or 'none (no stations given)'}"
+        )
+
+
+@dataclass(frozen=True)
+class Observation:
+    """One scheduled measurement: ``kind`` (one of :data:`models.KINDS`), the participating
+    station names (1 for range2/doppler2/azimuth/elevation, 2 for range3/doppler3/
+    diff_range/diff_doppler, 0 for star_planet_angle/planet_diameter; for differenced kinds
+    value = station 1 - station 2) and the white-noise sigma in the kind's unit (km, km/s
+    or rad)."""
+
+    kind: str
+    stations: tuple[str, ...]
+    sigma: float
+
+    def __post_init__(self):
+        if self.kind not in models.KINDS:
+            raise ValueError(
+                f"measurement kind {self.kind!r} unknown: expected one of {', '.join(models.KINDS)}"
+            )
+        if isinstance(self.stations, str):
+            raise ValueError(
+                f"{self.kind}: stations must be a tuple of names, got the string {self.stations!r}"
+            )
+        object.__setattr__(self, "stations", tuple(self.stations))
+        need = models.N_STATIONS[self.kind]
+        if len(self.stations) != need:
+            raise ValueError(
+                f"{self.kind} needs {need} station(s), got {len(self.stations)}: {self.stations}"
+            )
+        if len(set(self.stations)) != len(self.stations):
+            raise ValueError(f"{self.kind}: the two stations must differ, got {self.stations}")
+        if not (math.isfinite(self.sigma) and self.sigma > 0.0):
+            raise ValueError(
+                f"{self.kind}: sigma must be positive and finite ({_KIND_UNITS[self.kind]}),"
+                f" got {self.sigma!r}"
+            )
+
+
+@dataclass
+class Geometry:
+    """Nominal geometry at one measurement epoch.
+
+    ``et_s``: TDB s past J2000.  ``sc_r, sc_v`` (km, km/s): spacecraft relative to an origin
+    O; ``earth_r, earth_v``: Earth centre relative to the same O (ICRF).  ``body_r, body_v``:
+    target-body centre relative to O (needed by the spacecraft-based kinds), with radius
+    ``body_radius_km`` (planet_diameter) and ``star_unit`` (star_planet_angle).
+    ``body_r_partials``: label -> d body_r / d param (3,), supplied by the caller for
+    ephemeris parameters and chained into H (TRAKM eqs. 35, 39).
+    """
+
+    et_s: float
+    sc_r: np.ndarray
+    sc_v: np.ndarray
+    earth_r: np.ndarray
+    earth_v: np.ndarray
+    body_r: np.ndarray | None = None
+    body_v: np.ndarray | None = None
+    body_radius_km: float | None = None
+    star_unit: np.ndarray | None = None
+    body_r_partials: dict = field(default_factory=dict)
+
+
+@dataclass
+class ObservationBatch:
+    """TRAKM + MENO output for m observations: ``values`` (m,) bias-free predicted values
+    (km, km/s, rad), ``H`` (m, nx + n_labels), ``R`` (m, m) = diag(sigma^2), and
+    ``elevation_deg`` (m,) the lowest elevation of the participating stations (nan for
+    spacecraft-based kinds; negative = below the horizon, for the caller to report or skip)."""
+
+    values: np.ndarray
+    H: np.ndarray
+    R: np.ndarray
+    elevation_deg: np.ndarray
+
+
+# --- kernels ------------------------------------------------------------------------
+# Packed input (one float64 vector, one host->device transfer per observation):
+_I_ET, _I_SC, _I_E, _I_ST1, _I_ST2, _I_BODY, _I_RP, _I_STAR = 0, 1, 7, 13, 16, 19, 22, 23
+_N_IN = 26
+# Packed output: value, h_sc (6), h_st1 (R, phi, lam), h_st2 (3), h_body_r (3), elev1, elev2
+_O_H, _O_ST1, _O_ST2, _O_BODY, _O_EL = 1, 7, 10, 13, 16
+_N_OUT = 18
+
+
+def _station(x, i0, et):
+    R, lat, lon = x[i0], x[i0 + 1], x[i0 + 2]
+    r, v = station_state(R, lat, lon, et)
+    return r, v, station_partials(R, lat, lon, et)
+
+
+def _kernel(kind: str):
+    """Packed kernel for one kind: (26,) -> (18,) (traced inside :func:`_batch_kernel`)."""
+    value_fn = models.VALUE_FUNCTIONS[kind]
+    partial_fn = models.PARTIAL_FUNCTIONS[kind]
+    n_st = models.N_STATIONS[kind]
+
+    def kernel(x):
+        et = x[_I_ET]
+        sc_r, sc_v = x[_I_SC:_I_SC + 3], x[_I_SC + 3:_I_SC + 6]
+        e_r, e_v = x[_I_E:_I_E + 3], x[_I_E + 3:_I_E + 6]
+        z3 = jnp.zeros(3, dtype=jnp.float64)
+        nan2 = jnp.full(2, jnp.nan, dtype=jnp.float64)
+        if n_st == 0:
+            body_r, star = x[_I_BODY:_I_BODY + 3], x[_I_STAR:_I_STAR + 3]
+            third = star if kind == "star_planet_angle" else x[_I_RP]
+            val = value_fn(sc_r, body_r, third)
+            h_sc, h_body = partial_fn(sc_r, body_r, third)[:2]
+            return jnp.concatenate([val[None], h_sc, z3, z3, h_body, nan2])
+        s1_r, s1_v, s1_p = _station(x, _I_ST1, et)
+        el1 = models.elevation(sc_r, sc_v, e_r, e_v, s1_r, s1_v)
+        if n_st == 1:
+            args = (sc_r, sc_v, e_r, e_v, s1_r, s1_v)
+            h_sc, h_s1 = partial_fn(*args)
+            h_p1, h_p2, el2 = h_s1 @ s1_p, z3, jnp.full((), jnp.nan, dtype=jnp.float64)
+        else:
+            s2_r, s2_v, s2_p = _station(x, _I_ST2, et)
+            el2 = models.elevation(sc_r, sc_v, e_r, e_v, s2_r, s2_v)
+            args = (sc_r, sc_v, e_r, e_v, s1_r, s1_v, s2_r, s2_v)
+            h_sc, h_s1, h_s2 = partial_fn(*args)
+            h_p1, h_p2 = h_s1 @ s1_p, h_s2 @ s2_p
+        val = value_fn(*args)
+        return jnp.concatenate([val[None], h_sc, h_p1, h_p2, z3, jnp.stack([el1, el2])])
+
+    return kernel
+
+
+@functools.lru_cache(maxsize=None)
+def _batch_kernel(kind: str):
+    """Jitted kernel for one kind, vmapped over observations: (b, 26) -> (b, 18).
+
+    Built once per kind; the batch is padded to a power of two (at least
+    :data:`_MIN_BUCKET`), so it compiles once per kind and size bucket (and not at all in a
+    later process with the persistent compilation cache).  One dispatch per kind present
+    in a call.  (A single all-kinds kernel with ``lax.switch`` was tried: vmapped, it
+    evaluates every branch and cost ~0.5 ms a call against ~0.05 ms per kind here.)
+    """
+    return jax.jit(jax.vmap(_kernel(kind)))
+
+
+_MIN_BUCKET = 4
+
+
+def _bucket(m: int) -> int:
+    return max(_MIN_BUCKET, 1 << max(m - 1, 0).bit_length())
+
+
+# --- label bookkeeping --------------------------------------------------------------
+# Unit bias partials per kind: (label name, station slot or None, coefficient).
+_BIAS_TERMS = {
+    "range2": (("range_bias_km", 0, 1.0),),
+    "doppler2": (("doppler_bias_km_s", 0, 1.0),),
+    "range3": (("range_bias_km", 0, 1.0), ("range_bias_km", 1, 1.0), ("qvlbi_timing_km", None, 1.0)),
+    "doppler3": (("doppler_bias_km_s", 0, 1.0), ("doppler_bias_km_s", 1, 1.0),
+                 ("qvlbi_frequency_km_s", None, 1.0)),
+    "diff_range": (("range_bias_km", 0, 1.0), ("range_bias_km", 1, -1.0),
+                   ("qvlbi_timing_km", None, -1.0)),
+    "diff_doppler": (("doppler_bias_km_s", 0, 1.0), ("doppler_bias_km_s", 1, -1.0),
+                     ("qvlbi_frequency_km_s", None, -1.0)),
+    "azimuth": (("azimuth_bias_rad", 0, 1.0),),
+    "elevation": (("elevation_bias_rad", 0, 1.0),),
+    "star_planet_angle": (("star_planet_bias_rad", None, 1.0),),
+    "planet_diameter": (("diameter_bias_rad", None, 1.0),),
+}
+
+
+@functools.lru_cache(maxsize=64)
+def _label_table(labels: tuple, station_names: tuple) -> dict:
+    """(label name, station or None) -> column offsets; validates measurement labels."""
+    table: dict = {}
+    for j, label in enumerate(labels):
+        parts = _split(label)
+        if parts is None:
+            continue  # not a measurement parameter (dynamic, ephemeris, ...)
+        check_measurement_label(label, station_names)
+        table.setdefault(parts, []).append(j)
+    return table
+
+
+_ONE = _N_OUT  # index of a constant 1.0 appended to each kernel output row
+
+
+@functools.lru_cache(maxsize=4096)
+def _columns(labels: tuple, station_names: tuple, kind: str, obs_stations: tuple):
+    """Label-column scatter of one observation signature: arrays (src, col, coef) with
+    H[nx + col] += coef * out_ext[src] (out_ext = kernel row with 1.0 appended)."""
+    table = _label_table(labels, station_names)
+    src, col, coef = [], [], []
+    for slot, name in enumerate(obs_stations):  # station locations (STAPRL chain)
+        o = _O_ST1 if slot == 0 else _O_ST2
+        for lname, k in _STATION_PARAM_INDEX.items():
+            for j in table.get((lname, name), ()):
+                src.append(o + k), col.append(j), coef.append(1.0)
+    for lname, slot, c in _BIAS_TERMS[kind]:  # unit bias partials (TRAKM eq. 8)
+        for j in table.get((lname, None if slot is None else obs_stations[slot]), ()):
+            src.append(_ONE), col.append(j), coef.append(c)
+    return np.array(src, dtype=np.intp), np.array(col, dtype=np.intp), np.array(coef)
+
+
+def _vec3(name, x):
+    a = np.asarray(x, dtype=np.float64)
+    if a.shape != (3,):
+        raise ValueError(f"Geometry.{name}: expected shape (3,), got {a.shape}")
+    return a
+
+
+def observation_matrix(
+    observations: Sequence[Observation],
+    geometry: Geometry,
+    stations: Mapping[str, Station],
+    labels: Sequence[str],
+    nx: int,
+) -> ObservationBatch:
+    """Values, observation matrix H, noise covariance R (MENO) and station elevations for
+    the observations at one epoch (FRACAS TRAKM + MENO).
+
+    H[:, :nx]: d h / d spacecraft state (r km, v km/s; columns 6..nx-1, e.g. mass, zero).
+    H[:, nx + j]: d h / d labels[j] (module docstring).  Station-location columns chain the
+    station (r, v) partials with STAPRL (:func:`stations.station_partials`; TRAKM eqs. 2, 6,
+    31).  Raises ValueError / KeyError for malformed input (unknown station, bad label,
+    missing body data); a station below the horizon is not an error (see elevation_deg).
+    Cost: one jitted dispatch per kind present, plus O(m) bookkeeping.
+    """
+    if nx < 6:
+        raise ValueError(f"nx must be >= 6 (spacecraft r, v first), got {nx}")
+    labels = tuple(labels)
+    names = tuple(sorted(stations))
+    _label_table(labels, names)  # validates the measurement labels once per label set
+    m = len(observations)
+    n = nx + len(labels)
+
+    base = np.zeros(_N_IN, dtype=np.float64)
+    base[_I_ET] = float(geometry.et_s)
+    base[_I_SC:_I_SC + 3] = _vec3("sc_r", geometry.sc_r)
+    base[_I_SC + 3:_I_SC + 6] = _vec3("sc_v", geometry.sc_v)
+    base[_I_E:_I_E + 3] = _vec3("earth_r", geometry.earth_r)
+    base[_I_E + 3:_I_E + 6] = _vec3("earth_v", geometry.earth_v)
+    if geometry.body_r is not None:
+        base[_I_BODY:_I_BODY + 3] = _vec3("body_r", geometry.body_r)
+    if geometry.body_radius_km is not None:
+        base[_I_RP] = float(geometry.body_radius_km)
+    if geometry.star_unit is not None:
+        base[_I_STAR:_I_STAR + 3] = _vec3("star_unit", geometry.star_unit)
+
+    x = np.tile(base, (m, 1))
+    groups: dict[str, list[int]] = {}
+    body_rows = []
+    for i, ob in enumerate(observations):
+        groups.setdefault(ob.kind, []).append(i)
+        for slot, name in enumerate(ob.stations):
+            st = stations.get(name)
+            if st is None:
+                raise KeyError(
+                    f"observation {i} ({ob.kind}): station {name!r} unknown; known: {', '.join(names)}"
+                )
+            i0 = _I_ST1 if slot == 0 else _I_ST2
+            x[i, i0:i0 + 3] = (st.radius_km, st.latitude_rad, st.longitude_rad)
+        if not ob.stations:
+            body_rows.append(i)
+            if geometry.body_r is None:
+                raise ValueError(f"observation {i} ({ob.kind}) needs Geometry.body_r")
+            if ob.kind == "planet_diameter" and geometry.body_radius_km is None:
+                raise ValueError(f"observation {i} (planet_diameter) needs Geometry.body_radius_km")
+            if ob.kind == "star_planet_angle" and geometry.star_unit is None:
+                raise ValueError(f"observation {i} (star_planet_angle) needs Geometry.star_unit")
+
+    out = np.ones((m, _N_OUT + 1))  # last column: the constant 1.0 of the bias partials
+    for kind, rows in groups.items():
+        b = _bucket(len(rows))
+        xk = np.empty((b, _N_IN))
+        xk[: len(rows)] = x[rows]
+        xk[len(rows):] = x[rows[0]]  # padding: a copy of a valid row, discarded
+        out[rows, :_N_OUT] = np.asarray(_batch_kernel(kind)(xk))[: len(rows)]
+
+    H = np.zeros((m, n))
+    H[:, :6] = out[:, _O_H:_O_H + 6]
+    for i, ob in enumerate(observations):
+        src, col, coef = _columns(labels, names, ob.kind, ob.stations)
+        if col.size:  # columns are distinct within one observation (distinct stations)
+            H[i, nx + col] += coef * out[i, src]
+    if body_rows:  # ephemeris parameters through the target body's position (eqs. 35, 39)
+        for j, lab in enumerate(labels):
+            if lab in geometry.body_r_partials:
+                dbody = _vec3(f"body_r_partials[{lab!r}]", geometry.body_r_partials[lab])
+                H[body_rows, nx + j] += out[body_rows, _O_BODY:_O_BODY + 3] @ dbody
+    with np.errstate(invalid="ignore"):
+        elev = np.degrees(np.fmin(out[:, _O_EL], out[:, _O_EL + 1]))  # nan-aware minimum
+    elev[body_rows] = np.nan
+    sigma = np.array([ob.sigma for ob in observations], dtype=np.float64)
+    return ObservationBatch(values=out[:, 0].copy(), H=H, R=np.diag(sigma * sigma), elevation_deg=elev)

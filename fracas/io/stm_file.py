@@ -1,0 +1,626 @@
+"""The STM file of TEAM (FRACAS STMGEN / STMRDR, CR-112256 sections 3.2, 5.3.18-19).
+
+One reference trajectory, sampled at every time an error analysis may ever need (the
+union of all event schedules), with the state transition matrix Phi and the parameter
+transition matrix Theta between consecutive times.  Many studies reuse one file: a study
+reads only the parameter columns it uses (STMRDR "entries for unused parameters are passed
+over") and multiplies the step matrices over the file times it skips (section 3.2):
+
+    Phi(t_b, t_a)   = Phi_b Phi_{b-1} ... Phi_{a+1}
+    Theta(t_b, t_a) = Phi_b Theta(t_{b-1}, t_a) + Theta_b
+
+where Phi_i = Phi(t_i, t_{i-1}) = dx(t_i)/dx(t_{i-1}) and Theta_i = dx(t_i)/dp with
+x(t_{i-1}) held fixed (FRACAS PTRAN; here by forward-mode AD).  State order
+x y z vx vy vz m in km, km/s, kg, relative to the primary at each time, ICRF axes.
+
+FRACAS STMGEN's record 0 (the parameter list "used by DATA for error checking") becomes
+``/parameters``; records 1..N (time, event type, state, Phi, Theta) become ``/stm``; the
+ERTRAJ namelist written at the head of the tape becomes ``/trajectory_deck`` with its
+canonical hash (:func:`trajectory_hash`), which a study checks (:func:`check_trajectory`).
+
+Layout (``docs/stm_file.md`` is the reference; every dataset has ``units``)::
+
+    /                  attrs: file_kind = "fracas-stm", schema_version, fracas_version,
+                              title, centre, frame = "ICRF", sensitivity_method
+    /stm/              epoch_et_s, times_s, event_types, states, primary,
+                       stm_step (n,7,7), par_step (np,n,7) -- one chunk per parameter
+    /parameters/       labels, units, values, steps
+    /trajectory_deck   deck TOML text; attrs trajectory_hash, text_sha256, path
+    /provenance/       attrs + deck_text + libraries/
+
+Every refusal is a one-line :class:`fracas.errors.StmFileError` naming the file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from fracas.errors import StmFileError
+from fracas.io.hdf5 import (
+    STR,
+    atomic_h5,
+    provenance,
+    read_provenance,
+    read_str,
+    set_attr,
+    write,
+    write_provenance,
+)
+
+FILE_KIND = "fracas-stm"
+SCHEMA_VERSION = 1
+TIME_TOL_S = 1e-6  # a requested time matches a file time within this (s); the deck's eps_t
+DAY_S = 86400.0
+
+STATE_LABELS = ("x", "y", "z", "vx", "vy", "vz", "mass")
+STATE_UNITS = ("km", "km", "km", "km/s", "km/s", "km/s", "kg")
+EVENT_TYPES = (
+    "initial", "measurement", "propagation", "eigenvector", "prediction",
+    "thrust_on", "thrust_off", "guidance", "final", "grid",
+)
+SENSITIVITY_METHODS = {
+    "ad": "forward-mode automatic differentiation through the integrator (propagate_with_sensitivities)",
+    "finite_difference": "central finite differences (FRACAS PTRAN), steps in /parameters/steps",
+}
+_HASH_PREFIX = "fracas-trajectory-deck/1\n"
+
+__all__ = [
+    "FILE_KIND",
+    "SCHEMA_VERSION",
+    "STATE_LABELS",
+    "STATE_UNITS",
+    "StmData",
+    "chain",
+    "check_trajectory",
+    "describe",
+    "read_stm_file",
+    "stm_data_from_run",
+    "time_indices",
+    "trajectory_hash",
+    "write_stm_file",
+]
+
+
+# --------------------------------------------------------------------------- data
+
+
+@dataclass
+class StmData:
+    """The contents of an STM file (numpy, canonical units, ICRF axes).
+
+    times_s (n,): s from the epoch (t = 0), non-decreasing; epoch_et_s: TDB s past J2000 of
+    t = 0; event_types (n,): why each time is on the file ("initial", "measurement",
+    "propagation", "eigenvector", "prediction", "thrust_on", "thrust_off", "final", "grid";
+    several joined by "+"); states (n,7): r km, v km/s, m kg relative to primary[i];
+    stm_step (n,7,7): Phi(t_i, t_{i-1}) (i = 0: from the epoch to times_s[0], the identity
+    when times_s[0] == 0); par_step (n,7,np): Theta(t_i, t_{i-1}) = dx(t_i)/dp with
+    x(t_{i-1}) fixed, element (r, p) in STATE_UNITS[r] / param_units[p];
+    param_labels/param_units/param_values (np,): fracas.params labels, their units and
+    nominal values; param_steps (np,): perturbations of a finite-difference generation
+    (NaN for AD, see ``sensitivity_method``); deck_text/deck_hash/deck_path: the trajectory
+    deck (TOML) the file was built from and its :func:`trajectory_hash`.
+    ``source_path`` is the file it was read from ("" when built in memory).
+    """
+
+    times_s: np.ndarray
+    epoch_et_s: float
+    event_types: list[str]
+    states: np.ndarray
+    primary: list[str]
+    stm_step: np.ndarray
+    par_step: np.ndarray
+    param_labels: list[str]
+    param_units: list[str]
+    param_values: np.ndarray
+    param_steps: np.ndarray
+    deck_text: str
+    deck_hash: str
+    deck_path: str | None = None
+    title: str = ""
+    centre: str = ""
+    frame: str = "ICRF"
+    fracas_version: str = ""
+    schema_version: int = SCHEMA_VERSION
+    sensitivity_method: str = "ad"
+    provenance: dict[str, Any] = field(default_factory=dict)
+    source_path: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.fracas_version:
+            from fracas import __version__
+
+            self.fracas_version = __version__
+
+    @property
+    def n_times(self) -> int:
+        return int(np.shape(self.times_s)[0])
+
+    @property
+    def where(self) -> str:
+        """How messages name this data: the file path, or the deck it was built from."""
+        return self.source_path or (f"STM data of {self.deck_path}" if self.deck_path else "STM data")
+
+
+def trajectory_hash(deck) -> str:
+    """SHA-256 (hex) of the canonical form of a validated :class:`TrajectoryDeck`.
+
+    The canonical form is the validated model as JSON (defaults filled in, floats in
+    shortest round-trip form, keys sorted, no whitespace) behind a version prefix, so
+    comments, layout, key order, ``7000`` vs ``7000.0``, a default written out or left
+    implicit and the file's name or place do not change the hash; any changed value does.
+    Every section counts (title and ``[output]`` included): the file is tied to exactly
+    the deck it was built from (FRACAS writes ERTRAJ at the head of the STM tape).
+    """
+    body = json.dumps(
+        deck.model_dump(mode="json"), sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False
+    )
+    return hashlib.sha256((_HASH_PREFIX + body).encode("utf-8")).hexdigest()
+
+
+def _days(t: float) -> str:
+    return f"{float(t) / DAY_S:.6f} d"
+
+
+def stm_data_from_run(problem, traj, sens, event_types, deck_text, deck_hash, deck_path=None) -> StmData:
+    """Assemble :class:`StmData` from a propagation with sensitivities (FRACAS STMGEN).
+
+    ``problem``: :class:`fracas.build.Problem` whose ``t_out`` are the schedule times (s,
+    ``t_out[0]`` must be 0: the propagation starts at the epoch) and ``param_labels`` the
+    columns; ``traj``, ``sens``: from
+    :func:`fracas.integrate.propagate.propagate_with_sensitivities` on that problem;
+    ``event_types``: one string per time.  Refuses (StmFileError) a trajectory that did not
+    reach every scheduled time.
+    """
+    from fracas.params import get_values, param_unit
+
+    where = deck_path or problem.source_path or "<deck>"
+    t_out = np.asarray(problem.t_out, np.float64)
+    t = np.asarray(traj.t, np.float64)
+    n = t_out.shape[0]
+    if n == 0:
+        raise StmFileError(f"{where}: cannot build an STM file: the schedule has no times")
+    if abs(float(t_out[0])) > TIME_TOL_S:
+        raise StmFileError(
+            f"{where}: cannot build an STM file: the schedule starts at t = {t_out[0]:.6f} s "
+            f"({_days(t_out[0])}), expected 0 (the propagation starts at the epoch)"
+        )
+    event_types = [str(e) for e in event_types]
+    if len(event_types) != n:
+        raise StmFileError(f"{where}: {len(event_types)} event types for {n} schedule times")
+    bad = np.nonzero(~np.isfinite(t))[0]
+    if bad.size:
+        from fracas.io.trajectory_file import STATUS_TEXT
+
+        k = int(bad[0])
+        status = int(np.asarray(traj.status))
+        raise StmFileError(
+            f"{where}: cannot build an STM file: the trajectory ended at t = {_days(np.asarray(traj.t_final))} "
+            f"({STATUS_TEXT.get(status, f'status {status}')}) before scheduled time {k} at {_days(t_out[k])} "
+            f"({event_types[k]}); shorten the schedule or fix the deck"
+        )
+    model = problem.model
+    labels = [str(x) for x in problem.param_labels]
+    stm_step = np.asarray(sens.stm_step, np.float64)
+    par_step = np.asarray(sens.par_step, np.float64).reshape(n, 7, len(labels))
+    if not (np.all(np.isfinite(stm_step)) and np.all(np.isfinite(par_step))):
+        raise StmFileError(f"{where}: cannot build an STM file: non-finite transition matrices")
+    return StmData(
+        times_s=t_out,  # the schedule itself (the integrator lands within eps_t of each)
+        epoch_et_s=float(problem.epoch_et_s),
+        event_types=event_types,
+        states=np.asarray(traj.x, np.float64),
+        primary=[model.bodies[int(i)] for i in np.asarray(traj.primary)],
+        stm_step=stm_step,
+        par_step=par_step,
+        param_labels=labels,
+        param_units=[param_unit(lab, model) for lab in labels],
+        param_values=np.asarray(get_values(problem.params, labels, model), np.float64).reshape(len(labels)),
+        param_steps=np.full(len(labels), np.nan),
+        deck_text=str(deck_text or ""),
+        deck_hash=str(deck_hash),
+        deck_path=deck_path,
+        title=problem.title,
+        centre=problem.centre,
+        frame=problem.frame,
+        sensitivity_method="ad",
+        provenance=provenance(deck_text, deck_path),
+    )
+
+
+# --------------------------------------------------------------------------- write
+
+
+def _write_strs(g: h5py.Group, name: str, values: Sequence[str], **attrs: Any) -> h5py.Dataset:
+    vals = [str(v) for v in values]
+    ds = g.create_dataset(name, data=np.array(vals, dtype=object), dtype=STR) if vals else g.create_dataset(
+        name, shape=(0,), dtype=STR
+    )
+    ds.attrs["units"] = "none"
+    for key, val in attrs.items():
+        set_attr(ds, key, val)
+    return ds
+
+
+def _validate(data: StmData, dest: Path) -> tuple[int, int]:
+    def bad(what: str) -> StmFileError:
+        return StmFileError(f"{dest}: cannot write the STM file: {what}")
+
+    t = np.asarray(data.times_s, np.float64)
+    if t.ndim != 1 or t.shape[0] == 0:
+        raise bad(f"times_s has shape {t.shape}, expected (n,) with n >= 1")
+    n = t.shape[0]
+    n_p = len(data.param_labels)
+    shapes = {
+        "states": (np.shape(data.states), (n, 7)),
+        "stm_step": (np.shape(data.stm_step), (n, 7, 7)),
+        "par_step": (np.shape(data.par_step), (n, 7, n_p)),
+        "param_units": ((len(data.param_units),), (n_p,)),
+        "param_values": (np.shape(data.param_values), (n_p,)),
+        "param_steps": (np.shape(data.param_steps), (n_p,)),
+        "event_types": ((len(data.event_types),), (n,)),
+        "primary": ((len(data.primary),), (n,)),
+    }
+    for name, (got, want) in shapes.items():
+        if tuple(got) != want:
+            raise bad(f"{name} has shape {tuple(got)}, expected {want}")
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) < 0):
+        raise bad("times_s must be finite and non-decreasing")
+    if len(set(data.param_labels)) != n_p:
+        raise bad(f"repeated parameter labels {list(data.param_labels)}")
+    if data.sensitivity_method not in SENSITIVITY_METHODS:
+        raise bad(f"sensitivity_method = {data.sensitivity_method!r}, expected one of {sorted(SENSITIVITY_METHODS)}")
+    return n, n_p
+
+
+def write_stm_file(path: str | os.PathLike, data: StmData) -> None:
+    """Write ``data`` atomically to ``path`` (FRACAS STMGEN's tape; parent directories created).
+
+    ``par_step`` is stored parameter-major, (np, n, 7) with one HDF5 chunk per parameter,
+    so :func:`read_stm_file` reads only the columns a study asks for.
+    """
+    dest = Path(path)
+    n, n_p = _validate(data, dest)
+    mat_attrs = {"row_labels": list(STATE_LABELS), "row_units": list(STATE_UNITS)}
+    try:
+        with atomic_h5(dest) as f:
+            f.attrs["file_kind"] = FILE_KIND
+            f.attrs["schema_version"] = SCHEMA_VERSION
+            f.attrs["fracas_version"] = data.fracas_version
+            f.attrs["title"] = data.title
+            f.attrs["centre"] = data.centre
+            f.attrs["frame"] = data.frame
+            f.attrs["sensitivity_method"] = data.sensitivity_method
+            f.attrs["sensitivity_method_text"] = SENSITIVITY_METHODS[data.sensitivity_method]
+
+            g = f.create_group("stm")
+            set_attr(g, "state_labels", list(STATE_LABELS))
+            set_attr(g, "state_units", list(STATE_UNITS))
+            write(g, "epoch_et_s", np.float64(data.epoch_et_s), "s",
+                  meaning="epoch of t = 0, TDB seconds past J2000 (2000-01-01T12:00:00 TDB)")
+            write(g, "times_s", np.asarray(data.times_s, np.float64), "s",
+                  meaning="times on the file, s from the epoch, non-decreasing")
+            _write_strs(g, "event_types", data.event_types, meaning="event type(s) at each time ('+' joins several)")
+            write(g, "states", np.asarray(data.states, np.float64), "col_units[j]",
+                  col_labels=list(STATE_LABELS), col_units=list(STATE_UNITS),
+                  meaning="r km, v km/s, m kg relative to primary[i], ICRF")
+            _write_strs(g, "primary", data.primary, meaning="centre body of states[i]")
+            write(g, "stm_step", np.asarray(data.stm_step, np.float64), "row_units[i]/col_units[j]",
+                  col_labels=list(STATE_LABELS), col_units=list(STATE_UNITS), **mat_attrs,
+                  meaning="Phi(t_i, t_{i-1}) = dx(t_i)/dx(t_{i-1}); i = 0: from t = 0 to times_s[0]",
+                  dims="(time, row, col)")
+            par = np.ascontiguousarray(np.transpose(np.asarray(data.par_step, np.float64), (2, 0, 1)))
+            chunks = (1, n, 7) if n_p else None
+            ds = g.create_dataset("par_step", data=par, chunks=chunks)
+            ds.attrs["units"] = "row_units[i]/col_units[p]"
+            for key, val in {"col_labels": list(data.param_labels), "col_units": list(data.param_units),
+                             **mat_attrs}.items():
+                set_attr(ds, key, val)
+            ds.attrs["meaning"] = ("Theta(t_i, t_{i-1}) = dx(t_i)/dp holding x(t_{i-1}) fixed, stored as "
+                                   "par_step[p, i, row]; i = 0: from t = 0 to times_s[0]")
+            ds.attrs["dims"] = "(parameter, time, row)"
+
+            h = f.create_group("parameters")
+            _write_strs(h, "labels", data.param_labels, meaning="fracas.params labels: columns of par_step")
+            _write_strs(h, "units", data.param_units, meaning="unit of each parameter")
+            write(h, "values", np.asarray(data.param_values, np.float64).reshape(n_p), "units[p]",
+                  meaning="nominal values the trajectory was built with")
+            write(h, "steps", np.asarray(data.param_steps, np.float64).reshape(n_p), "units[p]",
+                  meaning="finite-difference perturbations (NaN: matrices by AD)")
+
+            write(f, "trajectory_deck", str(data.deck_text or ""), "none",
+                  trajectory_hash=data.deck_hash, path=data.deck_path or "",
+                  text_sha256=hashlib.sha256(str(data.deck_text or "").encode("utf-8")).hexdigest(),
+                  meaning="the trajectory deck (TOML) the file was built from; trajectory_hash "
+                          "is fracas.io.stm_file.trajectory_hash of the validated deck")
+            write_provenance(f, data.provenance or provenance(data.deck_text, data.deck_path))
+    except OSError as exc:
+        raise StmFileError(f"{dest}: cannot write the STM file: {exc.strerror or exc}") from None
+
+
+# --------------------------------------------------------------------------- read
+
+
+def _attr_str(obj: h5py.HLObject, key: str, default: str = "") -> str:
+    val = obj.attrs.get(key, default)
+    return val.decode() if isinstance(val, bytes) else str(val)
+
+
+def _open(path: str | os.PathLike) -> tuple[Path, h5py.File]:
+    """Open and check kind and schema (STMRDR's record-0 checks)."""
+    src = Path(path)
+    if not src.exists():
+        raise StmFileError(f"{src}: no such STM file")
+    if src.is_dir():
+        raise StmFileError(f"{src}: is a directory, expected an STM file (HDF5)")
+    try:
+        ok = h5py.is_hdf5(src)
+    except OSError as exc:
+        raise StmFileError(f"{src}: cannot read: {exc}") from None
+    if not ok:
+        raise StmFileError(f"{src}: not an HDF5 file, expected a fracas STM file (fracas stm ...)")
+    try:
+        f = h5py.File(src, "r")
+    except OSError as exc:
+        raise StmFileError(f"{src}: unreadable HDF5 file: {exc}") from None
+    kind = _attr_str(f, "file_kind")
+    if kind != FILE_KIND:
+        other = _attr_str(f, "format")
+        f.close()
+        what = f"file_kind = {kind!r}" if kind else (f"a {other!r} file" if other else "no file_kind attribute")
+        raise StmFileError(f"{src}: not a fracas STM file ({what}, expected file_kind = {FILE_KIND!r})")
+    version = int(f.attrs.get("schema_version", -1))
+    if version != SCHEMA_VERSION:
+        f.close()
+        raise StmFileError(
+            f"{src}: STM file schema_version = {version}, this fracas reads {SCHEMA_VERSION}: "
+            "regenerate the file with this fracas version"
+        )
+    return src, f
+
+
+def _nearest_message(where: str, t_file: np.ndarray, events: Sequence[str], t_req: float) -> str:
+    k = int(np.argmin(np.abs(t_file - t_req)))
+    return (
+        f"{where}: requested time {t_req:.6f} s ({_days(t_req)}) is not on the STM file "
+        f"(tolerance {TIME_TOL_S:g} s); nearest file time is {t_file[k]:.6f} s ({_days(t_file[k])}, "
+        f"{events[k] if k < len(events) else '?'}); the file has {t_file.shape[0]} times from "
+        f"{_days(t_file[0])} to {_days(t_file[-1])}: regenerate it with this time in the schedule"
+    )
+
+
+def _indices(t_file: np.ndarray, events: Sequence[str], req: np.ndarray, where: str) -> np.ndarray:
+    """Index of each requested time on the file (the last of equal file times)."""
+    idx = np.searchsorted(t_file, req + TIME_TOL_S, side="right") - 1
+    ok = (idx >= 0) & (np.abs(t_file[np.clip(idx, 0, None)] - req) <= TIME_TOL_S)
+    if not np.all(ok):
+        j = int(np.nonzero(~ok)[0][0])
+        raise StmFileError(_nearest_message(where, t_file, events, float(req[j])))
+    return idx
+
+
+def read_stm_file(
+    path: str | os.PathLike,
+    labels: Sequence[str] | None = None,
+    times_s: Sequence[float] | None = None,
+) -> StmData:
+    """Read an STM file (FRACAS STMRDR), loading only the parameter columns ``labels``.
+
+    ``labels``: parameter labels in the order the study wants its columns (None: all);
+    ``times_s``: times (s from the epoch) the study will ask :func:`chain` for; each must be
+    on the file within 1e-6 s (all file times are still returned: chaining needs them).
+    Refuses with a one-line StmFileError: missing file, not HDF5, not a fracas STM file,
+    another schema_version, an unknown label (lists the file's), a time not on the file
+    (names the nearest), an incomplete or inconsistent file.
+    """
+    src, f = _open(path)
+    try:
+        with f:
+            g, h = f["stm"], f["parameters"]
+            file_labels = read_str(h["labels"])
+            file_units = read_str(h["units"])
+            if labels is None:
+                cols = list(range(len(file_labels)))
+            else:
+                labels = [str(x) for x in labels]
+                missing = [x for x in labels if x not in file_labels]
+                if missing:
+                    raise StmFileError(
+                        f"{src}: parameter{'s' if len(missing) > 1 else ''} {', '.join(missing)} not on the STM file; "
+                        f"it has {', '.join(file_labels) if file_labels else 'no parameters'}: regenerate it "
+                        "with every parameter the study solves for, considers or ignores"
+                    )
+                cols = [file_labels.index(x) for x in labels]
+            t_file = g["times_s"][()]
+            n = t_file.shape[0]
+            events = read_str(g["event_types"])
+            prim = read_str(g["primary"])
+            ds = g["par_step"]
+            if ds.shape[0] != len(file_labels) or ds.shape[1:] != (n, 7):
+                raise StmFileError(
+                    f"{src}: inconsistent STM file: par_step has shape {ds.shape}, expected "
+                    f"({len(file_labels)}, {n}, 7)"
+                )
+            if cols == list(range(len(file_labels))):
+                par = ds[()]
+            else:  # one chunk per parameter: only the requested columns are read
+                par = np.empty((len(cols), n, 7))
+                for j, c in enumerate(cols):
+                    par[j] = ds[c]
+            data = StmData(
+                times_s=t_file,
+                epoch_et_s=float(g["epoch_et_s"][()]),
+                event_types=list(events) if not isinstance(events, str) else [events],
+                states=g["states"][()],
+                primary=list(prim) if not isinstance(prim, str) else [prim],
+                stm_step=g["stm_step"][()],
+                par_step=np.ascontiguousarray(np.transpose(par, (1, 2, 0))),
+                param_labels=[file_labels[c] for c in cols],
+                param_units=[file_units[c] for c in cols],
+                param_values=h["values"][()][cols] if cols else np.zeros(0),
+                param_steps=h["steps"][()][cols] if cols else np.zeros(0),
+                deck_text=read_str(f["trajectory_deck"]),
+                deck_hash=_attr_str(f["trajectory_deck"], "trajectory_hash"),
+                deck_path=_attr_str(f["trajectory_deck"], "path") or None,
+                title=_attr_str(f, "title"),
+                centre=_attr_str(f, "centre"),
+                frame=_attr_str(f, "frame"),
+                fracas_version=_attr_str(f, "fracas_version"),
+                schema_version=int(f.attrs["schema_version"]),
+                sensitivity_method=_attr_str(f, "sensitivity_method"),
+                provenance=read_provenance(f),
+                source_path=str(src),
+            )
+    except StmFileError:
+        raise
+    except (OSError, KeyError, ValueError, IndexError, TypeError) as exc:
+        raise StmFileError(f"{src}: unreadable or incomplete STM file: {exc}") from None
+    for name, shape in (("states", (n, 7)), ("stm_step", (n, 7, 7)),
+                        ("event_types", (n,)), ("primary", (n,))):
+        got = np.shape(getattr(data, name)) if name in ("states", "stm_step") else (len(getattr(data, name)),)
+        if tuple(got) != shape:
+            raise StmFileError(f"{src}: inconsistent STM file: {name} has shape {tuple(got)}, expected {shape}")
+    if times_s is not None:
+        _indices(t_file, data.event_types, np.atleast_1d(np.asarray(times_s, np.float64)), str(src))
+    return data
+
+
+def check_trajectory(data: StmData, deck_hash: str, path, study_deck: str | None = None) -> None:
+    """StmFileError unless the file was built from the study's trajectory deck.
+
+    ``deck_hash``: :func:`trajectory_hash` of the study's trajectory deck; ``path``: the STM
+    file (for the message); ``study_deck``: where the study's deck came from (optional).
+    """
+    if data.deck_hash == deck_hash:
+        return
+    study = f" ({study_deck})" if study_deck else ""
+    raise StmFileError(
+        f"{path}: built from another trajectory: file's deck {data.deck_path or '<unknown>'} has hash "
+        f"{data.deck_hash[:12]}, the study's trajectory deck{study} has {str(deck_hash)[:12]}: "
+        "regenerate the STM file from the study's deck or point the study at the file's deck"
+    )
+
+
+# --------------------------------------------------------------------------- chain
+
+
+def time_indices(data: StmData, times_s: Sequence[float]) -> np.ndarray:
+    """Index into ``data.times_s`` of each requested time (within 1e-6 s; StmFileError otherwise).
+
+    Equal file times resolve to the last of them (their step matrices are identities)."""
+    t_file = np.asarray(data.times_s, np.float64)
+    return _indices(t_file, data.event_types, np.atleast_1d(np.asarray(times_s, np.float64)), data.where)
+
+
+def chain(data: StmData, times_s: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    """Transition matrices between consecutive requested times (FRACAS STMRDR + section 3.2).
+
+    ``times_s`` (k,): s from the epoch, non-decreasing, each on the file.  Returns
+    phi (k,7,7) and theta (k,7,np) (columns as ``data.param_labels``): element j maps from
+    times_s[j-1] to times_s[j], element 0 from the epoch t = 0 to times_s[0]:
+
+        Phi(t_b, t_a)   = Phi_b ... Phi_{a+1}
+        Theta(t_b, t_a) = Phi_b Theta(t_{b-1}, t_a) + Theta_b
+
+    over the file's step matrices.  All segments are reduced together by pairwise
+    (log-depth) composition of neighbours within each segment: ~log2(longest segment)
+    batched matrix products in all, about two products per file step.
+    """
+    idx = time_indices(data, times_s)
+    k = idx.shape[0]
+    if k and np.any(np.diff(idx) < 0):
+        j = int(np.nonzero(np.diff(idx) < 0)[0][0]) + 1
+        req = np.atleast_1d(np.asarray(times_s, np.float64))
+        raise StmFileError(
+            f"{data.where}: requested times must increase: times_s[{j}] = {_days(req[j])} "
+            f"comes before times_s[{j - 1}] = {_days(req[j - 1])}"
+        )
+    stm_step = np.asarray(data.stm_step, np.float64)
+    par_step = np.asarray(data.par_step, np.float64)
+    n_p = par_step.shape[2]
+    starts = np.concatenate([[0], idx[:-1] + 1]).astype(np.int64) if k else np.zeros(0, np.int64)
+    lens = (idx - starts + 1).astype(np.int64)  # 0 where a time repeats: identity
+    phi = np.broadcast_to(np.eye(7), (k, 7, 7)).copy()
+    theta = np.zeros((k, 7, n_p))
+    if k == 0 or lens.max() <= 0:
+        return phi, theta
+    live = lens > 0
+    ls = lens[live]
+    offs = np.cumsum(ls) - ls
+    pos = np.arange(ls.sum()) - np.repeat(offs, ls)
+    fi = np.repeat(starts[live], ls) + pos
+    P, T = stm_step[fi], par_step[fi]
+    while ls.max() > 1:
+        offs = np.cumsum(ls) - ls
+        pos = np.arange(P.shape[0]) - np.repeat(offs, ls)
+        seglen = np.repeat(ls, ls)
+        left = np.nonzero(pos % 2 == 0)[0]  # first of each pair (or a lone last element)
+        has = pos[left] + 1 < seglen[left]
+        a = left[has]  # earlier step of a pair; a + 1 is the later one
+        b = a + 1
+        Pb = P[b]
+        newP, newT = P[left], T[left]
+        newP[has] = Pb @ P[a]
+        newT[has] = Pb @ T[a] + T[b]
+        P, T = newP, newT
+        ls = (ls + 1) // 2
+    phi[live] = P
+    theta[live] = T
+    return phi, theta
+
+
+# --------------------------------------------------------------------------- describe
+
+
+def describe(path: str | os.PathLike) -> str:
+    """Readable multi-line summary of an STM file (``fracas stm info FILE``)."""
+    from fracas.timescales import et_to_calendar
+
+    src, f = _open(path)
+    try:
+        with f:
+            g, h = f["stm"], f["parameters"]
+            t = g["times_s"][()]
+            events = read_str(g["event_types"])
+            events = [events] if isinstance(events, str) else events
+            labels = read_str(h["labels"])
+            units = read_str(h["units"])
+            values = h["values"][()]
+            deck = f["trajectory_deck"]
+            epoch = float(g["epoch_et_s"][()])
+            prim = read_str(g["primary"])
+            prim = [prim] if isinstance(prim, str) else prim
+            prov = read_provenance(f)
+            lines = [
+                f"STM file     {src}",
+                f"title        {_attr_str(f, 'title') or '-'}",
+                (f"trajectory   {_attr_str(deck, 'path') or '<unknown deck>'} "
+                 f"(hash {_attr_str(deck, 'trajectory_hash')[:16]})"),
+                f"epoch        {et_to_calendar(epoch)} TDB ({epoch:.3f} s past J2000)",
+                (f"span         {t[0] / DAY_S:.6f} to {t[-1] / DAY_S:.6f} d ({(t[-1] - t[0]) / DAY_S:.6f} d), "
+                 f"centre {_attr_str(f, 'centre') or '-'}, frame {_attr_str(f, 'frame')}"),
+                f"primaries    {', '.join(dict.fromkeys(prim))}",
+                f"times        {t.shape[0]}: "
+                + ", ".join(f"{c} {e}" for e, c in sorted(Counter(events).items())),
+                f"parameters   {len(labels)} (matrices by {_attr_str(f, 'sensitivity_method')})",
+            ]
+            lines += [f"  {lab:<28s} {val: .10g} {u}" for lab, u, val in zip(labels, units, values)]
+            lines += [
+                f"file size    {src.stat().st_size / 1024:.1f} KiB",
+                (f"written by   fracas {_attr_str(f, 'fracas_version')} at {prov.get('created_utc', '?')}, "
+                 f"schema_version {int(f.attrs['schema_version'])}"),
+            ]
+            return "\n".join(lines)
+    except StmFileError:
+        raise
+    except (OSError, KeyError, ValueError, IndexError) as exc:
+        raise StmFileError(f"{src}: unreadable or incomplete STM file: {exc}") from None

@@ -96,3 +96,94 @@ def propagate_deck(
     say("writing the trajectory file")
     path = write_trajectory_file(output or default_output(deck_path), data)
     return data, path
+
+
+# ----------------------------------------------------------------------------- TEAM
+def team_output(deck_path: str | Path) -> Path:
+    return Path("out") / f"{Path(deck_path).stem}.h5"
+
+
+def load_team(deck_path: str | Path):
+    """Read and validate a TEAM deck and build its study (with a punched a-priori if named)."""
+    from fracas.config.team import load_team_deck
+    from fracas.io.team_results import read_punch
+    from fracas.team.setup import build_study
+
+    deck = load_team_deck(deck_path)
+    punched = None
+    if deck.a_priori is not None and deck.a_priori.from_punch:
+        punched = read_punch(deck.resolve(deck.a_priori.from_punch), str(deck_path))
+    return build_study(deck, punched)
+
+
+def build_stm(deck_path: str | Path, output: str | Path | None = None, on_stage: Stage | None = None):
+    """``fracas stm build``: integrate the study's reference once and write the STM file (STMGEN)."""
+    from fracas.io.stm_file import write_stm_file
+    from fracas.team.reference import build_stm_data
+
+    say = on_stage or (lambda _text: None)
+    say("reading the deck")
+    study = load_team(deck_path)
+    if output is None:
+        if not study.deck.errcon.stm_file:
+            output = Path("stm_files") / f"{Path(deck_path).stem}.h5"
+        else:
+            output = study.deck.resolve(study.deck.errcon.stm_file)
+    say("integrating the reference and its sensitivities")
+    data = build_stm_data(study)
+    say("writing the STM file")
+    write_stm_file(output, data)
+    return Path(output), data
+
+
+def run_team(
+    deck_path: str | Path,
+    stm: str | Path | None = None,
+    output: str | Path | None = None,
+    on_stage: Stage | None = None,
+):
+    """``fracas run`` on a TEAM deck: study -> reference (STM file or in line) -> filter -> results.
+
+    Returns (TeamResult, results path, reference source).
+    """
+    import time
+
+    from fracas.io.team_results import write_punch, write_team_results
+    from fracas.team.engine import run_study
+    from fracas.team.reference import integrate_reference, reference_from_stm
+
+    say = on_stage or (lambda _text: None)
+    t0 = time.perf_counter()
+    say("reading the deck")
+    study = load_team(deck_path)
+    ec = study.deck.errcon
+    stm_path = Path(stm) if stm is not None else (study.deck.resolve(ec.stm_file) if ec.stm_file else None)
+    t1 = time.perf_counter()
+    if ec.build_stm and stm is None:
+        path, _ = build_stm(deck_path, stm_path, on_stage)
+        stm_path = path
+    if stm_path is not None and (stm is not None or ec.stm_file):
+        if not stm_path.exists():
+            from fracas.errors import StmFileError
+
+            raise StmFileError(f"{stm_path}: no such STM file (build it with: fracas stm build {deck_path} -o {stm_path})")
+        say("reading the STM file")
+        ref = reference_from_stm(study, stm_path)
+    else:
+        say("integrating the reference and its sensitivities")
+        ref = integrate_reference(study)
+    t2 = time.perf_counter()
+    if not ec.analysis:
+        return None, None, ref.source
+    res = run_study(study, ref, say)
+    t3 = time.perf_counter()
+    res.timing.update({"setup_s": t1 - t0, "reference_s": t2 - t1, "analysis_s": t3 - t2})
+    out = Path(output) if output is not None else (
+        study.deck.resolve(study.deck.output.results) if study.deck.output.results else team_output(deck_path))
+    say("writing the results file")
+    write_team_results(out, res, ref.source)
+    if study.deck.punch is not None:
+        idx = [k for k, e in enumerate(study.schedule.events) if "punch" in e]
+        write_punch(study.deck.resolve(study.deck.punch.file), res, idx)
+    res.timing["total_s"] = time.perf_counter() - t0
+    return res, out, ref.source

@@ -1,0 +1,57 @@
+"""Eigenvector events (FRACAS SETEVN/PRINT): standard deviations, correlations and the
+eigen-decomposition of the position and velocity blocks of a covariance.  Pure numpy."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["EigenSummary", "eigen_summary", "sigma_corr"]
+
+
+def sigma_corr(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Standard deviations and correlation coefficients (zero-variance rows: correlation 0)."""
+    P = 0.5 * (P + P.T)
+    s = np.sqrt(np.clip(np.diag(P), 0.0, None))
+    d = np.where(s > 0, s, 1.0)
+    c = P / d[:, None] / d[None, :]
+    c[s == 0, :] = 0.0
+    c[:, s == 0] = 0.0
+    np.fill_diagonal(c, np.where(s > 0, 1.0, 0.0))
+    return s, np.clip(c, -1.0, 1.0)
+
+
+@dataclass
+class EigenSummary:
+    """sigma (n,), corr (n, n); position/velocity eigenvalues (3,) in km^2 and km^2/s^2
+    (ascending), their square roots (1σ semi-axes, km and km/s) and eigenvectors (columns)."""
+
+    sigma: np.ndarray
+    corr: np.ndarray
+    pos_eigval: np.ndarray
+    pos_axes: np.ndarray
+    pos_eigvec: np.ndarray
+    vel_eigval: np.ndarray
+    vel_axes: np.ndarray
+    vel_eigvec: np.ndarray
+
+    @property
+    def pos_rss(self) -> float:
+        return float(np.sqrt(np.sum(self.sigma[:3] ** 2)))
+
+    @property
+    def vel_rss(self) -> float:
+        return float(np.sqrt(np.sum(self.sigma[3:6] ** 2)))
+
+
+def eigen_summary(P: np.ndarray) -> EigenSummary:
+    """The eigenvector event of one augmented covariance (state first: r km, v km/s, ...)."""
+    s, c = sigma_corr(P)
+    out = []
+    for blk in (slice(0, 3), slice(3, 6)):
+        B = 0.5 * (P[blk, blk] + P[blk, blk].T)
+        w, V = np.linalg.eigh(B)
+        V = V * np.where(V[np.argmax(np.abs(V), axis=0), np.arange(3)] < 0, -1.0, 1.0)  # sign: largest entry > 0
+        out += [w, np.sqrt(np.clip(w, 0.0, None)), V]
+    return EigenSummary(s, c, *out)

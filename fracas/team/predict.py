@@ -1,0 +1,69 @@
+"""Prediction events (FRACAS PRED): map the knowledge ahead to a later time without changing the run.
+
+The reference is integrated afresh from the stored state at the event time (the STM
+file's trajectory deck when the study reads one), with breaks at the thrust switches in
+between so DYNO's Q̃ never straddles one; assumed and true covariances are mapped with
+PROP eq. 1 over each piece.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fracas.constants import DAY_S
+from fracas.errors import NumericalError
+
+__all__ = ["predictions", "predict_from"]
+
+
+def predict_from(res, k: int, t_to: float):
+    """(P_assumed, P_true or None) predicted from schedule index k to ``t_to`` (s)."""
+    from fracas.integrate.propagate import propagate_with_sensitivities
+    from fracas.filters import covariance as cov
+    from fracas.team.engine import interval_noise
+    from fracas.team.reference import Reference
+    from fracas.team.engine import augmented_transitions
+
+    study, ref = res.study, res.ref
+    pr = study.problem
+    t_k = float(res.times_s[k])
+    sw = [a.start_days * DAY_S for a in study.traj_deck.thrust_arc] + [a.stop_days * DAY_S for a in study.traj_deck.thrust_arc]
+    mids = sorted(t for t in set(sw) if t_k + 1e-3 < t < t_to - 1e-3)
+    t_out = np.array([t_k] + mids + [t_to])
+    labels = study.dynamic_labels
+    traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, ref.states[k], t_out, labels)
+    phi = np.array(sens.stm_step)
+    if not np.all(np.isfinite(phi)):
+        raise NumericalError(f"{study.source}: prediction from {t_k / DAY_S:.6g} d to {t_to / DAY_S:.6g} d: "
+                             f"the integration stopped (status {int(traj.status)})")
+    phi[0] = np.eye(7)
+    theta = np.array(sens.par_step)
+    theta[0] = 0.0
+    bodies = pr.model.bodies
+    prim = [bodies[int(i)] for i in np.asarray(traj.primary)]
+    sub = Reference(t_out, np.array(traj.x), prim, phi, theta, labels, "prediction")
+    # augmented transitions and noise for the pieces (reuse the schedule-based helpers)
+    saved = study.schedule
+    try:
+        from fracas.team.schedule import Schedule
+
+        study.schedule = Schedule(t_out, [["prediction"]] * len(t_out), [[]] * len(t_out))
+        phis = augmented_transitions(study, sub)
+        Qa, Qt = interval_noise(study, t_out, sub.states, prim, phi)
+    finally:
+        study.schedule = saved
+    Pa = res.Pa_plus[k]
+    Pt = res.Pt_plus[k] if res.Pt_plus is not None else None
+    for j in range(1, len(t_out)):
+        Pa = np.asarray(cov.time_update(Pa, phis[j], Qa[j]))
+        if Pt is not None:
+            Pt = np.asarray(cov.time_update(Pt, phis[j], Qt[j]))
+    return Pa, Pt
+
+
+def predictions(res) -> dict[int, list[tuple[float, np.ndarray, np.ndarray | None]]]:
+    """Every prediction event of the schedule: {k: [(t_to_s, P_assumed, P_true), ...]}."""
+    out = {}
+    for k, targets in res.study.schedule.predict_to_s.items():
+        out[k] = [(t, *predict_from(res, k, t)) for t in targets]
+    return out

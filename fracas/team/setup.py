@@ -1,0 +1,294 @@
+"""From a validated TEAM deck to a :class:`Study` in canonical units (FRACAS DATA, sec. 5.3.2).
+
+The application layer of TEAM: reads the trajectory deck named by [ertraj], sorts the
+study's parameters into the augmented-state roles (solve-for s, dynamic consider u,
+measurement consider v, ignore w), builds the a-priori covariances (assumed and, for
+generalized covariance, true), the Gauss-Markov thrust noise levels, the stations, the
+observations of every [[tracking]] entry and the event schedule.  Every problem is a
+one-line :class:`~fracas.errors.DeckError` naming the deck, the field and what was expected.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from fracas.build import Problem, build_propagation
+from fracas.config.team import SIGMA_UNITS, APriori, TeamDeck, ThrustNoise
+from fracas.config.trajectory import TrajectoryDeck, load_deck
+from fracas.constants import DAY_S
+from fracas.errors import DeckError
+from fracas.filters.covariance import Layout
+from fracas.measurements import trakm
+from fracas.measurements.stations import DSN_STATIONS, Station
+from fracas.params import param_unit, parse_label
+from fracas.team.schedule import Schedule, build_schedule, merge_times, range_times
+
+__all__ = ["Study", "build_study", "trajectory_problem", "THRUST_NOISE_LABELS"]
+
+THRUST_NOISE_LABELS = ("thrust_scale", "bias_in_rad", "bias_out_rad")
+_NOISE_FIELDS = ("proportionality", "in_plane_deg", "out_of_plane_deg")
+_NOISE_SCALE = (1.0, math.pi / 180.0, math.pi / 180.0)
+
+
+@dataclass
+class Study:
+    """Everything a TEAM run needs, in km, s, kg, rad (ICRF).
+
+    labels: augmented parameter labels in layout order [s, u, v, w]; dynamic[i]: whether
+    the trajectory depends on labels[i] (its column is in the STM file); P0_assumed /
+    P0_true (n, n): a-priori covariances (the assumed one has zero ignore rows/columns);
+    noise_sigma_* (3,), noise_tau_* (3,) s: Gauss-Markov thrust noise (proportionality,
+    in-plane rad, out-of-plane rad), assumed and true; observations[j], true_sigma[j]:
+    the observation of tracking entry j and the real-world noise sigma (km, km/s or rad).
+    """
+
+    deck: TeamDeck
+    source: str
+    traj_deck: TrajectoryDeck
+    problem: Problem
+    layout: Layout
+    labels: list[str]
+    roles: list[str]
+    units: list[str]
+    dynamic: np.ndarray
+    P0_assumed: np.ndarray
+    P0_true: np.ndarray
+    noise_sigma_assumed: np.ndarray
+    noise_tau_assumed: np.ndarray
+    noise_sigma_true: np.ndarray
+    noise_tau_true: np.ndarray
+    stations: dict[str, Station]
+    observations: list[trakm.Observation]
+    true_sigma: np.ndarray
+    schedule: Schedule
+    start_s: float
+    stop_s: float
+    gencov: bool
+    filter_kind: str
+    square_root: bool
+    user_gain: Callable | None
+    min_elevation_deg: float
+    propagation: str
+    punched: dict | None = None
+
+    @property
+    def nx(self) -> int:
+        return self.layout.nx
+
+    @property
+    def dynamic_labels(self) -> list[str]:
+        return [lab for lab, d in zip(self.labels, self.dynamic) if d]
+
+    @property
+    def state_labels(self) -> list[str]:
+        return ["x", "y", "z", "vx", "vy", "vz", "mass"][: self.nx]
+
+    @property
+    def state_units(self) -> list[str]:
+        return ["km", "km", "km", "km/s", "km/s", "km/s", "kg"][: self.nx]
+
+    @property
+    def has_noise(self) -> bool:
+        return bool(np.any(self.noise_sigma_assumed > 0) or (self.gencov and np.any(self.noise_sigma_true > 0)))
+
+
+def _err(src: str, field: str, value, expected: str) -> DeckError:
+    v = f' = "{value}"' if isinstance(value, str) else (f" = {value}" if value is not None else "")
+    return DeckError(f"{src}: {field}{v}: {expected}")
+
+
+def trajectory_problem(deck: TeamDeck, src: str) -> tuple[TrajectoryDeck, Problem]:
+    """Load the [ertraj] trajectory deck and build its propagation problem."""
+    path = deck.resolve(deck.ertraj.deck)
+    if not path.exists():
+        raise _err(src, "ertraj.deck", deck.ertraj.deck, f"no such trajectory deck ({path})")
+    tdeck = load_deck(path)
+    return tdeck, build_propagation(tdeck)
+
+
+def _classify(label: str, model, station_names, src: str, field: str) -> bool:
+    """True if the dynamics depend on ``label``, False for a measurement label; DeckError otherwise."""
+    try:
+        parse_label(label, model)
+        return True
+    except KeyError as exc:
+        dyn_msg = str(exc).strip("'\"")
+    if trakm.is_measurement_label(label):
+        try:
+            trakm.check_measurement_label(label, station_names)
+        except KeyError as exc:
+            raise _err(src, field, label, str(exc).strip("'\"")) from None
+        return False
+    raise _err(src, field, label, f"unknown parameter: {dyn_msg}; measurement parameters are e.g. "
+               "station_lon_rad[goldstone], range_bias_km[madrid], qvlbi_timing_km")
+
+
+def _unit(label: str, dynamic: bool, model) -> str:
+    return param_unit(label, model) if dynamic else trakm.measurement_label_unit(label)
+
+
+def _state_sigmas(ap: APriori, nx: int) -> np.ndarray:
+    pos, vel = ap.sigmas()
+    s = list(pos) + list(vel) + ([ap.mass_sigma_kg] if nx == 7 else [])
+    return np.asarray(s, dtype=np.float64)
+
+
+def _noise(tn: ThrustNoise) -> tuple[np.ndarray, np.ndarray]:
+    sig, tau = np.zeros(3), np.full(3, DAY_S)
+    for i, (f, k) in enumerate(zip(_NOISE_FIELDS, _NOISE_SCALE)):
+        c = getattr(tn, f)
+        if c is not None:
+            sig[i], tau[i] = c.sigma * k, c.tau_days * DAY_S
+    return sig, tau
+
+
+def load_user_gain(spec: str, src: str) -> Callable:
+    """Import ``module:function`` (FRACAS USRGAN); it must be written with jax.numpy."""
+    mod, _, fn = spec.partition(":")
+    try:
+        obj = getattr(importlib.import_module(mod), fn)
+    except (ImportError, AttributeError) as exc:
+        raise _err(src, "filter.user_gain", spec, f"cannot import it ({exc})") from None
+    if not callable(obj):
+        raise _err(src, "filter.user_gain", spec, "is not callable")
+    return obj
+
+
+def build_study(deck: TeamDeck, punched: dict | None = None) -> Study:
+    """DATA: validate the deck against the trajectory and the catalogues; build the study."""
+    src = deck.source_path or "<deck>"
+    tdeck, problem = trajectory_problem(deck, src)
+    model = problem.model
+    nx = 7 if model.thrust else 6
+
+    stations = dict(DSN_STATIONS)
+    for s in deck.station:
+        stations[s.name] = Station(s.name, s.radius_km, math.radians(s.latitude_deg), math.radians(s.longitude_deg))
+    names = tuple(stations)
+
+    # ---- parameters and roles
+    groups: dict[str, list[tuple[str, float, bool]]] = {"s": [], "u": [], "v": [], "w": []}
+    true_sigma: dict[str, float] = {}
+    for k, p in enumerate(deck.parameter):
+        dyn = _classify(p.label, model, names, src, f"parameter[{k}].label")
+        role = {"solve_for": "s", "ignore": "w"}.get(p.role, "u" if dyn else "v")
+        groups[role].append((p.label, p.sigma, dyn))
+    gen = deck.gencov if (deck.gencov is not None and deck.gencov.enabled) else None
+    if gen is not None:
+        for k, g in enumerate(gen.parameter):
+            if g.role == "ignore":
+                dyn = _classify(g.label, model, names, src, f"gencov.parameter[{k}].label")
+                groups["w"].append((g.label, g.sigma, dyn))
+            else:
+                true_sigma[g.label] = g.sigma
+    ordered = groups["s"] + groups["u"] + groups["v"] + groups["w"]
+    labels = [lab for lab, _, _ in ordered]
+    dynamic = np.array([d for _, _, d in ordered], dtype=bool)
+    roles = (["solve_for"] * len(groups["s"]) + ["dynamic_consider"] * len(groups["u"])
+             + ["measurement_consider"] * len(groups["v"]) + ["ignore"] * len(groups["w"]))
+    units = [_unit(lab, d, model) for lab, _, d in ordered]
+    layout = Layout(nx, len(groups["s"]), len(groups["u"]), len(groups["v"]), len(groups["w"]))
+
+    # ---- a-priori covariances
+    n = layout.n
+    p_sig_a = np.array([s for _, s, _ in ordered], dtype=np.float64)
+    p_sig_t = np.array([true_sigma.get(lab, s) for lab, s, _ in ordered], dtype=np.float64)
+    if layout.nw:  # the filter does not know its ignore parameters
+        p_sig_a[-layout.nw:] = 0.0
+    if punched is not None:
+        P0a = np.array(punched["assumed"], dtype=np.float64)
+        P0t = np.array(punched.get("true", punched["assumed"]), dtype=np.float64)
+        if list(punched["labels"]) != labels or P0a.shape != (n, n):
+            raise _err(src, "a_priori.from_punch", deck.a_priori.from_punch,
+                       f"the punched covariance has parameters {list(punched['labels'])}, this study {labels}")
+    else:
+        xs_a = _state_sigmas(deck.a_priori, nx)
+        xs_t = _state_sigmas(gen.a_priori, nx) if (gen is not None and gen.a_priori is not None) else xs_a
+        P0a = np.diag(np.concatenate([xs_a, p_sig_a]) ** 2)
+        P0t = np.diag(np.concatenate([xs_t, p_sig_t]) ** 2)
+
+    # ---- thrust noise (Gauss-Markov)
+    sig_a, tau_a = _noise(deck.thrust_noise)
+    sig_t, tau_t = _noise(gen.thrust_noise) if (gen is not None and gen.thrust_noise is not None) else (sig_a, tau_a)
+    if (np.any(sig_a > 0) or np.any(sig_t > 0)) and not model.thrust:
+        raise _err(src, "thrust_noise", None, "the trajectory deck has no thrust ([propulsion] and [[thrust_arc]])")
+
+    # ---- observations and their schedule
+    obs, tsig, track_times = [], [], []
+    for j, t in enumerate(deck.tracking):
+        unit, k = SIGMA_UNITS[t.type]
+        obs.append(trakm.Observation(t.type, tuple(t.stations), t.sigma * k))
+        ts = (gen.measurement_sigma.get(t.type, t.sigma) if gen is not None else t.sigma) * k
+        tsig.append(ts)
+        track_times.append(range_times(t.start_days * DAY_S, t.stop_days * DAY_S, t.interval_hours * 3600.0))
+
+    dur = tdeck.duration_days * DAY_S
+    start = deck.filter.start_days * DAY_S
+    stop = min(deck.filter.stop_days * DAY_S, dur) if deck.filter.stop_days is not None else dur
+    if punched is not None:
+        start = float(punched["time_s"])
+    if start >= stop:
+        raise _err(src, "filter.start_days", start / DAY_S, f"must be before the end of the study ({stop / DAY_S:g} d)")
+    events = []
+    for k, e in enumerate(deck.event):
+        ts = np.array(e.times(), dtype=np.float64) * DAY_S
+        if np.any(ts > dur):
+            raise _err(src, f"event[{k}]", None, f"times must be within the trajectory (<= {dur / DAY_S:g} d)")
+        events.append((e.type, ts, None if e.predict_to_days is None else e.predict_to_days * DAY_S))
+    switches = []
+    for arc in tdeck.thrust_arc:
+        switches += [(arc.start_days * DAY_S, "thrust_on"), (arc.stop_days * DAY_S, "thrust_off")]
+    punch = np.array(deck.punch.times_days) * DAY_S if deck.punch is not None else np.zeros(0)
+    sched = build_schedule(start, stop, track_times, events, switches, punch)
+
+    gain = load_user_gain(deck.filter.user_gain, src) if deck.filter.type == "user" else None
+    problem = dataclasses.replace(problem, param_labels=tuple(lab for lab, d in zip(labels, dynamic) if d),
+                                  sensitivities=True)
+    return Study(
+        deck=deck, source=src, traj_deck=tdeck, problem=problem, layout=layout, labels=labels, roles=roles,
+        units=units, dynamic=dynamic, P0_assumed=P0a, P0_true=P0t,
+        noise_sigma_assumed=sig_a, noise_tau_assumed=tau_a, noise_sigma_true=sig_t, noise_tau_true=tau_t,
+        stations=stations, observations=obs, true_sigma=np.array(tsig, dtype=np.float64), schedule=sched,
+        start_s=start, stop_s=stop, gencov=gen is not None, filter_kind=deck.filter.type,
+        square_root=deck.filter.square_root, user_gain=gain, min_elevation_deg=deck.filter.min_elevation_deg,
+        propagation=deck.errcon.propagation, punched=punched,
+    )
+
+
+def stm_file_times(study: Study) -> np.ndarray:
+    """STMGEN: the time points an STM file built from this deck holds (s from the epoch).
+
+    The study's schedule, the thrust switches, the epoch and the optional uniform grid
+    ([stm] grid_hours) over the whole trajectory, so other studies can use other times.
+    """
+    dur = study.traj_deck.duration_days * DAY_S
+    grid = np.zeros(0)
+    if study.deck.stm.grid_hours:
+        grid = range_times(0.0, dur, study.deck.stm.grid_hours * 3600.0)
+    sw = [a.start_days * DAY_S for a in study.traj_deck.thrust_arc] + [a.stop_days * DAY_S for a in study.traj_deck.thrust_arc]
+    t = merge_times([0.0], study.schedule.times_s, grid, sw, [dur])
+    return t[(t >= 0) & (t <= dur + 1e-6)]
+
+
+def stm_file_labels(study: Study) -> list[str]:
+    """The parameter columns of an STM file built from this deck: the study's dynamic
+    parameters, the thrust noise components, and [stm] parameters."""
+    out = list(study.dynamic_labels)
+    extra = list(study.deck.stm.parameters)
+    if study.problem.model.thrust:
+        extra += list(THRUST_NOISE_LABELS)
+    for lab in extra:
+        if lab not in out:
+            try:
+                parse_label(lab, study.problem.model)
+            except KeyError as exc:
+                raise _err(study.source, "stm.parameters", lab, str(exc).strip("'\"")) from None
+            out.append(lab)
+    return out

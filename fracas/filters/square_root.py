@@ -96,9 +96,7 @@ def sqrt_time_update(W: jax.Array, phi_aug: jax.Array, Q: jax.Array) -> jax.Arra
 
 
 @partial(jax.jit, static_argnames=("layout",))
-def sqrt_kalman_schmidt_gain(
-    W: jax.Array, H: jax.Array, R: jax.Array, layout: Layout
-) -> jax.Array:
+def sqrt_kalman_schmidt_gain(W: jax.Array, H: jax.Array, R: jax.Array, layout: Layout) -> jax.Array:
     """Kalman-Schmidt gain from the factor (FRACAS KSGAIN with FILTER eqs. 1-6).
 
     F = H W (m, n), J = F Fᵀ + R, A = W Fᵀ; J's Cholesky factor L_J comes from the QR of

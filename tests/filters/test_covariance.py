@@ -66,9 +66,9 @@ def random_problem(rng, L, m):
     scales = 10.0 ** rng.uniform(-1.5, 1.5, size=n)  # mixed units, 3 decades
     P = random_cov(rng, n, scales)
     phi = np.eye(L.nx) + 0.2 * rng.normal(size=(L.nx, L.nx))
-    theta = rng.normal(size=(L.nx, n - L.nx)) * scales[:L.nx, None] / scales[None, L.nx:]
+    theta = rng.normal(size=(L.nx, n - L.nx)) * scales[: L.nx, None] / scales[None, L.nx :]
     Bq = rng.normal(size=(L.nx, L.nx - 2))  # singular process noise
-    Q = 0.1 * Bq @ Bq.T * np.outer(scales[:L.nx], scales[:L.nx])
+    Q = 0.1 * Bq @ Bq.T * np.outer(scales[: L.nx], scales[: L.nx])
     H = rng.normal(size=(m, n)) / scales[None, :]
     R = random_cov(rng, m) * 0.3
     return P, phi, theta, Q, H, R
@@ -95,7 +95,7 @@ def prop_literal(P, phi, Ts, Tu, Tw, Q, L):
     """FRACAS PROP eqs. 5-16, block by block (eq. 5 rebuilt, see module docstring)."""
     b = blocks(P, L)
     F = phi
-    T = lambda a: a.T  # noqa: E731
+    T = lambda a: a.T
     o = dict(b)
     o["xs"] = F @ b["xs"] + Ts @ b["ss"] + Tu @ T(b["su"]) + Tw @ T(b["sw"])  # (6)
     o["xu"] = F @ b["xu"] + Ts @ b["su"] + Tu @ b["uu"] + Tw @ T(b["uw"])  # (7)
@@ -118,12 +118,18 @@ def filter_residuals(P, H, R, L):
     """FRACAS FILTER eqs. 1-6 (eq. 5 rebuilt: C_vw H_wᵀ)."""
     b = blocks(P, L)
     Hx, Hs, Hu, Hv, Hw = (H[:, getattr(L, r)] for r in ROLES)
-    T = lambda a: a.T  # noqa: E731
+    T = lambda a: a.T
     A = b["xx"] @ Hx.T + b["xs"] @ Hs.T + b["xu"] @ Hu.T + b["xv"] @ Hv.T + b["xw"] @ Hw.T
     B = b["ss"] @ Hs.T + T(b["xs"]) @ Hx.T + b["su"] @ Hu.T + b["sv"] @ Hv.T + b["sw"] @ Hw.T
     D = T(b["xu"]) @ Hx.T + T(b["su"]) @ Hs.T + b["uu"] @ Hu.T + b["uv"] @ Hv.T + b["uw"] @ Hw.T
     E = T(b["xv"]) @ Hx.T + T(b["sv"]) @ Hs.T + T(b["uv"]) @ Hu.T + b["vv"] @ Hv.T + b["vw"] @ Hw.T
-    F = T(b["xw"]) @ Hx.T + T(b["sw"]) @ Hs.T + T(b["uw"]) @ Hu.T + T(b["vw"]) @ Hv.T + b["ww"] @ Hw.T
+    F = (
+        T(b["xw"]) @ Hx.T
+        + T(b["sw"]) @ Hs.T
+        + T(b["uw"]) @ Hu.T
+        + T(b["vw"]) @ Hv.T
+        + b["ww"] @ Hw.T
+    )
     J = Hx @ A + Hs @ B + Hu @ D + Hv @ E + Hw @ F + R
     return A, B, D, E, F, J
 
@@ -212,8 +218,10 @@ def test_time_update_equals_prop_eqs_5_16(L, m):
         P, phi, theta, Q, H, R = random_problem(rng, L, m)
         F = augmented_transition(f64(phi), f64(theta), L)
         got = np.asarray(time_update(f64(P), F, f64(Q)))
-        th = lambda r: theta[:, getattr(L, r).start - L.nx : getattr(L, r).stop - L.nx]  # noqa: E731
-        ref = prop_literal(P, phi, th("s"), th("u"), th("w"), Q, L)
+        Ts, Tu, Tw = (
+            theta[:, getattr(L, r).start - L.nx : getattr(L, r).stop - L.nx] for r in "suw"
+        )
+        ref = prop_literal(P, phi, Ts, Tu, Tw, Q, L)
         assert scaled_err(got, ref, ref) < TOL
         assert np.array_equal(got, got.T)
 

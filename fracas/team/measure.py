@@ -63,64 +63,90 @@ def _ephemeris_states(study: Study, ref: Reference, ks: list[int], bodies: list[
 
 
 def assemble_measurements(study: Study, ref: Reference, m_pad: int = 4) -> MeasurementSet:
-    """TRAKM + MENO over the schedule: the observation matrices of every measurement event."""
+    """TRAKM + MENO over the schedule: the observation matrices of every measurement event.
+
+    All observations of the study are evaluated together: one jitted, vmapped kernel call
+    per measurement type (trakm's packed kernels), then scattered into H[k] by schedule
+    index.  Skipped observations (below ``min_elevation_deg``) are counted per entry.
+    """
     sched = study.schedule
     K, n, nx = sched.n, study.layout.n, study.nx
-    ks = [k for k in range(K) if sched.tracking[k]]
-    per_k: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, list[MeasurementRecord]]] = {}
+    pairs = [(k, j) for k in range(K) for j in sched.tracking[k]]
     skipped: dict[int, int] = {}
-    if ks:
-        body_names = sorted({t.body for t in study.deck.tracking if t.body})
-        bodies = sorted(set(ref.primary[k] for k in ks) | {"earth"} | set(body_names))
-        pos, vel = _ephemeris_states(study, ref, ks, bodies)
-        bi = {b: i for i, b in enumerate(bodies)}
-        for j_k, k in enumerate(ks):
-            p = bi[ref.primary[k]]
-            o_r, o_v = pos[j_k, p], vel[j_k, p]
-            x = ref.states[k]
-            obs, sig_t, meta = [], [], []
-            for j in sched.tracking[k]:
-                t = study.deck.tracking[j]
-                body_r = body_v = None
-                radius = star = None
-                if t.body:
-                    body_r, body_v = pos[j_k, bi[t.body]] - o_r, vel[j_k, bi[t.body]] - o_v
-                    radius = BODIES[t.body].radius_km
-                if t.type == "star_planet_angle":
-                    ra, de = math.radians(t.star_ra_deg), math.radians(t.star_dec_deg)
-                    star = np.array([math.cos(de) * math.cos(ra), math.cos(de) * math.sin(ra), math.sin(de)])
-                geo = trakm.Geometry(
-                    et_s=float(study.problem.epoch_et_s + ref.times_s[k]), sc_r=x[:3], sc_v=x[3:6],
-                    earth_r=pos[j_k, bi["earth"]] - o_r, earth_v=vel[j_k, bi["earth"]] - o_v,
-                    body_r=body_r, body_v=body_v, body_radius_km=radius, star_unit=star)
-                b = trakm.observation_matrix([study.observations[j]], geo, study.stations, study.labels, nx)
-                elev = float(b.elevation_deg[0])
-                used = not (np.isfinite(elev) and elev < study.min_elevation_deg)
-                rec = MeasurementRecord(k, j, t.type, tuple(t.stations), float(b.values[0]), elev, used,
-                                        study.observations[j].sigma)
-                if not used:
-                    skipped[j] = skipped.get(j, 0) + 1
-                else:
-                    obs.append(np.asarray(b.H[0]))
-                    sig_t.append(study.true_sigma[j])
-                meta.append(rec)
-            per_k[k] = (np.array(obs).reshape(-1, n), np.array([r.sigma for r in meta if r.used]),
-                        np.array(sig_t), meta)
-    m = max([v[0].shape[0] for v in per_k.values()] + [1])
+    records: list[MeasurementRecord] = []
+    if not pairs:
+        return MeasurementSet(np.zeros((K, m_pad, n)), np.broadcast_to(np.eye(m_pad), (K, m_pad, m_pad)).copy(),
+                              np.broadcast_to(np.eye(m_pad), (K, m_pad, m_pad)).copy(), [], {})
+    ks = sorted({k for k, _ in pairs})
+    kpos = {k: i for i, k in enumerate(ks)}
+    body_names = sorted({t.body for t in study.deck.tracking if t.body})
+    bodies = sorted(set(ref.primary[k] for k in ks) | {"earth"} | set(body_names))
+    pos, vel = _ephemeris_states(study, ref, ks, bodies)
+    bi = {b: i for i, b in enumerate(bodies)}
+    T = trakm
+    x = np.zeros((len(pairs), T._N_IN))
+    for i, (k, j) in enumerate(pairs):
+        a = kpos[k]
+        p = bi[ref.primary[k]]
+        o_r, o_v = pos[a, p], vel[a, p]
+        t = study.deck.tracking[j]
+        row = x[i]
+        row[T._I_ET] = study.problem.epoch_et_s + ref.times_s[k]
+        row[T._I_SC:T._I_SC + 6] = ref.states[k, :6]
+        row[T._I_E:T._I_E + 3] = pos[a, bi["earth"]] - o_r
+        row[T._I_E + 3:T._I_E + 6] = vel[a, bi["earth"]] - o_v
+        for slot, name in enumerate(t.stations):
+            st = study.stations[name]
+            i0 = T._I_ST1 if slot == 0 else T._I_ST2
+            row[i0:i0 + 3] = (st.radius_km, st.latitude_rad, st.longitude_rad)
+        if t.body:
+            row[T._I_BODY:T._I_BODY + 3] = pos[a, bi[t.body]] - o_r
+            row[T._I_RP] = BODIES[t.body].radius_km
+        if t.type == "star_planet_angle":
+            ra, de = math.radians(t.star_ra_deg), math.radians(t.star_dec_deg)
+            row[T._I_STAR:T._I_STAR + 3] = (math.cos(de) * math.cos(ra), math.cos(de) * math.sin(ra), math.sin(de))
+    out = np.ones((len(pairs), T._N_OUT + 1))
+    groups: dict[str, list[int]] = {}
+    for i, (_, j) in enumerate(pairs):
+        groups.setdefault(study.deck.tracking[j].type, []).append(i)
+    for kind, rows in groups.items():
+        b = T._bucket(len(rows))
+        xk = np.empty((b, T._N_IN))
+        xk[: len(rows)] = x[rows]
+        xk[len(rows):] = x[rows[0]]
+        out[rows, : T._N_OUT] = np.asarray(T._batch_kernel(kind)(xk))[: len(rows)]
+    labels = tuple(study.labels)
+    names = tuple(sorted(study.stations))
+    T._label_table(labels, names)
+    with np.errstate(invalid="ignore"):
+        elev = np.degrees(np.fmin(out[:, T._O_EL], out[:, T._O_EL + 1]))
+    per_k: dict[int, list[int]] = {}
+    for i, (k, j) in enumerate(pairs):
+        t = study.deck.tracking[j]
+        e = float(elev[i]) if study.observations[j].stations else float("nan")
+        used = not (np.isfinite(e) and e < study.min_elevation_deg)
+        rec = MeasurementRecord(k, j, t.type, tuple(t.stations), float(out[i, 0]), e, used, study.observations[j].sigma)
+        records.append(rec)
+        if used:
+            rec.row = len(per_k.setdefault(k, []))
+            per_k[k].append(i)
+        else:
+            skipped[j] = skipped.get(j, 0) + 1
+    m = max([len(v) for v in per_k.values()] + [1])
     m = int(math.ceil(m / m_pad) * m_pad)
     H = np.zeros((K, m, n))
     Ra = np.broadcast_to(np.eye(m), (K, m, m)).copy()
     Rt = Ra.copy()
-    records: list[MeasurementRecord] = []
-    for k, (h, sa, st, meta) in per_k.items():
-        r = h.shape[0]
-        H[k, :r] = h
-        Ra[k, np.arange(r), np.arange(r)] = sa ** 2
-        Rt[k, np.arange(r), np.arange(r)] = st ** 2
-        row = 0
-        for rec in meta:
-            if rec.used:
-                rec.row = row
-                row += 1
-            records.append(rec)
+    idx_of = {(k, j): i for i, (k, j) in enumerate(pairs)}
+    for rec in records:
+        if not rec.used:
+            continue
+        i = idx_of[(rec.k, rec.tracking)]
+        h = H[rec.k, rec.row]
+        h[:6] = out[i, T._O_H:T._O_H + 6]
+        src, col, coef = T._columns(labels, names, rec.kind, rec.stations)
+        if col.size:
+            h[nx + col] += coef * out[i, src]
+        Ra[rec.k, rec.row, rec.row] = rec.sigma ** 2
+        Rt[rec.k, rec.row, rec.row] = study.true_sigma[rec.tracking] ** 2
     return MeasurementSet(H, Ra, Rt, records, skipped)

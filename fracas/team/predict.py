@@ -52,8 +52,9 @@ def predict_from(res, k: int, t_to: float):
         Qa, Qt = interval_noise(study, t_out, sub.states, prim, phi)
     finally:
         study.schedule = saved
-    Pa = res.Pa_plus[k]
-    Pt = res.Pt_plus[k] if res.Pt_plus is not None else None
+    n = study.layout.n  # PDOT's noise states (appended last) are dropped: DYNO's Q̃ stands for them
+    Pa = res.Pa_plus[k][:n, :n]
+    Pt = res.Pt_plus[k][:n, :n] if res.Pt_plus is not None else None
     for j in range(1, len(t_out)):
         Pa = np.asarray(cov.time_update(Pa, phis[j], Qa[j]))
         if Pt is not None:

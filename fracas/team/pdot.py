@@ -1,0 +1,143 @@
+"""PDOT propagation: the covariance differential equations with the noise states augmented
+(FRACAS DERY, PATH; Appendix 9.3 "PDOT").
+
+The three Gauss-Markov thrust errors η (proportionality, in-plane, out-of-plane pointing)
+become states appended after the study's parameters, with ṅ = −η/τ + q; the augmented
+covariance obeys Ṗ = F P + P Fᵀ + Q_c with F = [[A, B, h], [0, 0, 0], [0, 0, −1/τ]]
+evaluated along the reference trajectory (A, B, h by automatic differentiation of the
+full force model).  Ṗ is integrated with RK4 on a uniform grid inside every interval
+between events (step <= ``ertraj.pdot_step_hours``); measurement updates are the same
+as in PHI mode.  The noise states are carried like ignore-block rows (their gains are
+zero: they are considered, not estimated) but the filter knows them (the assumed
+covariance has them too).
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+
+from fracas import _jax  # noqa: F401
+import jax
+import jax.numpy as jnp
+
+from fracas.errors import ConfigError
+from fracas.filters.covariance import Layout
+from fracas.team.setup import THRUST_NOISE_LABELS, Study
+
+__all__ = ["run_pdot", "NOISE_STATE_LABELS"]
+
+NOISE_STATE_LABELS = ["eta_proportionality", "eta_in_plane_rad", "eta_out_of_plane_rad"]
+
+
+@lru_cache(maxsize=None)
+def _pdot_fn():
+    from fracas.filters.process_noise import pdot_propagate
+
+    return jax.jit(pdot_propagate)
+
+
+def _expand(P: np.ndarray, sig: np.ndarray) -> np.ndarray:
+    n = P.shape[0]
+    out = np.zeros((n + 3, n + 3))
+    out[:n, :n] = P
+    out[n:, n:] = np.diag(sig ** 2)  # stationary Gauss-Markov start
+    return out
+
+
+def run_pdot(study: Study, ref, meas):
+    """The TEAM run with PDOT time updates; returns a TeamResult over n + 3 augmented states."""
+    import time
+
+    from fracas.dynamics.variational import jacobians_at
+    from fracas.integrate.propagate import propagate
+    from fracas.team.engine import TeamResult, _bucket, _primary_index, _scan, finish, EPS_T
+
+    if study.filter_kind == "wls" or study.square_root:
+        raise ConfigError(f"{study.source}: errcon.propagation = \"pdot\" supports the Kalman-Schmidt and user "
+                          "filters in covariance form (use propagation = \"phi\" for WLS or the square-root mode)")
+    L = study.layout
+    nx, n = L.nx, L.n
+    lay = Layout(L.nx, L.ns, L.nu, L.nv, L.nw + 3)
+    sched = study.schedule
+    K = sched.n
+    t = ref.times_s
+    h_max = study.deck.ertraj.pdot_step_hours * 3600.0
+    # nodes: for each interval, 2N+1 equally spaced points (ends nudged inside the interval)
+    Ns, nodes, owner = [], [], []
+    for k in range(1, K):
+        dt = t[k] - t[k - 1]
+        N = max(1, int(math.ceil(dt / h_max - 1e-9)))
+        tt = t[k - 1] + dt * np.arange(2 * N + 1) / (2 * N)
+        e = min(EPS_T, dt / 4)
+        tt[0] += e
+        tt[-1] -= e
+        Ns.append(N)
+        nodes.append(tt)
+    t0 = time.perf_counter()
+    pr = study.problem
+    all_t = np.concatenate(nodes) if nodes else np.zeros(0)
+    order = np.argsort(all_t, kind="stable")
+    t_sorted = np.concatenate([[t[0]], all_t[order]])
+    traj = propagate(pr.model, pr.params, pr.ephem, pr.epoch_et_s, ref.states[0], t_sorted)
+    xs = np.empty((all_t.size, 7))
+    xs[order] = np.asarray(traj.x)[1:]
+    prim_names = np.empty(all_t.size, dtype=object)
+    bodies = pr.model.bodies
+    prim_names[order] = [bodies[int(i)] for i in np.asarray(traj.primary)[1:]]
+    labels = list(study.dynamic_labels) + list(THRUST_NOISE_LABELS)
+    kk = all_t.size
+    kp = _bucket(kk)
+    pad = lambda a: np.concatenate([a, np.repeat(a[-1:], kp - kk, axis=0)]) if kp > kk else a  # noqa: E731
+    A, B = jacobians_at(pr.model, pr.params, pr.ephem, pr.epoch_et_s, pad(all_t), pad(xs),
+                        pad(_primary_index(study, list(prim_names))), labels)
+    A, B = np.asarray(A)[:kk, :nx, :nx], np.asarray(B)[:kk, :nx, :]
+    # F at every node (assumed and true differ only in the noise correlation times)
+    nd = len(study.dynamic_labels)
+    F = np.zeros((kk, n + 3, n + 3))
+    F[:, :nx, :nx] = A
+    dyn_cols = [nx + j for j, d in enumerate(study.dynamic) if d]
+    F[:, :nx, dyn_cols] = B[:, :, :nd]
+    F[:, :nx, n:] = B[:, :, nd:]
+    Fs, Qcs = [], []
+    for sig, tau in ((study.noise_sigma_assumed, study.noise_tau_assumed), (study.noise_sigma_true, study.noise_tau_true)):
+        Fx = F.copy()
+        Fx[:, np.arange(n, n + 3), np.arange(n, n + 3)] = -1.0 / tau
+        Qc = np.zeros((n + 3, n + 3))
+        Qc[np.arange(n, n + 3), np.arange(n, n + 3)] = 2.0 * sig ** 2 / tau
+        Fs.append(Fx)
+        Qcs.append(Qc)
+    t_nodes = time.perf_counter() - t0
+
+    Pa = jnp.asarray(_expand(study.P0_assumed, study.noise_sigma_assumed))
+    Pt = jnp.asarray(_expand(study.P0_true, study.noise_sigma_true))
+    H = np.concatenate([meas.H, np.zeros(meas.H.shape[:2] + (3,))], axis=2)
+    eye = jnp.eye(n + 3)[None]
+    zq = jnp.zeros((1, nx, nx))
+    pdot = _pdot_fn()
+    out = {k: [] for k in ("am", "ap", "tm", "tp", "sig")}
+    start = 0
+    for k in range(K):
+        if k > 0:
+            N = Ns[k - 1]
+            seg = slice(start, start + 2 * N + 1)
+            start += 2 * N + 1
+            dt = (t[k] - t[k - 1]) / N
+            Pa = pdot(Pa, jnp.asarray(Fs[0][seg]), jnp.asarray(Qcs[0]), dt)
+            if study.gencov:
+                Pt = pdot(Pt, jnp.asarray(Fs[1][seg]), jnp.asarray(Qcs[1]), dt)
+        am, ap, tm, tp, sg = _scan(Pa, Pt, eye, zq, zq, jnp.asarray(H[k:k + 1]), jnp.asarray(meas.R_assumed[k:k + 1]),
+                                   jnp.asarray(meas.R_true[k:k + 1]), layout=lay, kind=study.filter_kind,
+                                   gencov=study.gencov, square_root=False, user_gain=study.user_gain)
+        Pa, Pt = ap[0], tp[0]
+        for key, v in (("am", am), ("ap", ap), ("tm", tm), ("tp", tp), ("sig", sg)):
+            out[key].append(np.asarray(v[0]))
+    zeros = np.zeros((K, nx, nx))
+    res = TeamResult(study, ref, meas, np.array(out["am"]), np.array(out["ap"]),
+                     np.array(out["tm"]) if study.gencov else None, np.array(out["tp"]) if study.gencov else None,
+                     zeros, zeros.copy(), np.array(out["sig"]), labels=study.state_labels + study.labels + NOISE_STATE_LABELS)
+    tm = {"pdot_nodes_s": t_nodes, "pdot_nodes": int(kk)}
+    finish(res, tm)
+    return res

@@ -107,9 +107,11 @@ def jacobians_at(
 ):
     """A (k, 7, 7) and B (k, 7, np) at k nodes (t_nodes (k,) s, x_nodes (k, 7), primary_nodes (k,)).
 
-    Vmapped and jitted once per (force model structure, labels, array shapes): the
-    integrator constants are not part of the dynamics and are dropped from the cache key,
-    so decks differing only in step control share the compiled function.
+    At a thrust switch time the controls of [t_on, t_off) apply (DYNO/PATH intervals should
+    end at switches, where h jumps).  Vmapped and jitted once per (force model structure,
+    labels, array shapes): the integrator constants are not part of the dynamics and are
+    dropped from the cache key, so decks differing only in step control share the compiled
+    function.
     """
     static = dataclasses.replace(model, integrator=IntegratorSettings())
     t_nodes = jnp.asarray(t_nodes, jnp.float64)

@@ -92,17 +92,20 @@ def dyno_q(phi, h_k, h_k1, sigma, tau_s, dt_s):
 
 
 def gm_augmented_F(A, B, h, tau_s):
-    """Augmented system matrix F (n, n), n = nx + np + k, for z = [x, p, eta] (FRACAS DERY;
+    """Augmented system matrix F (..., n, n), n = nx + np + k, for z = [x, p, eta] (FRACAS DERY;
     App. 9.3 PDOT): F = [[A, B, h], [0, 0, 0], [0, 0, -diag(1/tau)]].
 
     A (..., nx, nx) = d xdot/dx (1/s); B (..., nx, np) = d xdot/dp for constant parameters;
     h (..., nx, k) = d xdot/d eta; tau_s (k,) correlation times (s; inf makes eta a bias).
-    Leading batch dimensions (e.g. integration nodes) broadcast.
+    Leading batch dimensions (e.g. integration nodes) broadcast.  From the trajectory core:
+    ``A, Bfull = variational.jacobians_at(..., labels=params + THRUST_NOISE_LABELS)``, then
+    ``gm_augmented_F(A, Bfull[..., :np], Bfull[..., np:], tau_s)``.
     """
     A, B, h, tau = _f64(A), _f64(B), _f64(h), _f64(tau_s)
-    batch = A.shape[:-2]
+    batch = jnp.broadcast_shapes(A.shape[:-2], B.shape[:-2], h.shape[:-2])
     nx, npar, k = A.shape[-1], B.shape[-1], h.shape[-1]
     n = nx + npar + k
+    A = jnp.broadcast_to(A, batch + (nx, nx))
     B = jnp.broadcast_to(B, batch + (nx, npar))
     h = jnp.broadcast_to(h, batch + (nx, k))
     top = jnp.concatenate([A, B, h], axis=-1)

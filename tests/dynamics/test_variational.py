@@ -35,6 +35,8 @@ DECK = Path(__file__).resolve().parents[2] / "namelists" / "earth_mars_sep.toml"
 LABELS = THRUST_NOISE_LABELS + ("mu[sun]", "exhaust_velocity_km_s")
 N_RK4 = 24  # RK4 steps of h = 3600 s over the day; 2N+1 = 49 reference states
 BLOCKS = (slice(0, 3), slice(3, 6), slice(6, 7))  # r, v, m
+# state_jacobians jitted once for the module (called with float64 t, (7,) x, int32 primary)
+_state_jacobians = jax.jit(state_jacobians, static_argnums=(0, 7))
 
 
 @pytest.fixture(scope="module")
@@ -104,7 +106,9 @@ def test_thrust_noise_h_is_zero_while_coasting(prob):
     non-zero on the arc; d xdot/d mu[sun] is non-zero in both (exact zeros: no tolerance)."""
     pb = prob
     x = np.asarray(pb.x0, float)
-    jac = jax.jit(lambda t: state_jacobians(pb.model, pb.params, pb.ephem, pb.epoch_et_s, t, x, 0, LABELS))
+    def jac(t):
+        return _state_jacobians(pb.model, pb.params, pb.ephem, pb.epoch_et_s, np.float64(t), x, np.int32(0), LABELS)
+
     _, b_coast = jac(120.0 * DAY)
     _, b_arc = jac(100.0 * DAY)
     b_coast, b_arc = np.asarray(b_coast), np.asarray(b_arc)
@@ -195,8 +199,8 @@ def test_variational_equations_reproduce_encke_stm_and_parameter_matrix(prob):
     assert 12.0 < ratio < 20.0, ratio
 
     # jacobians_at is state_jacobians vmapped: same numbers at a node (bitwise up to roundoff)
-    a5, b5 = jax.jit(lambda t, x: state_jacobians(m, p, pb.ephem, pb.epoch_et_s, t, x, 0, LABELS))(
-        t_nodes[5], tr.x[5]
+    a5, b5 = _state_jacobians(
+        m, p, pb.ephem, pb.epoch_et_s, np.float64(t_nodes[5]), np.asarray(tr.x[5]), np.int32(0), LABELS
     )
     np.testing.assert_allclose(np.asarray(a5), As[5], rtol=1e-13, atol=1e-30)
     np.testing.assert_allclose(np.asarray(b5), Bs[5], rtol=1e-13, atol=1e-30)

@@ -112,6 +112,9 @@ def test_pdot_without_noise_is_expm_congruence_at_fourth_order():
     # augmented layout (DERY / App. 9.3): parameter rows zero, eta block -diag(1/tau)
     assert np.all(F[nx : nx + npar] == 0.0) and np.all(F[nx + npar :, : nx + npar] == 0.0)
     np.testing.assert_allclose(np.diag(F[nx + npar :, nx + npar :]), -1.0 / (tau * c), rtol=1e-15)
+    # batched nodes broadcast (h per node, A and B shared)
+    Fb = np.asarray(gm_augmented_F(A / c, B / c, np.stack([h / c] * 3), tau * c))
+    assert Fb.shape == (3, n, n) and np.array_equal(Fb[2], F)
     T = 2.0
     L = rng.standard_normal((n, n))
     P0 = L @ L.T / n + np.eye(n)

@@ -203,8 +203,8 @@ def _diff_terms(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
     du = (dr - drho * u2) / rho1
     # rho_dot_1 - rho_dot_2 = u1.w1 - u2.w2 = (u1 - u2).w1 + u2.(w1 - w2)
     drdot = jnp.dot(du, w1) + jnp.dot(u2, dv)
-    return dict(rho1=rho1, rho2=rho2, u1=u1, u2=u2, w1=w1, w2=w2, rdot1=rdot1, rdot2=rdot2,
-                dv=dv, drho=drho, du=du, drdot=drdot)
+    return {"rho1": rho1, "rho2": rho2, "u1": u1, "u2": u2, "w1": w1, "w2": w2,
+            "rdot1": rdot1, "rdot2": rdot2, "dv": dv, "drho": drho, "du": du, "drdot": drdot}
 
 
 def diff_range(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):

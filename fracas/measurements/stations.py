@@ -18,8 +18,8 @@ Simplifications, all deliberate for covariance-analysis geometry:
 * UT1 = TDB - 69.184 s (TT - UTC with 37 leap seconds, TDB - TT and UT1 - UTC < 1 s
   neglected);
 * the rotation rate is d(theta)/dt of the IAU 2000 formula (:data:`ERA_RATE_RAD_S`, a local
-  constant, so that v is exactly dr/dt of the model); it differs from
-  ``constants.EARTH_ROTATION_RAD_S`` (the IERS nominal rate) by 1e-8 relative.
+  constant derived from the ERA coefficients, so that v is exactly dr/dt of the model; it
+  equals ``constants.EARTH_ROTATION_RAD_S`` to the last bit but one).
 
 FRACAS STAPRL works in the ecliptic frame (its partials carry cos/sin of the obliquity)
 and the scan of its formulas is garbled (repeated rows, lost signs, G undefined).  The
@@ -34,6 +34,7 @@ import math
 from dataclasses import dataclass
 
 from fracas import _jax  # noqa: F401  (x64 first)
+import jax
 import jax.numpy as jnp
 
 __all__ = [
@@ -100,7 +101,10 @@ def earth_rotation_angle(et_s):
     """
     et = jnp.asarray(et_s, dtype=jnp.float64)
     days = jnp.floor(et / 86_400.0)
-    sec_of_day = et - days * 86_400.0  # exact: both terms are multiples of ulp(et)
+    # exact: both terms are multiples of ulp(et).  The barrier stops XLA from reassociating
+    # (et - days*86400) - 69.184 into (et - 69.184) - days*86400, which it did when
+    # constant-folding a jitted call with a literal et (an error of ~1e-12 rad).
+    sec_of_day = jax.lax.optimization_barrier(et - days * 86_400.0)
     tu = (et + UT1_MINUS_TDB_S) / 86_400.0
     rev = _ERA_0 + _ERA_EXCESS * tu + (sec_of_day + UT1_MINUS_TDB_S) / 86_400.0
     return 2.0 * jnp.pi * jnp.mod(rev, 1.0)

@@ -37,7 +37,7 @@ import functools
 import math
 import re
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -258,7 +258,7 @@ def _kernel(kind: str):
     return kernel
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _batch_kernel(kind: str):
     """Jitted kernel for one kind, vmapped over observations: (b, 26) -> (b, 18).
 
@@ -304,6 +304,9 @@ def _label_table(labels: tuple, station_names: tuple) -> dict:
     for j, label in enumerate(labels):
         parts = _split(label)
         if parts is None:
+            base = label.split("[", 1)[0].strip() if isinstance(label, str) else ""
+            if base in STATION_LABELS or base in GLOBAL_LABELS:  # e.g. 'range_bias_km' alone
+                check_measurement_label(label, station_names)  # raises, naming the forms
             continue  # not a measurement parameter (dynamic, ephemeris, ...)
         check_measurement_label(label, station_names)
         table.setdefault(parts, []).append(j)

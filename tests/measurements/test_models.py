@@ -45,7 +45,7 @@ def _geometry(rng, distance_km, et):
 
 
 def _args(kind, g, rng):
-    sc_r, sc_v, earth_r, earth_v, s1, s1v, s2, s2v = g
+    sc_r, sc_v, earth_r, earth_v, s1, s1v, _, _ = g
     n = M.N_STATIONS[kind]
     if n == 1:
         return (sc_r, sc_v, earth_r, earth_v, s1, s1v)
@@ -127,7 +127,7 @@ def test_three_way_is_sum_of_two_way():
     # rounding of the sum (relative 1e-15).
     rng = np.random.default_rng(6)
     g = _geometry(rng, 4e5, 6.1e8)
-    one = lambda f, k: float(f(*g[:4], g[4 + 2 * k], g[5 + 2 * k]))  # noqa: E731
+    one = lambda f, k: float(f(*g[:4], g[4 + 2 * k], g[5 + 2 * k]))
     r3, d3 = float(M.range3(*g)), float(M.doppler3(*g))
     assert abs(r3 - one(M.range2, 0) - one(M.range2, 1)) <= 1e-15 * abs(r3)
     assert abs(d3 - one(M.doppler2, 0) - one(M.doppler2, 1)) <= 1e-15 * abs(d3) + 1e-16
@@ -195,7 +195,7 @@ def _decimal_reference(sc_r, sc_v, earth_r, earth_v, s1, s1v, s2, s2v):
     """rho1 - rho2, rho_dot1 - rho_dot2, u1 - u2 and g1 - g2 (d rho_dot / d r) in 50-digit
     decimal arithmetic from the exact binary values of the float64 inputs."""
     getcontext().prec = 50
-    dec = lambda v: [Decimal(float(x)) for x in v]  # noqa: E731
+    dec = lambda v: [Decimal(float(x)) for x in v]
     p1 = [a - b - c for a, b, c in zip(dec(sc_r), dec(earth_r), dec(s1))]
     p2 = [a - b - c for a, b, c in zip(dec(sc_r), dec(earth_r), dec(s2))]
     w1 = [a - b - c for a, b, c in zip(dec(sc_v), dec(earth_v), dec(s1v))]
@@ -206,7 +206,7 @@ def _decimal_reference(sc_r, sc_v, earth_r, earth_v, s1, s1v, s2, s2v):
     rd2 = sum(a * b for a, b in zip(u2, w2))
     g1 = [(w - rd1 * u) / r1 for w, u in zip(w1, u1)]
     g2 = [(w - rd2 * u) / r2 for w, u in zip(w2, u2)]
-    vec = lambda a, b: np.array([float(x - y) for x, y in zip(a, b)])  # noqa: E731
+    vec = lambda a, b: np.array([float(x - y) for x, y in zip(a, b)])
     return float(r1 - r2), float(rd1 - rd2), vec(u1, u2), vec(g1, g2)
 
 

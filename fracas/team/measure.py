@@ -85,26 +85,29 @@ def assemble_measurements(study: Study, ref: Reference, m_pad: int = 4) -> Measu
     bi = {b: i for i, b in enumerate(bodies)}
     T = trakm
     x = np.zeros((len(pairs), T._N_IN))
-    for i, (k, j) in enumerate(pairs):
-        a = kpos[k]
-        p = bi[ref.primary[k]]
-        o_r, o_v = pos[a, p], vel[a, p]
-        t = study.deck.tracking[j]
-        row = x[i]
-        row[T._I_ET] = study.problem.epoch_et_s + ref.times_s[k]
-        row[T._I_SC:T._I_SC + 6] = ref.states[k, :6]
-        row[T._I_E:T._I_E + 3] = pos[a, bi["earth"]] - o_r
-        row[T._I_E + 3:T._I_E + 6] = vel[a, bi["earth"]] - o_v
+    pk = np.array([k for k, _ in pairs])
+    pj = np.array([j for _, j in pairs])
+    pa = np.array([kpos[k] for k in pk])
+    prim = np.array([bi[ref.primary[k]] for k in pk])
+    o_r, o_v = pos[pa, prim], vel[pa, prim]
+    x[:, T._I_ET] = study.problem.epoch_et_s + ref.times_s[pk]
+    x[:, T._I_SC:T._I_SC + 6] = ref.states[pk, :6]
+    x[:, T._I_E:T._I_E + 3] = pos[pa, bi["earth"]] - o_r
+    x[:, T._I_E + 3:T._I_E + 6] = vel[pa, bi["earth"]] - o_v
+    for j, t in enumerate(study.deck.tracking):
+        rows = pj == j
+        if not rows.any():
+            continue
         for slot, name in enumerate(t.stations):
             st = study.stations[name]
             i0 = T._I_ST1 if slot == 0 else T._I_ST2
-            row[i0:i0 + 3] = (st.radius_km, st.latitude_rad, st.longitude_rad)
+            x[rows, i0:i0 + 3] = (st.radius_km, st.latitude_rad, st.longitude_rad)
         if t.body:
-            row[T._I_BODY:T._I_BODY + 3] = pos[a, bi[t.body]] - o_r
-            row[T._I_RP] = BODIES[t.body].radius_km
+            x[rows, T._I_BODY:T._I_BODY + 3] = pos[pa[rows], bi[t.body]] - o_r[rows]
+            x[rows, T._I_RP] = BODIES[t.body].radius_km
         if t.type == "star_planet_angle":
             ra, de = math.radians(t.star_ra_deg), math.radians(t.star_dec_deg)
-            row[T._I_STAR:T._I_STAR + 3] = (math.cos(de) * math.cos(ra), math.cos(de) * math.sin(ra), math.sin(de))
+            x[rows, T._I_STAR:T._I_STAR + 3] = (math.cos(de) * math.cos(ra), math.cos(de) * math.sin(ra), math.sin(de))
     out = np.ones((len(pairs), T._N_OUT + 1))
     groups: dict[str, list[int]] = {}
     for i, (_, j) in enumerate(pairs):
@@ -137,16 +140,17 @@ def assemble_measurements(study: Study, ref: Reference, m_pad: int = 4) -> Measu
     H = np.zeros((K, m, n))
     Ra = np.broadcast_to(np.eye(m), (K, m, m)).copy()
     Rt = Ra.copy()
-    idx_of = {(k, j): i for i, (k, j) in enumerate(pairs)}
-    for rec in records:
-        if not rec.used:
+    used_i = np.array([i for i, r in enumerate(records) if r.used], dtype=np.intp)
+    rows_of = np.array([r.row for r in records])
+    for j, t in enumerate(study.deck.tracking):  # scatter per tracking entry (one column map each)
+        ii = used_i[pj[used_i] == j]
+        if ii.size == 0:
             continue
-        i = idx_of[(rec.k, rec.tracking)]
-        h = H[rec.k, rec.row]
-        h[:6] = out[i, T._O_H:T._O_H + 6]
-        src, col, coef = T._columns(labels, names, rec.kind, rec.stations)
+        kk, rr = pk[ii], rows_of[ii]
+        H[kk, rr, :6] = out[ii, T._O_H:T._O_H + 6]
+        src, col, coef = T._columns(labels, names, t.type, tuple(t.stations))
         if col.size:
-            h[nx + col] += coef * out[i, src]
-        Ra[rec.k, rec.row, rec.row] = rec.sigma ** 2
-        Rt[rec.k, rec.row, rec.row] = study.true_sigma[rec.tracking] ** 2
+            H[kk[:, None], rr[:, None], nx + col[None, :]] += coef[None, :] * out[ii[:, None], src[None, :]]
+        Ra[kk, rr, rr] = study.observations[j].sigma ** 2
+        Rt[kk, rr, rr] = study.true_sigma[j] ** 2
     return MeasurementSet(H, Ra, Rt, records, skipped)

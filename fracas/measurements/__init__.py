@@ -21,6 +21,7 @@ from fracas.measurements.trakm import (
     is_measurement_label,
     measurement_label_unit,
     observation_matrix,
+    observation_matrix_many,
 )
 
 __all__ = [
@@ -38,4 +39,5 @@ __all__ = [
     "is_measurement_label",
     "measurement_label_unit",
     "observation_matrix",
+    "observation_matrix_many",
 ]

@@ -58,6 +58,7 @@ __all__ = [
     "measurement_label_unit",
     "check_measurement_label",
     "observation_matrix",
+    "observation_matrix_many",
 ]
 
 # name -> unit, for labels indexed by a station name (name[STATION]).
@@ -340,6 +341,23 @@ def _vec3(name, x):
     return a
 
 
+def _pack(geometry: Geometry) -> np.ndarray:
+    """Packed kernel input row of one geometry (stations filled in per observation)."""
+    base = np.zeros(_N_IN, dtype=np.float64)
+    base[_I_ET] = float(geometry.et_s)
+    base[_I_SC:_I_SC + 3] = _vec3("sc_r", geometry.sc_r)
+    base[_I_SC + 3:_I_SC + 6] = _vec3("sc_v", geometry.sc_v)
+    base[_I_E:_I_E + 3] = _vec3("earth_r", geometry.earth_r)
+    base[_I_E + 3:_I_E + 6] = _vec3("earth_v", geometry.earth_v)
+    if geometry.body_r is not None:
+        base[_I_BODY:_I_BODY + 3] = _vec3("body_r", geometry.body_r)
+    if geometry.body_radius_km is not None:
+        base[_I_RP] = float(geometry.body_radius_km)
+    if geometry.star_unit is not None:
+        base[_I_STAR:_I_STAR + 3] = _vec3("star_unit", geometry.star_unit)
+    return base
+
+
 def observation_matrix(
     observations: Sequence[Observation],
     geometry: Geometry,
@@ -357,31 +375,38 @@ def observation_matrix(
     missing body data); a station below the horizon is not an error (see elevation_deg).
     Cost: one jitted dispatch per kind present, plus O(m) bookkeeping.
     """
+    return observation_matrix_many([(ob, geometry) for ob in observations], stations, labels, nx)
+
+
+def observation_matrix_many(
+    items: Sequence[tuple[Observation, Geometry]],
+    stations: Mapping[str, Station],
+    labels: Sequence[str],
+    nx: int,
+) -> ObservationBatch:
+    """:func:`observation_matrix` for observations at many epochs at once: ``items`` pairs
+    each observation with its own :class:`Geometry` (share one Geometry object between the
+    observations of an epoch).  Rows come back in the order of ``items``; R is diag(sigma^2)
+    over all of them.  One jitted dispatch per kind for the whole set, so a study's schedule
+    can be evaluated in a handful of calls.
+    """
     if nx < 6:
         raise ValueError(f"nx must be >= 6 (spacecraft r, v first), got {nx}")
     labels = tuple(labels)
     names = tuple(sorted(stations))
     _label_table(labels, names)  # validates the measurement labels once per label set
-    m = len(observations)
+    m = len(items)
     n = nx + len(labels)
 
-    base = np.zeros(_N_IN, dtype=np.float64)
-    base[_I_ET] = float(geometry.et_s)
-    base[_I_SC:_I_SC + 3] = _vec3("sc_r", geometry.sc_r)
-    base[_I_SC + 3:_I_SC + 6] = _vec3("sc_v", geometry.sc_v)
-    base[_I_E:_I_E + 3] = _vec3("earth_r", geometry.earth_r)
-    base[_I_E + 3:_I_E + 6] = _vec3("earth_v", geometry.earth_v)
-    if geometry.body_r is not None:
-        base[_I_BODY:_I_BODY + 3] = _vec3("body_r", geometry.body_r)
-    if geometry.body_radius_km is not None:
-        base[_I_RP] = float(geometry.body_radius_km)
-    if geometry.star_unit is not None:
-        base[_I_STAR:_I_STAR + 3] = _vec3("star_unit", geometry.star_unit)
-
-    x = np.tile(base, (m, 1))
+    packed: dict[int, np.ndarray] = {}
+    x = np.empty((m, _N_IN))
     groups: dict[str, list[int]] = {}
-    body_rows = []
-    for i, ob in enumerate(observations):
+    body_rows: list[int] = []
+    for i, (ob, geometry) in enumerate(items):
+        base = packed.get(id(geometry))
+        if base is None:
+            base = packed[id(geometry)] = _pack(geometry)
+        x[i] = base
         groups.setdefault(ob.kind, []).append(i)
         for slot, name in enumerate(ob.stations):
             st = stations.get(name)
@@ -410,17 +435,19 @@ def observation_matrix(
 
     H = np.zeros((m, n))
     H[:, :6] = out[:, _O_H:_O_H + 6]
-    for i, ob in enumerate(observations):
+    for i, (ob, _) in enumerate(items):
         src, col, coef = _columns(labels, names, ob.kind, ob.stations)
         if col.size:  # columns are distinct within one observation (distinct stations)
             H[i, nx + col] += coef * out[i, src]
-    if body_rows:  # ephemeris parameters through the target body's position (eqs. 35, 39)
-        for j, lab in enumerate(labels):
-            if lab in geometry.body_r_partials:
-                dbody = _vec3(f"body_r_partials[{lab!r}]", geometry.body_r_partials[lab])
-                H[body_rows, nx + j] += out[body_rows, _O_BODY:_O_BODY + 3] @ dbody
+    for i in body_rows:  # ephemeris parameters through the target body's position (eqs. 35, 39)
+        partials = items[i][1].body_r_partials
+        if partials:
+            h_body = out[i, _O_BODY:_O_BODY + 3]
+            for j, lab in enumerate(labels):
+                if lab in partials:
+                    H[i, nx + j] += h_body @ _vec3(f"body_r_partials[{lab!r}]", partials[lab])
     with np.errstate(invalid="ignore"):
         elev = np.degrees(np.fmin(out[:, _O_EL], out[:, _O_EL + 1]))  # nan-aware minimum
     elev[body_rows] = np.nan
-    sigma = np.array([ob.sigma for ob in observations], dtype=np.float64)
+    sigma = np.array([ob.sigma for ob, _ in items], dtype=np.float64)
     return ObservationBatch(values=out[:, 0].copy(), H=H, R=np.diag(sigma * sigma), elevation_deg=elev)

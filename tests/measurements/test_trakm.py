@@ -21,6 +21,7 @@ from fracas.measurements.trakm import (
     is_measurement_label,
     measurement_label_unit,
     observation_matrix,
+    observation_matrix_many,
 )
 
 NX = 7  # r, v, mass
@@ -231,14 +232,22 @@ def test_noise_covariance_and_elevations(setup):
 
 
 def test_padding_and_grouping_do_not_change_rows(setup):
-    # Six range2 observations (padded bucket of 8) and a reversed mixed batch give the same
-    # rows as the reference batch: bookkeeping only, so bit-identical.
+    # Six range2 observations (padded bucket of 8), a reversed mixed batch and a two-epoch
+    # batch give the same rows as the per-epoch calls: bookkeeping only, so bit-identical.
     geo, batch = setup
     many = observation_matrix([OBS[0], OBS[1]] * 3, geo, DSN_STATIONS, LABELS, NX)
     assert np.array_equal(many.H[0::2], np.repeat(batch.H[0:1], 3, axis=0))
     assert np.array_equal(many.H[1::2], np.repeat(batch.H[1:2], 3, axis=0))
     rev = observation_matrix(OBS[::-1], geo, DSN_STATIONS, LABELS, NX)
     assert np.array_equal(rev.H, batch.H[::-1]) and np.array_equal(rev.values, batch.values[::-1])
+    # many epochs in one call: interleaved rows equal the per-epoch calls
+    geo2 = dataclasses.replace(geo, et_s=geo.et_s + 3600.0, sc_r=geo.sc_r + 500.0,
+                               body_r_partials={"ephem[moon,x]": 2.0 * D_BODY})
+    one2 = observation_matrix(OBS, geo2, DSN_STATIONS, LABELS, NX)
+    both = observation_matrix_many([(ob, g) for ob in OBS for g in (geo, geo2)], DSN_STATIONS, LABELS, NX)
+    assert np.array_equal(both.H[0::2], batch.H) and np.array_equal(both.H[1::2], one2.H)
+    assert np.array_equal(both.values[1::2], one2.values)
+    assert np.array_equal(np.isnan(both.elevation_deg[1::2]), np.isnan(one2.elevation_deg))
 
 
 # --- labels and validation ----------------------------------------------------------------

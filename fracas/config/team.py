@@ -44,9 +44,17 @@ import tomllib
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from fracas.config.trajectory import FieldProblem, ParamLabel, PositiveFloat, Vector3, format_validation_error
+from fracas.config.trajectory import (
+    FieldProblem,
+    ParamLabel,
+    PositiveFloat,
+    SourcedDeck,
+    Vector3,
+    format_validation_error,
+    read_deck_text,
+)
 from fracas.errors import DeckError
 
 __all__ = ["TeamDeck", "load_team_deck", "parse_team_deck", "is_team_text", "MEASUREMENT_TYPES", "SIGMA_UNITS"]
@@ -265,7 +273,7 @@ class OutputSection(_Section):
     plot: str | None = None
 
 
-class TeamDeck(_Section):
+class TeamDeck(SourcedDeck):
     """A whole TEAM deck (frozen)."""
 
     title: str = ""
@@ -284,16 +292,6 @@ class TeamDeck(_Section):
     gencov: GenCov | None = None
     output: OutputSection = OutputSection()
 
-    _source_path: str | None = PrivateAttr(None)
-    _source_text: str | None = PrivateAttr(None)
-
-    @property
-    def source_path(self) -> str | None:
-        return self._source_path
-
-    @property
-    def source_text(self) -> str | None:
-        return self._source_text
 
     def resolve(self, rel: str) -> Path:
         """A path named in the deck, relative to the deck's folder."""
@@ -358,15 +356,4 @@ def is_team_text(text: str) -> bool:
 
 def load_team_deck(path: str | Path) -> TeamDeck:
     """Read and validate a TEAM deck; every failure is a one-line DeckError."""
-    p = Path(path)
-    try:
-        text = p.read_bytes().decode("utf-8")
-    except FileNotFoundError:
-        raise DeckError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise DeckError(f"{path}: is a directory, expected a TOML deck file") from None
-    except UnicodeDecodeError as exc:
-        raise DeckError(f"{path}: not UTF-8 text (byte {exc.start})") from None
-    except OSError as exc:
-        raise DeckError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    return parse_team_deck(text, str(path))
+    return parse_team_deck(read_deck_text(path), str(path))

@@ -417,7 +417,22 @@ class Output(_Section):
     _unique = field_validator("sensitivities")(classmethod(lambda cls, v: _no_repeats(v)))
 
 
-class TrajectoryDeck(_Section):
+class SourcedDeck(_Section):
+    """A whole deck that remembers where it came from (``source_path``, ``source_text``)."""
+
+    _source_path: str | None = PrivateAttr(None)
+    _source_text: str | None = PrivateAttr(None)
+
+    @property
+    def source_path(self) -> str | None:
+        return self._source_path
+
+    @property
+    def source_text(self) -> str | None:
+        return self._source_text
+
+
+class TrajectoryDeck(SourcedDeck):
     """A whole trajectory deck (frozen).  ``source_path``/``source_text`` say where it came from."""
 
     title: str = ""
@@ -432,16 +447,6 @@ class TrajectoryDeck(_Section):
     stop: Stop
     output: Output = Output()
 
-    _source_path: str | None = PrivateAttr(None)
-    _source_text: str | None = PrivateAttr(None)
-
-    @property
-    def source_path(self) -> str | None:
-        return self._source_path
-
-    @property
-    def source_text(self) -> str | None:
-        return self._source_text
 
     @property
     def primary(self) -> str:
@@ -642,8 +647,8 @@ def parse_deck(text: str, source: str = "<deck>") -> TrajectoryDeck:
     return deck
 
 
-def load_deck(path: str | Path) -> TrajectoryDeck:
-    """Read and validate a trajectory deck; every failure is a one-line DeckError."""
+def read_deck_text(path: str | Path) -> str:
+    """The UTF-8 text of a deck file; every failure is a one-line DeckError."""
     p = Path(path)
     source = str(path)
     try:
@@ -655,7 +660,11 @@ def load_deck(path: str | Path) -> TrajectoryDeck:
     except OSError as exc:
         raise DeckError(f"{source}: cannot read: {exc.strerror or exc}") from None
     try:
-        text = raw.decode("utf-8")
+        return raw.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise DeckError(f"{source}: not UTF-8 text (byte {exc.start})") from None
-    return parse_deck(text, source)
+
+
+def load_deck(path: str | Path) -> TrajectoryDeck:
+    """Read and validate a trajectory deck; every failure is a one-line DeckError."""
+    return parse_deck(read_deck_text(path), str(path))

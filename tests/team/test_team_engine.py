@@ -1,0 +1,459 @@
+"""The TEAM engine end to end on the small study (tests/data/team_small.toml, 4 days).
+
+Each test compares the engine with an independent reference: the in-line reference with
+the STM-file one, the jitted scan with a plain-numpy re-computation of the filter algebra
+from the study's own inputs, the square-root with the covariance form, WLS with Kalman-
+Schmidt where they must coincide, PDOT with PHI, a restart from a punched covariance with
+the run it was punched from, the results file with the in-memory result, a user gain with
+the built-in one.  The study is set up and run once per module (module-scoped fixtures);
+variants are built from the deck as a dict and share the base reference where their
+schedule is the same (a reference may carry more parameter columns than a study uses).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import tomllib
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from fracas.config.team import parse_team_deck
+from fracas.errors import StmFileError
+from fracas.pipeline import build_stm, run_team
+from fracas.team.engine import augmented_transitions, process_noise, run_study
+from fracas.team.measure import assemble_measurements
+from fracas.team.reference import integrate_reference, reference_from_stm
+from fracas.team.setup import build_study
+
+DATA = Path(__file__).resolve().parents[1] / "data"
+SMALL = DATA / "team_small.toml"
+TRAJ = DATA / "team_small_traj.toml"
+DAY = 86400.0
+
+
+# ----------------------------------------------------------------------------- helpers
+def dumps(d: dict) -> str:
+    """A TEAM deck dict back to TOML (the subset the decks use: tables, arrays of tables,
+    inline tables, strings, numbers, booleans, lists)."""
+    out: list[str] = []
+
+    def val(v) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, (int, float)):
+            return repr(v)
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, list):
+            return "[" + ", ".join(val(x) for x in v) + "]"
+        return "{" + ", ".join(f"{k} = {val(x)}" for k, x in v.items()) + "}"
+
+    def is_aot(v) -> bool:
+        return isinstance(v, list) and bool(v) and isinstance(v[0], dict)
+
+    def table(t: dict, prefix: str) -> None:
+        for k, v in t.items():
+            if not isinstance(v, dict) and not is_aot(v):
+                out.append(f"{k} = {val(v)}")
+        for k, v in t.items():
+            if isinstance(v, dict):
+                out.append(f"[{prefix}{k}]")
+                table(v, f"{prefix}{k}.")
+            elif is_aot(v):
+                for x in v:
+                    out.append(f"[[{prefix}{k}]]")
+                    table(x, f"{prefix}{k}.")
+
+    table(d, "")
+    return "\n".join(out) + "\n"
+
+
+def small_dict() -> dict:
+    return tomllib.loads(SMALL.read_text(encoding="utf-8"))
+
+
+def study_of(d: dict, source: Path = SMALL):
+    """Build the study of a deck dict as if read from ``source`` (relative paths resolve there)."""
+    return build_study(parse_team_deck(dumps(d), str(source)))
+
+
+def write_deck(d: dict, path: Path) -> Path:
+    """Write a variant deck elsewhere, its trajectory deck named by absolute path."""
+    d = copy.deepcopy(d)
+    d["ertraj"]["deck"] = str(TRAJ)
+    path.write_text(dumps(d), encoding="utf-8")
+    return path
+
+
+def scaled_diff(A: np.ndarray, B: np.ndarray) -> float:
+    """max |A_ij - B_ij| / sqrt(B_ii B_jj) over a covariance history (K, n, n): the error
+    relative to each variance (a correlation-sized number; zero-variance rows scale by 1)."""
+    d = np.sqrt(np.abs(np.einsum("...ii->...i", B)))
+    d = np.where(d > 0, d, 1.0)
+    return float(np.max(np.abs(A - B) / d[..., :, None] / d[..., None, :]))
+
+
+def pos_rss(P: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.einsum("...ii->...i", P)[..., :3].sum(-1))
+
+
+# ----------------------------------------------------------------------------- fixtures
+@pytest.fixture(scope="module")
+def base():
+    """The small study, its in-line reference and its run."""
+    study = study_of(small_dict())
+    ref = integrate_reference(study)
+    return study, ref, run_study(study, ref)
+
+
+@pytest.fixture(scope="module")
+def tmp_mod(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("team_engine")
+
+
+@pytest.fixture(scope="module")
+def stm_path(tmp_mod) -> Path:
+    path, _ = build_stm(SMALL, tmp_mod / "team_small_stm.h5")
+    return path
+
+
+# ----------------------------------------------------------------------------- a, b: STM file
+def test_base_study_is_what_the_tests_assume(base):
+    """Guards the premises of the other tests: roles, tracking used, noise present."""
+    study, ref, res = base
+    assert study.roles == ["solve_for", "solve_for", "dynamic_consider", "measurement_consider", "ignore"]
+    assert study.gencov and study.filter_kind == "kalman_schmidt"
+    assert sum(r.used for r in res.meas.records) >= 15  # 19 of 42 above 5 deg elevation
+    assert np.any(res.Q_assumed != 0) and not res.psd_problems
+    # tracking must have shrunk the a-priori 1 m/s velocity sigmas (497 mm/s RSS at 3 d,
+    # the thrust uncertainty keeping it there; 1.7 m/s a priori)
+    k3 = study.schedule.index_of(3.0 * DAY)
+    vel = lambda P: np.sqrt(np.einsum("ii->i", P)[3:6].sum())  # noqa: E731
+    assert vel(res.Pa_plus[k3]) < 0.5 * vel(study.P0_assumed)
+
+
+def test_stm_file_equals_in_line(base, stm_path):
+    """Reference: the in-line run.  The file was integrated once over its 2 h grid and the
+    study's times, then chained; the in-line run stops only at the study's times, so the
+    two differ by the integrator's truncation (the STM-file engineer measured ~1e-9
+    relative on the matrices; here the covariances agree to 5e-11 of each variance).
+    Tolerance 1e-8 of each variance: 200x the measured, far below any modelling effect."""
+    study, _, res = base
+    ref_f = reference_from_stm(study, stm_path)
+    assert ref_f.source == str(stm_path)
+    res_f = run_study(study, ref_f)
+    np.testing.assert_allclose(ref_f.times_s, res.times_s, rtol=0, atol=0)
+    assert scaled_diff(res_f.Pa_minus, res.Pa_minus) < 1e-8
+    assert scaled_diff(res_f.Pa_plus, res.Pa_plus) < 1e-8
+    assert scaled_diff(res_f.Pt_plus, res.Pt_plus) < 1e-8
+
+
+def test_changed_schedule_through_the_same_file(base, stm_path):
+    """A second study tracking Doppler every 8 h (a subset of the 2 h file grid) and range
+    from day 1 reads the same file and equals its own in-line run (same tolerance and
+    reason as above)."""
+    d = small_dict()
+    for t in d["tracking"]:
+        t["interval_hours"] = 8.0 if t["type"] == "doppler2" else 24.0
+    d["tracking"][2]["start_days"] = 1.0
+    study = study_of(d)
+    assert study.schedule.n != base[0].schedule.n  # really another schedule
+    res_f = run_study(study, reference_from_stm(study, stm_path))
+    res_i = run_study(study, integrate_reference(study))
+    assert scaled_diff(res_f.Pa_plus, res_i.Pa_plus) < 1e-8
+    assert scaled_diff(res_f.Pt_plus, res_i.Pt_plus) < 1e-8
+    # and it is another answer than the base study's (fewer measurements, larger sigma)
+    assert pos_rss(res_f.Pa_plus[-1]) > 1.05 * pos_rss(base[2].Pa_plus[-1])
+
+
+def test_refusals_parameter_missing(stm_path):
+    d = small_dict()
+    d["parameter"].append({"label": "mu[earth]", "sigma": 1.0, "role": "consider"})
+    with pytest.raises(StmFileError, match=r"mu\[earth\] not on the STM file; it has thrust_scale, "
+                                           r"bias_in_rad, mu\[sun\], cr") as e:
+        reference_from_stm(study_of(d), stm_path)
+    assert str(stm_path) in str(e.value) and "\n" not in str(e.value)
+
+
+def test_refusals_time_missing(stm_path):
+    """Doppler every 3 h: 3 h is not on the 2 h file grid."""
+    d = small_dict()
+    d["tracking"][0]["interval_hours"] = 3.0
+    with pytest.raises(StmFileError, match=r"requested time 10800\.000000 s .* is not on the STM file.*"
+                                           r"regenerate it") as e:
+        reference_from_stm(study_of(d), stm_path)
+    assert "\n" not in str(e.value)
+
+
+def test_refusals_other_trajectory(stm_path, tmp_path):
+    """The same study on a trajectory deck with one value changed (C_R 1.3 -> 1.31)."""
+    traj = tmp_path / "traj_cr.toml"
+    traj.write_text(TRAJ.read_text(encoding="utf-8").replace("cr = 1.3\n", "cr = 1.31\n"), encoding="utf-8")
+    assert traj.read_text() != TRAJ.read_text()
+    d = small_dict()
+    d["ertraj"]["deck"] = str(traj)
+    with pytest.raises(StmFileError, match=r"built from another trajectory.*regenerate the STM file") as e:
+        reference_from_stm(study_of(d, tmp_path / "study.toml"), stm_path)
+    assert str(traj) in str(e.value) and "\n" not in str(e.value)
+
+
+# ----------------------------------------------------------------------------- d: numpy re-computation
+def test_first_events_against_numpy(base):
+    """Reference: the filter algebra in plain numpy, from the study's own event inputs
+    (Φ_aug, DYNO's Q̃, H and R): P⁻ = Φ P Φᵀ + Q (x block), K = P⁻Hᵀ J⁻¹ on the estimated
+    rows (state, solve-for) and zero on consider/ignore rows, Joseph update; the true
+    covariance with the same (assumed) gain, true Q and R.  Only rounding separates the
+    two (the engine symmetrizes, uses a Cholesky solve): 1e-10 of each variance."""
+    study, ref, res = base
+    L = study.layout
+    phi = augmented_transitions(study, ref)
+    Qa, Qt = process_noise(study, ref)
+    meas = assemble_measurements(study, ref)
+    n, ne = L.n, L.n_est
+    Pa, Pt = study.P0_assumed.copy(), study.P0_true.copy()
+    n_check = 7
+    for k in range(n_check):
+        Pam = phi[k] @ Pa @ phi[k].T
+        Pam[: L.nx, : L.nx] += Qa[k]
+        Ptm = phi[k] @ Pt @ phi[k].T
+        Ptm[: L.nx, : L.nx] += Qt[k]
+        H, Ra, Rt = meas.H[k], meas.R_assumed[k], meas.R_true[k]
+        J = H @ Pam @ H.T + Ra
+        K = np.zeros((n, H.shape[0]))
+        K[:ne] = np.linalg.solve(J, H @ Pam[:, :ne]).T
+        IKH = np.eye(n) - K @ H
+        Pa = IKH @ Pam @ IKH.T + K @ Ra @ K.T
+        Pt = IKH @ Ptm @ IKH.T + K @ Rt @ K.T
+        assert scaled_diff(res.Pa_minus[k], Pam) < 1e-10, k
+        assert scaled_diff(res.Pa_plus[k], Pa) < 1e-10, k
+        assert scaled_diff(res.Pt_minus[k], Ptm) < 1e-10, k
+        assert scaled_diff(res.Pt_plus[k], Pt) < 1e-10, k
+        # Schmidt: the consider/ignore block is not updated by a measurement
+        c = slice(ne, n)
+        np.testing.assert_allclose(res.Pa_plus[k][c, c], res.Pa_minus[k][c, c], rtol=1e-12, atol=0)
+    # the events checked did something: measurements, process noise, a real update
+    assert sum(bool(np.any(meas.H[k])) for k in range(n_check)) >= 3
+    assert all(np.any(Qa[k]) for k in range(1, n_check)) and not np.any(Qa[0])
+    assert np.trace(res.Pa_plus[n_check - 1][3:6, 3:6]) < 0.6 * np.trace(study.P0_assumed[3:6, 3:6])
+
+
+# ----------------------------------------------------------------------------- f: filter forms
+def test_square_root_equals_covariance_form(base):
+    """Reference: the covariance-form run.  Both are exact algebra; the square-root form
+    (triangular factors, sqrt Joseph) differs by rounding amplified by the conditioning
+    (measured 1.5e-11 of each variance); tolerance 1e-9."""
+    study, ref, res = base
+    d = small_dict()
+    d["filter"]["square_root"] = True
+    del d["event"][1]  # no prediction: not part of this comparison (saves its integration)
+    res_s = run_study(study_of(d), ref)
+    assert res_s.study.square_root
+    assert scaled_diff(res_s.Pa_plus, res.Pa_plus) < 1e-9
+    assert scaled_diff(res_s.Pt_plus, res.Pt_plus) < 1e-9
+
+
+def test_wls_equals_ks_without_noise_and_consider(base):
+    """Sequential WLS computes its gain from the non-consider covariance propagated without
+    process noise; with no process noise and no consider parameters that is the Kalman-
+    Schmidt covariance, so both gains and both histories coincide (rounding only,
+    measured 1e-11; tolerance 1e-9).  On the base study (thrust noise, two consider
+    parameters) they must differ materially (checked too, so the equality is not vacuous)."""
+    study, ref, res = base
+    d = small_dict()
+    d["filter"]["type"] = "wls"
+    del d["event"][1]
+    res_w = run_study(study_of(d), ref)
+    assert not res_w.psd_problems and np.all(np.isfinite(res_w.Pa_plus))
+    assert scaled_diff(res_w.Pa_plus, res.Pa_plus) > 1e-2
+    d = small_dict()
+    del d["thrust_noise"], d["event"][1]
+    d["parameter"] = [p for p in d["parameter"] if p["role"] == "solve_for"]
+    ks = run_study(study_of(d), ref)
+    d["filter"]["type"] = "wls"
+    wls = run_study(study_of(d), ref)
+    assert ks.study.layout.nu == ks.study.layout.nv == 0 and not ks.study.has_noise
+    assert scaled_diff(wls.Pa_plus, ks.Pa_plus) < 1e-9
+    assert scaled_diff(wls.Pt_plus, ks.Pt_plus) < 1e-9
+
+
+def test_user_gain_equals_kalman_schmidt(base):
+    """tests/team/user_gains.py writes the KS gain with jax.numpy (a plain solve instead of
+    Cholesky): rounding only (measured 1.2e-11); tolerance 1e-9."""
+    study, ref, res = base
+    d = small_dict()
+    d["filter"]["type"] = "user"
+    d["filter"]["user_gain"] = "tests.team.user_gains:ks_gain"
+    del d["event"][1]
+    res_u = run_study(study_of(d), ref)
+    assert res_u.study.user_gain is not None
+    assert scaled_diff(res_u.Pa_plus, res.Pa_plus) < 1e-9
+    assert scaled_diff(res_u.Pt_plus, res.Pt_plus) < 1e-9
+
+
+# ----------------------------------------------------------------------------- g: PHI vs PDOT
+def _pdot_pair(ref, d: dict, step_hours: float | None = None):
+    d = copy.deepcopy(d)
+    phi = run_study(study_of(d), ref)
+    d["errcon"] = {"propagation": "pdot"}
+    if step_hours is not None:
+        d["ertraj"]["pdot_step_hours"] = step_hours
+    return phi, run_study(study_of(d), ref)
+
+
+def test_pdot_and_phi_position_sigmas(base):
+    """Different noise models: PHI adds DYNO's Q̃ per interval, PDOT carries the Gauss-Markov
+    errors as states (a stationary start).  Measured PDOT/PHI position RSS: 0.946 final,
+    0.66-1.00 over the history on this study (where PDOT also loses the thrust-bias columns,
+    see the xfail below); 0.985 final, 0.70-1.00 on a variant without thrust-bias
+    parameters.  Tolerances: 0.8-1.25 final, 0.5-2 throughout (same order, other model)."""
+    _, ref, _ = base
+    d = small_dict()
+    del d["event"][1]
+    phi, pdot = _pdot_pair(ref, d)
+    n = phi.study.layout.n
+    assert pdot.Pa_plus.shape[-1] == n + 3 and pdot.labels[n:] == ["eta_proportionality", "eta_in_plane_rad",
+                                                                   "eta_out_of_plane_rad"]
+    ratio = pos_rss(pdot.Pa_plus[:, :n, :n]) / pos_rss(phi.Pa_plus)
+    print(f"PDOT/PHI position RSS: final {ratio[-1]:.4f}, range {ratio.min():.3f}-{ratio.max():.3f}")
+    assert 0.8 < ratio[-1] < 1.25
+    assert 0.5 < ratio.min() and ratio.max() < 2.0
+
+
+def _zero_noise_no_thrust_bias() -> dict:
+    d = small_dict()
+    del d["thrust_noise"], d["event"][1]
+    d["parameter"] = [p for p in d["parameter"] if p["label"] not in ("thrust_scale", "bias_in_rad")]
+    return d
+
+
+def test_pdot_equals_phi_without_noise(base):
+    """With zero thrust noise both modes propagate the same covariance exactly: PHI with the
+    integrator's Φ and Θ, PDOT by RK4 on Ṗ = FP + PFᵀ.  Their difference is RK4's step
+    error: measured 6.7e-9 of each variance at the 2.4 h step and 4.2e-10 at 1.2 h
+    (ratio 16 = 2⁴, RK4's order).  Tolerance 5e-8 at 2.4 h; the error must fall by at
+    least 8x when the step halves (order >= 3)."""
+    _, ref, _ = base
+    d = _zero_noise_no_thrust_bias()
+    phi, pdot = _pdot_pair(ref, d)
+    n = phi.study.layout.n
+    e1 = scaled_diff(pdot.Pa_plus[:, :n, :n], phi.Pa_plus)
+    assert e1 < 5e-8
+    assert scaled_diff(pdot.Pt_plus[:, :n, :n], phi.Pt_plus) < 5e-8
+    _, pdot2 = _pdot_pair(ref, d, step_hours=1.2)
+    e2 = scaled_diff(pdot2.Pa_plus[:, :n, :n], phi.Pa_plus)
+    print(f"PDOT vs PHI without noise: {e1:.2e} (2.4 h step), {e2:.2e} (1.2 h)")
+    assert e2 < e1 / 8
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "run_pdot asks jacobians_at for labels dynamic_labels + THRUST_NOISE_LABELS; a study parameter that "
+    "is also a thrust-noise label (thrust_scale, bias_in_rad, bias_out_rad) appears twice, set_values "
+    "keeps the second copy, so the B column of the study parameter is zero: PDOT loses the thrust-bias "
+    "sensitivities (20 % off in the vx-bias_in covariance after 4 h)"))
+def test_pdot_equals_phi_without_noise_with_thrust_bias(base):
+    """As above on the small study itself (thrust_scale and bias_in_rad solved for):
+    same reference and tolerance."""
+    _, ref, _ = base
+    d = small_dict()
+    del d["thrust_noise"], d["event"][1]
+    phi, pdot = _pdot_pair(ref, d)
+    n = phi.study.layout.n
+    assert scaled_diff(pdot.Pa_plus[:, :n, :n], phi.Pa_plus) < 5e-8
+
+
+# ----------------------------------------------------------------------------- h, i: punch, results
+@pytest.fixture(scope="module")
+def punched(tmp_mod, stm_path):
+    """Run the small study with a punch at 1.25 d (between two Doppler passes), then a
+    second deck starting from the punched covariance; both through the pipeline with the
+    STM file."""
+    d = small_dict()
+    d["punch"] = {"times_days": [1.25], "file": str(tmp_mod / "punch.h5")}
+    first = write_deck(d, tmp_mod / "first.toml")
+    res1, out1, _ = run_team(first, stm=stm_path, output=tmp_mod / "first_results.h5")
+    d2 = small_dict()
+    d2["a_priori"] = {"from_punch": str(tmp_mod / "punch.h5")}
+    second = write_deck(d2, tmp_mod / "second.toml")
+    res2, _, _ = run_team(second, stm=stm_path, output=tmp_mod / "second_results.h5")
+    return res1, out1, res2
+
+
+def test_restart_from_punch_reproduces_the_run(punched):
+    """Reference: the first run after the punch time.  The restart maps with the same
+    chained file matrices and the same events from 1.25 d on: rounding only; 1e-10."""
+    res1, _, res2 = punched
+    t1, t2 = res1.times_s, res2.times_s
+    assert t2[0] == 1.25 * DAY and "punch" in res1.study.schedule.events[np.searchsorted(t1, 1.25 * DAY)]
+    k0 = int(np.searchsorted(t1, t2[0]))
+    np.testing.assert_array_equal(t1[k0:], t2)
+    assert [e for e in res2.study.schedule.events[1:]] == res1.study.schedule.events[k0 + 1:]
+    assert scaled_diff(res2.Pa_plus, res1.Pa_plus[k0:]) < 1e-10
+    assert scaled_diff(res2.Pt_plus, res1.Pt_plus[k0:]) < 1e-10
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "a restart from a covariance punched at a measurement time processes that time's measurements "
+    "again: build_schedule keeps tracking times equal to start_s (punched time_s), so the first event "
+    "of the restart (identity transition) updates an already-updated covariance"))
+def test_restart_at_a_measurement_time(tmp_path, stm_path):
+    """Punch at 2.0 d, where Goldstone and Madrid Doppler and Goldstone range are taken
+    (the punch event comes after the measurement there): the restart's covariance at 2.0 d
+    must be the punched one (rounding only: 1e-10)."""
+    d = small_dict()
+    del d["event"][1]
+    d["punch"] = {"times_days": [2.0], "file": str(tmp_path / "punch2.h5")}
+    res1, _, _ = run_team(write_deck(d, tmp_path / "a.toml"), stm=stm_path, output=tmp_path / "a.h5")
+    d2 = small_dict()
+    del d2["event"][1]
+    d2["a_priori"] = {"from_punch": str(tmp_path / "punch2.h5")}
+    res2, _, _ = run_team(write_deck(d2, tmp_path / "b.toml"), stm=stm_path, output=tmp_path / "b.h5")
+    k0 = int(np.searchsorted(res1.times_s, 2.0 * DAY))
+    assert res1.study.schedule.events[k0] == ["measurement", "punch"]
+    assert res2.study.schedule.tracking[0] == []  # fails now: [0, 1, 2], measured again
+    assert scaled_diff(res2.Pa_plus[0], res1.Pa_plus[k0]) < 1e-10  # now off by 1.4e-5
+
+
+def test_results_file_reads_back(punched):
+    """The results file holds the in-memory history exactly (float64 written and read)."""
+    from fracas.io.team_results import read_team_results
+
+    res1, out1, _ = punched
+    r = read_team_results(out1)
+    st = res1.study
+    assert r["labels"] == res1.labels == st.state_labels + st.labels
+    assert r["units"][:7] == ["km", "km", "km", "km/s", "km/s", "km/s", "kg"]
+    assert r["units"][7:] == st.units and r["roles"] == ["state"] * 7 + st.roles
+    np.testing.assert_array_equal(r["times_s"], res1.times_s)
+    np.testing.assert_array_equal(r["assumed"]["P_plus"], res1.Pa_plus)
+    np.testing.assert_array_equal(r["assumed"]["P_minus"], res1.Pa_minus)
+    np.testing.assert_array_equal(r["true"]["P_plus"], res1.Pt_plus)
+    assert len(r["measurements"]["index"]) == len(res1.meas.records)
+
+
+def _datasets(path: Path) -> dict[str, h5py.Dataset]:
+    out = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda name, obj: out.__setitem__(name, dict(obj.attrs)) if isinstance(obj, h5py.Dataset)
+                     else None)
+    return out
+
+
+def test_results_file_numeric_datasets_have_units(punched):
+    found = _datasets(punched[1])
+    numeric = {k: a for k, a in found.items() if not k.endswith(("names", "units", "roles", "event_types",
+                                                                 "primary", "type", "stations", "psd_problems"))}
+    assert len(numeric) > 10
+    assert [k for k, a in numeric.items() if "units" not in a] == []
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "fracas/io/team_results.py writes its string datasets with _strs(), which sets no units attribute "
+    "(team/event_types, team/primary, team/labels/{names,units,roles}, team/measurements/{type,stations}); "
+    "the convention (fracas.io.hdf5.write, DESIGN 'datasets carry units attributes') is units = \"none\""))
+def test_results_file_every_dataset_has_units(punched):
+    found = _datasets(punched[1])
+    assert [k for k, a in found.items() if "units" not in a] == []

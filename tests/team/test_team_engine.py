@@ -127,7 +127,11 @@ def test_base_study_is_what_the_tests_assume(base):
     study, ref, res = base
     assert study.roles == ["solve_for", "solve_for", "dynamic_consider", "measurement_consider", "ignore"]
     assert study.gencov and study.filter_kind == "kalman_schmidt"
-    assert sum(r.used for r in res.meas.records) >= 15  # 19 of 42 above 5 deg elevation
+    # every scheduled observation has a record (2 x 19 Doppler + 4 range, by hand), used or
+    # skipped below 5 deg elevation (19 used)
+    assert len(res.meas.records) == 42
+    assert sum(r.used for r in res.meas.records) + sum(res.meas.skipped.values()) == 42
+    assert sum(r.used for r in res.meas.records) >= 15
     assert np.any(res.Q_assumed != 0) and not res.psd_problems
     # tracking must have shrunk the a-priori 1 m/s velocity sigmas (497 mm/s RSS at 3 d,
     # the thrust uncertainty keeping it there; 1.7 m/s a priori)

@@ -1,7 +1,8 @@
 """Prediction events (FRACAS PRED): map the knowledge ahead to a later time without changing the run.
 
-The reference is integrated afresh from the stored state at the event time (the STM
-file's trajectory deck when the study reads one), with breaks at the thrust switches in
+When the target time (and every thrust switch on the way) is a reference time, the stored
+transitions are composed; otherwise the reference is integrated afresh from the stored
+state at the event time (the STM file's trajectory deck when the study reads one), with breaks at the thrust switches in
 between so DYNO's Q̃ never straddles one; assumed and true covariances are mapped with
 PROP eq. 1 over each piece.
 """
@@ -31,17 +32,30 @@ def predict_from(res, k: int, t_to: float):
     mids = sorted(t for t in set(sw) if t_k + 1e-3 < t < t_to - 1e-3)
     t_out = np.array([t_k] + mids + [t_to])
     labels = study.dynamic_labels
-    traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, ref.states[k], t_out, labels)
-    phi = np.array(sens.stm_step)
-    if not np.all(np.isfinite(phi)):
-        raise NumericalError(f"{study.source}: prediction from {t_k / DAY_S:.6g} d to {t_to / DAY_S:.6g} d: "
-                             f"the integration stopped (status {int(traj.status)})")
-    phi[0] = np.eye(7)
-    theta = np.array(sens.par_step)
-    theta[0] = 0.0
-    bodies = pr.model.bodies
-    prim = [bodies[int(i)] for i in np.asarray(traj.primary)]
-    sub = Reference(t_out, np.array(traj.x), prim, phi, theta, labels, "prediction")
+    on_ref = [int(np.argmin(np.abs(ref.times_s - t))) for t in t_out]
+    if all(abs(ref.times_s[j] - t) < 1e-6 for j, t in zip(on_ref, t_out)):
+        # every piece ends on a reference time: compose the stored transitions (no integration)
+        phi = np.broadcast_to(np.eye(7), (len(t_out), 7, 7)).copy()
+        theta = np.zeros((len(t_out), 7, ref.theta.shape[2]))
+        for i in range(1, len(t_out)):
+            for j in range(on_ref[i - 1] + 1, on_ref[i] + 1):
+                phi[i] = ref.phi[j] @ phi[i]
+                theta[i] = ref.phi[j] @ theta[i] + ref.theta[j]
+        sub = Reference(t_out, ref.states[on_ref], [ref.primary[j] for j in on_ref], phi, theta, labels, "reference")
+        prim = sub.primary
+    else:
+        traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, ref.states[k], t_out,
+                                                  labels)
+        phi = np.array(sens.stm_step)
+        if not np.all(np.isfinite(phi)):
+            raise NumericalError(f"{study.source}: prediction from {t_k / DAY_S:.6g} d to {t_to / DAY_S:.6g} d: "
+                                 f"the integration stopped (status {int(traj.status)})")
+        phi[0] = np.eye(7)
+        theta = np.array(sens.par_step)
+        theta[0] = 0.0
+        bodies = pr.model.bodies
+        prim = [bodies[int(i)] for i in np.asarray(traj.primary)]
+        sub = Reference(t_out, np.array(traj.x), prim, phi, theta, labels, "prediction")
     # augmented transitions and noise for the pieces (reuse the schedule-based helpers)
     saved = study.schedule
     try:

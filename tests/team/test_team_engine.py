@@ -465,6 +465,26 @@ def test_restart_at_a_measurement_time(tmp_path, stm_path):
     assert scaled_diff(res2.Pa_plus[0], res1.Pa_plus[k0]) < 1e-10  # now off by 1.4e-5
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "the punch file records its trajectory_hash and read_punch returns it, but nothing compares it "
+    "with the restarting study's trajectory deck: a restart on another trajectory is silently accepted"))
+def test_restart_from_punch_of_another_trajectory(punched, tmp_mod):
+    """A punch from team_small_traj.toml, a restart on the same deck with power_kw 10 -> 10.5:
+    refused with a one-line error naming the trajectory (as the STM file's check does)."""
+    from fracas.errors import DeckError
+    from fracas.pipeline import load_team
+
+    traj = tmp_mod / "traj_power.toml"
+    traj.write_text(TRAJ.read_text(encoding="utf-8").replace("power_kw = 10.0", "power_kw = 10.5"), encoding="utf-8")
+    d = small_dict()
+    d["a_priori"] = {"from_punch": str(tmp_mod / "punch.h5")}
+    d["ertraj"]["deck"] = str(traj)
+    deck = tmp_mod / "restart_other.toml"
+    deck.write_text(dumps(d), encoding="utf-8")
+    with pytest.raises((DeckError, StmFileError), match="trajectory"):
+        load_team(deck)
+
+
 def test_results_file_reads_back(punched):
     """The results file holds the in-memory history exactly (float64 written and read)."""
     from fracas.io.team_results import read_team_results

@@ -21,6 +21,7 @@ _STR = h5py.string_dtype()
 
 def _strs(g, name, values, **attrs):
     ds = g.create_dataset(name, data=np.array(list(values), dtype=object), dtype=_STR)
+    ds.attrs["units"] = "none"
     for k, v in attrs.items():
         ds.attrs[k] = v
     return ds

@@ -20,6 +20,7 @@ def _fmt(x: float) -> str:
 
 def covariance_table(P: np.ndarray, labels: list[str], units: list[str], title: str, correlations: bool = True):
     """Standard deviations and the state correlation matrix (like App. 9.3 Table 2)."""
+    from rich.markup import escape
     from rich.table import Table
 
     e = eigen_summary(P)
@@ -33,7 +34,7 @@ def covariance_table(P: np.ndarray, labels: list[str], units: list[str], title: 
         for s in state:
             t.add_column(s, justify="right")
     for i, lab in enumerate(labels):
-        row = [lab, f"{e.sigma[i]:.6g}", units[i]]
+        row = [escape(lab), f"{e.sigma[i]:.6g}", escape(units[i])]
         if correlations:
             row += [f"{e.corr[i, j]:+.4f}" if (j <= i or i >= 6) else "" for j in range(6)]
         t.add_row(*row)
@@ -73,22 +74,23 @@ def summary_dict(res, path: Path | None, source: str) -> dict:
 def print_team(res, path: Path | None, source: str, console=None) -> None:
     """The FRACAS-style printout: study, event log, eigenvector events, predictions, warnings."""
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
-    con = console or Console()
+    con = console or Console(width=None if __import__("sys").stdout.isatty() else 160)
     st = res.study
     sched = st.schedule
     units = st.state_units + st.units + ["1", "rad", "rad"][: len(res.labels) - st.nx - len(st.labels)]
-    con.rule(f"[bold]TEAM[/bold] {st.deck.title}")
-    con.print(f"filter {st.filter_kind}{' (square root)' if st.square_root else ''}, propagation {st.propagation}, "
-              f"generalized covariance {'on' if st.gencov else 'off'}; reference: {source}")
+    con.rule(f"[bold]TEAM[/bold] {escape(st.deck.title)}")
+    con.print(escape(f"filter {st.filter_kind}{' (square root)' if st.square_root else ''}, propagation {st.propagation}, "
+                     f"generalized covariance {'on' if st.gencov else 'off'}; reference: {source}"))
     pt = Table(title="augmented parameters", title_justify="left", show_edge=False, pad_edge=False)
     for c in ("label", "role", "unit", "a-priori 1σ (assumed)", "a-priori 1σ (true)", "final 1σ (assumed)"):
         pt.add_column(c, justify="right" if "σ" in c else "left")
     n0 = st.nx
     for j, lab in enumerate(st.labels):
         i = n0 + j
-        pt.add_row(lab, st.roles[j], st.units[j], _fmt(np.sqrt(st.P0_assumed[i, i])), _fmt(np.sqrt(st.P0_true[i, i])),
+        pt.add_row(escape(lab), st.roles[j], escape(st.units[j]), _fmt(np.sqrt(st.P0_assumed[i, i])), _fmt(np.sqrt(st.P0_true[i, i])),
                    _fmt(np.sqrt(max(res.Pa_plus[-1][i, i], 0.0))))
     con.print(pt)
 
@@ -133,7 +135,7 @@ def print_team(res, path: Path | None, source: str, console=None) -> None:
             if P is None:
                 continue
             t, eig = covariance_table(P, res.labels, units,
-                                      f"{which} knowledge at t = {res.times_s[k] / DAY_S:.4f} d ({'+'.join(sched.events[k])})",
+                                      escape(f"{which} knowledge at t = {res.times_s[k] / DAY_S:.4f} d ({'+'.join(sched.events[k])})"),
                                       st.deck.print.correlations)
             con.print(t)
             con.print(eig)
@@ -145,16 +147,16 @@ def print_team(res, path: Path | None, source: str, console=None) -> None:
             if Pt is not None:
                 et = eigen_summary(Pt)
                 line += f"; true RSS {et.pos_rss:.5g} km, {et.vel_rss * 1e6:.5g} mm/s"
-            con.print(line)
+            con.print(escape(line))
     if res.meas.skipped:
         parts = [f"{st.deck.tracking[j].type} {'+'.join(st.deck.tracking[j].stations)}: {c}"
                  for j, c in sorted(res.meas.skipped.items())]
-        con.print(f"[yellow]below {st.min_elevation_deg:g} deg elevation, skipped:[/yellow] " + "; ".join(parts))
+        con.print(f"[yellow]below {st.min_elevation_deg:g} deg elevation, skipped:[/yellow] " + escape("; ".join(parts)))
     for k, e, which, val in res.psd_problems[:5]:
         con.print(f"[red]warning:[/red] {which} covariance not positive semi-definite at t = "
                   f"{res.times_s[k] / DAY_S:.6g} d ({e} event), smallest normalized eigenvalue {val:.3g}")
     if path is not None:
-        con.print(f"written: {path}")
+        con.print(escape(f"written: {path}"))
 
 
 def plot_team(res, png: str | Path) -> Path:

@@ -87,20 +87,21 @@ def run_pdot(study: Study, ref, meas):
     prim_names = np.empty(all_t.size, dtype=object)
     bodies = pr.model.bodies
     prim_names[order] = [bodies[int(i)] for i in np.asarray(traj.primary)[1:]]
-    labels = list(study.dynamic_labels) + list(THRUST_NOISE_LABELS)
+    labels = list(dict.fromkeys(list(study.dynamic_labels) + list(THRUST_NOISE_LABELS)))  # a bias may be both
     kk = all_t.size
     kp = _bucket(kk)
     pad = lambda a: np.concatenate([a, np.repeat(a[-1:], kp - kk, axis=0)]) if kp > kk else a  # noqa: E731
     A, B = jacobians_at(pr.model, pr.params, pr.ephem, pr.epoch_et_s, pad(all_t), pad(xs),
                         pad(_primary_index(study, list(prim_names))), labels)
     A, B = np.asarray(A)[:kk, :nx, :nx], np.asarray(B)[:kk, :nx, :]
+    B_dyn = B[:, :, [labels.index(lab) for lab in study.dynamic_labels]]
+    h = B[:, :, [labels.index(lab) for lab in THRUST_NOISE_LABELS]]
     # F at every node (assumed and true differ only in the noise correlation times)
-    nd = len(study.dynamic_labels)
     F = np.zeros((kk, n + 3, n + 3))
     F[:, :nx, :nx] = A
     dyn_cols = [nx + j for j, d in enumerate(study.dynamic) if d]
-    F[:, :nx, dyn_cols] = B[:, :, :nd]
-    F[:, :nx, n:] = B[:, :, nd:]
+    F[:, :nx, dyn_cols] = B_dyn
+    F[:, :nx, n:] = h
     Fs, Qcs = [], []
     for sig, tau in ((study.noise_sigma_assumed, study.noise_tau_assumed), (study.noise_sigma_true, study.noise_tau_true)):
         Fx = F.copy()

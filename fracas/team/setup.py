@@ -247,6 +247,10 @@ def build_study(deck: TeamDeck, punched: dict | None = None) -> Study:
         switches += [(arc.start_days * DAY_S, "thrust_on"), (arc.stop_days * DAY_S, "thrust_off")]
     punch = np.array(deck.punch.times_days) * DAY_S if deck.punch is not None else np.zeros(0)
     sched = build_schedule(start, stop, track_times, events, switches, punch)
+    if punched is not None:  # the punched covariance already includes the events at its time
+        sched.events[0] = ["initial"]
+        sched.tracking[0] = []
+        sched.predict_to_s.pop(0, None)
 
     gain = load_user_gain(deck.filter.user_gain, src) if deck.filter.type == "user" else None
     problem = dataclasses.replace(problem, param_labels=tuple(lab for lab, d in zip(labels, dynamic) if d),

@@ -179,10 +179,10 @@ def test_missing_file():
 
 # ----------------------------------------------------------------------------- through the CLI
 @pytest.mark.parametrize("name, expected", [
-    ("team_bad_station.toml", 'tracking[0].stations[0] = "parkes": unknown station (expected one of: canberra, '
-                              "goldstone, madrid)"),
-    ("team_bad_label.toml", "parameter[1].label = \"mu[pluto]\": unknown parameter: parameter 'mu[pluto]': "
-                            "body 'pluto' is not in the force model ('sun', 'earth')"),
+    ("team_bad_station.toml", ('tracking[0].stations[0] = "parkes": unknown station (expected one of: canberra, '
+                               "goldstone, madrid)")),
+    ("team_bad_label.toml", ("parameter[1].label = \"mu[pluto]\": unknown parameter: parameter 'mu[pluto]': "
+                             "body 'pluto' is not in the force model ('sun', 'earth')")),
 ], ids=["station", "label"])
 def test_cli_refuses_bad_deck(name, expected):
     path = DATA / name

@@ -14,12 +14,12 @@ from __future__ import annotations
 
 import copy
 import json
-import tomllib
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
+import tomllib
 
 from fracas.config.team import parse_team_deck
 from fracas.errors import StmFileError
@@ -124,7 +124,7 @@ def stm_path(tmp_mod) -> Path:
 # ----------------------------------------------------------------------------- a, b: STM file
 def test_base_study_is_what_the_tests_assume(base):
     """Guards the premises of the other tests: roles, tracking used, noise present."""
-    study, ref, res = base
+    study, _, res = base
     assert study.roles == ["solve_for", "solve_for", "dynamic_consider", "measurement_consider", "ignore"]
     assert study.gencov and study.filter_kind == "kalman_schmidt"
     # every scheduled observation has a record (2 x 19 Doppler + 4 range, by hand), used or
@@ -136,7 +136,7 @@ def test_base_study_is_what_the_tests_assume(base):
     # tracking must have shrunk the a-priori 1 m/s velocity sigmas (497 mm/s RSS at 3 d,
     # the thrust uncertainty keeping it there; 1.7 m/s a priori)
     k3 = study.schedule.index_of(3.0 * DAY)
-    vel = lambda P: np.sqrt(np.einsum("ii->i", P)[3:6].sum())  # noqa: E731
+    vel = lambda P: np.sqrt(np.einsum("ii->i", P)[3:6].sum())
     assert vel(res.Pa_plus[k3]) < 0.5 * vel(study.P0_assumed)
 
 
@@ -300,7 +300,7 @@ def test_square_root_equals_covariance_form(base):
     """Reference: the covariance-form run.  Both are exact algebra; the square-root form
     (triangular factors, sqrt Joseph) differs by rounding amplified by the conditioning
     (measured 1.5e-11 of each variance); tolerance 1e-9."""
-    study, ref, res = base
+    _, ref, res = base
     d = small_dict()
     d["filter"]["square_root"] = True
     del d["event"][1]  # no prediction: not part of this comparison (saves its integration)
@@ -316,7 +316,7 @@ def test_wls_equals_ks_without_noise_and_consider(base):
     Schmidt covariance, so both gains and both histories coincide (rounding only,
     measured 1e-11; tolerance 1e-9).  On the base study (thrust noise, two consider
     parameters) they must differ materially (checked too, so the equality is not vacuous)."""
-    study, ref, res = base
+    _, ref, res = base
     d = small_dict()
     d["filter"]["type"] = "wls"
     del d["event"][1]
@@ -337,7 +337,7 @@ def test_wls_equals_ks_without_noise_and_consider(base):
 def test_user_gain_equals_kalman_schmidt(base):
     """tests/team/user_gains.py writes the KS gain with jax.numpy (a plain solve instead of
     Cholesky): rounding only (measured 1.2e-11); tolerance 1e-9."""
-    study, ref, res = base
+    _, ref, res = base
     d = small_dict()
     d["filter"]["type"] = "user"
     d["filter"]["user_gain"] = "tests.team.user_gains:ks_gain"

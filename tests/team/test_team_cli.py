@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
+from click.testing import CliRunner, Result
 
 from fracas.cli import main
 from fracas.io.team_results import read_team_results
@@ -26,7 +26,7 @@ SMALL = DATA / "team_small.toml"
 TRAJ = DATA / "team_small_traj.toml"
 
 
-def fracas(*args) -> click.testing.Result:  # noqa: F821
+def fracas(*args) -> Result:
     return CliRunner().invoke(main, [str(a) for a in args])
 
 
@@ -109,7 +109,7 @@ def printout(tmp_mod) -> str:
 def test_run_printout(printout, tmp_mod):
     assert "TEAM TEAM test study" in printout and "reference:" in printout and "integrated" in printout
     for lab, role in (("thrust_scale", "solve_for"), ("bias_in_rad", "solve_for"), ("cr", "ignore")):
-        assert re.search(rf"^\s*{re.escape(lab)}\s*│\s*{role}\b", printout, re.M), (lab, role)
+        assert re.search(rf"^\s*{re.escape(lab)}\s*│\s*{role}\b", printout, re.MULTILINE), (lab, role)
     assert "event log" in printout and "assumed knowledge at t = 1.5000 d" in printout
     assert printout.rstrip().endswith(f"written: {tmp_mod / 'print.h5'}")
 

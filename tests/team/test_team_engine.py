@@ -360,11 +360,10 @@ def _pdot_pair(ref, d: dict, step_hours: float | None = None):
 
 def test_pdot_and_phi_position_sigmas(base):
     """Different noise models: PHI adds DYNO's Q̃ per interval, PDOT carries the Gauss-Markov
-    errors as states (a stationary start).  Measured PDOT/PHI position RSS: 0.946 final,
-    0.66-1.00 over the history on this study (where PDOT also loses the thrust-bias columns,
-    see the xfail below; 0.949 and 0.63-1.00 with that fixed); 0.985 final, 0.70-1.00 on a
-    variant without thrust-bias parameters.  Tolerances: 0.8-1.25 final, 0.5-2 throughout
-    (same order, other model)."""
+    errors as states (a stationary start).  Measured PDOT/PHI position RSS: 0.949 final,
+    0.63-1.00 over the history on this study (0.985 and 0.70-1.00 on a variant without
+    thrust-bias parameters).  Tolerances: 0.8-1.25 final, 0.5-2 throughout (same order,
+    another model)."""
     _, ref, _ = base
     d = small_dict()
     del d["event"][1]
@@ -408,7 +407,8 @@ def test_pdot_equals_phi_without_noise_with_thrust_bias(base):
     """As above on the small study itself (thrust_scale and bias_in_rad solved for), same
     reference.  With the labels de-duplicated (checked by patching jacobians_at) the
     difference is RK4's again: 7.1e-7 of each variance at 2.4 h, 4.2e-8 at 1.2 h (the
-    thrust_scale variance, the most sensitive); tolerance 2e-6.  Now: 4e3."""
+    thrust_scale variance, the most sensitive); tolerance 2e-6.  Before the fix of the
+    duplicated labels (B columns of thrust_scale, bias_in_rad zero): 4e3."""
     _, ref, _ = base
     d = small_dict()
     del d["thrust_noise"], d["event"][1]
@@ -461,8 +461,8 @@ def test_restart_at_a_measurement_time(tmp_path, stm_path):
     res2, _, _ = run_team(write_deck(d2, tmp_path / "b.toml"), stm=stm_path, output=tmp_path / "b.h5")
     k0 = int(np.searchsorted(res1.times_s, 2.0 * DAY))
     assert res1.study.schedule.events[k0] == ["measurement", "punch"]
-    assert res2.study.schedule.tracking[0] == []  # fails now: [0, 1, 2], measured again
-    assert scaled_diff(res2.Pa_plus[0], res1.Pa_plus[k0]) < 1e-10  # now off by 1.4e-5
+    assert res2.study.schedule.tracking[0] == []  # was [0, 1, 2]: measured again
+    assert scaled_diff(res2.Pa_plus[0], res1.Pa_plus[k0]) < 1e-10  # was off by 1.4e-5
 
 
 @pytest.mark.xfail(strict=True, reason=(

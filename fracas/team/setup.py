@@ -126,7 +126,8 @@ def _classify(label: str, model, station_names, src: str, field: str) -> bool:
         except KeyError as exc:
             raise _err(src, field, label, str(exc).strip("'\"")) from None
         return False
-    raise _err(src, field, label, f"unknown parameter: {dyn_msg}; measurement parameters are e.g. "
+    lead = "" if dyn_msg.startswith("unknown parameter") else "unknown parameter: "
+    raise _err(src, field, label, f"{lead}{dyn_msg}; measurement parameters are e.g. "
                "station_lon_rad[goldstone], range_bias_km[madrid], qvlbi_timing_km")
 
 
@@ -203,6 +204,12 @@ def build_study(deck: TeamDeck, punched: dict | None = None) -> Study:
     if layout.nw:  # the filter does not know its ignore parameters
         p_sig_a[-layout.nw:] = 0.0
     if punched is not None:
+        from fracas.io.stm_file import trajectory_hash
+
+        if punched.get("trajectory_hash") and punched["trajectory_hash"] != trajectory_hash(tdeck):
+            raise _err(src, "a_priori.from_punch", deck.a_priori.from_punch,
+                       f"was punched on another trajectory (hash {str(punched['trajectory_hash'])[:12]}), this study's "
+                       f"trajectory deck {tdeck.source_path} has {trajectory_hash(tdeck)[:12]}")
         P0a = np.array(punched["assumed"], dtype=np.float64)
         P0t = np.array(punched.get("true", punched["assumed"]), dtype=np.float64)
         if list(punched["labels"]) != labels or P0a.shape != (n, n):

@@ -465,9 +465,6 @@ def test_restart_at_a_measurement_time(tmp_path, stm_path):
     assert scaled_diff(res2.Pa_plus[0], res1.Pa_plus[k0]) < 1e-10  # was off by 1.4e-5
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the punch file records its trajectory_hash and read_punch returns it, but nothing compares it "
-    "with the restarting study's trajectory deck: a restart on another trajectory is silently accepted"))
 def test_restart_from_punch_of_another_trajectory(punched, tmp_mod):
     """A punch from team_small_traj.toml, a restart on the same deck with power_kw 10 -> 10.5:
     refused with a one-line error naming the trajectory (as the STM file's check does)."""

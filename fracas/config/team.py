@@ -52,7 +52,7 @@ from fracas.config.trajectory import (
     PositiveFloat,
     SourcedDeck,
     Vector3,
-    format_validation_error,
+    parse_sourced,
     read_deck_text,
 )
 from fracas.errors import DeckError
@@ -332,18 +332,8 @@ class TeamDeck(SourcedDeck):
 
 
 def parse_team_deck(text: str, source: str = "<deck>") -> TeamDeck:
-    """Validate TOML text; any problem -> DeckError('source: field = value: expected')."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise DeckError(f"{source}: TOML syntax error: {exc}") from None
-    try:
-        deck = TeamDeck.model_validate(data)
-    except ValidationError as exc:
-        raise DeckError(format_validation_error(exc, source, TeamDeck)) from None
-    deck._source_path = source
-    deck._source_text = text
-    return deck
+    """Validate TEAM-deck TOML text; any problem -> one-line DeckError."""
+    return parse_sourced(text, source, TeamDeck)
 
 
 def is_team_text(text: str) -> bool:

@@ -632,19 +632,24 @@ def format_validation_error(exc: ValidationError, source: str, root: type[BaseMo
     return line
 
 
-def parse_deck(text: str, source: str = "<deck>") -> TrajectoryDeck:
-    """Validate TOML text; any problem -> DeckError('source: field = value: expected')."""
+def parse_sourced(text: str, source: str, cls: type[SourcedDeck]) -> SourcedDeck:
+    """Validate TOML text as a ``cls`` deck; any problem -> DeckError('source: field = value: expected')."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise DeckError(f"{source}: TOML syntax error: {exc}") from None
     try:
-        deck = TrajectoryDeck.model_validate(data)
+        deck = cls.model_validate(data)
     except ValidationError as exc:
-        raise DeckError(format_validation_error(exc, source)) from None
+        raise DeckError(format_validation_error(exc, source, cls)) from None
     deck._source_path = source
     deck._source_text = text
     return deck
+
+
+def parse_deck(text: str, source: str = "<deck>") -> TrajectoryDeck:
+    """Validate trajectory-deck TOML text; any problem -> one-line DeckError."""
+    return parse_sourced(text, source, TrajectoryDeck)
 
 
 def read_deck_text(path: str | Path) -> str:

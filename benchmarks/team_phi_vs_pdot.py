@@ -17,7 +17,6 @@ relation sigma_bias ~ (0.30 + 0.05 tau[days]) sigma_noise (Appendix 9.3 eq. 5).
 from __future__ import annotations
 
 import argparse
-import re
 import sys
 import time
 from pathlib import Path

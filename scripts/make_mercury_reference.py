@@ -67,7 +67,7 @@ def main():
     params = set_values(prob.params, ["arc_t_on[0]", "arc_t_off[0]"], np.array([-40 * DAY_S, 0.0]), prob.model)
     traj = propagate(prob.model, params, ephem, et, x0, np.array([0.0, -40 * DAY_S]))
     x = np.asarray(traj.x[-1])
-    print("status", int(traj.status), "mass used kg", 1500.0 - x[6] if False else x[6] - 1500.0)
+    print("status", int(traj.status), "; propellant used over the 40 days (kg):", round(float(x[6]) - 1500.0, 4))
     print("r_km =", [round(float(v), 3) for v in x[:3]])
     print("v_km_s =", [round(float(v), 7) for v in x[3:6]])
     print("mass_kg =", round(float(x[6]), 4))

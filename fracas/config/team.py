@@ -55,7 +55,6 @@ from fracas.config.trajectory import (
     parse_sourced,
     read_deck_text,
 )
-from fracas.errors import DeckError
 
 __all__ = ["TeamDeck", "load_team_deck", "parse_team_deck", "is_team_text", "MEASUREMENT_TYPES", "SIGMA_UNITS"]
 

@@ -9,7 +9,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from fracas.errors import DeckError, StmFileError
+from fracas.errors import DeckError
 from fracas.io.hdf5 import atomic_h5, provenance, read_str, write, write_provenance
 
 __all__ = ["write_team_results", "read_team_results", "write_punch", "read_punch", "RESULTS_SCHEMA", "PUNCH_SCHEMA"]
@@ -48,10 +48,8 @@ def write_team_results(path: str | os.PathLike, res, stm_source: str) -> None:
         _strs(g, "primary", res.ref.primary)
         lab = g.create_group("labels")
         _strs(lab, "names", res.labels)
-        units = st.state_units + st.units + (["1", "rad", "rad"] if len(res.labels) > len(st.state_units) + len(st.labels) else [])
-        _strs(lab, "units", units)
-        roles = ["state"] * st.nx + st.roles + ["noise_state"] * (len(res.labels) - st.nx - len(st.roles))
-        _strs(lab, "roles", roles)
+        _strs(lab, "units", res.units)
+        _strs(lab, "roles", res.roles)
         for which, Pm, Pp, Q in (("assumed", res.Pa_minus, res.Pa_plus, res.Q_assumed),
                                  ("true", res.Pt_minus, res.Pt_plus, res.Q_true)):
             if Pm is None:

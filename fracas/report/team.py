@@ -24,8 +24,7 @@ def covariance_table(P: np.ndarray, labels: list[str], units: list[str], title: 
     from rich.table import Table
 
     e = eigen_summary(P)
-    nx = min(7, len(labels))
-    state = [lab for lab in labels[:6]]
+    state = labels[:6]
     t = Table(title=title, title_justify="left", show_edge=False, pad_edge=False)
     t.add_column("", justify="left")
     t.add_column("1σ", justify="right")
@@ -45,7 +44,6 @@ def covariance_table(P: np.ndarray, labels: list[str], units: list[str], title: 
     for name, ax, V, unit in (("position", e.pos_axes, e.pos_eigvec, "km"), ("velocity", e.vel_axes * 1e6, e.vel_eigvec, "mm/s")):
         for a in range(3)[::-1]:
             eig.add_row(name, str(3 - a), f"{ax[a]:.5g}", unit, *(f"{v:+.4f}" for v in V[:, a]))
-    del nx
     return t, eig
 
 
@@ -80,7 +78,7 @@ def print_team(res, path: Path | None, source: str, console=None) -> None:
     con = console or Console(width=None if __import__("sys").stdout.isatty() else 160)
     st = res.study
     sched = st.schedule
-    units = st.state_units + st.units + ["1", "rad", "rad"][: len(res.labels) - st.nx - len(st.labels)]
+    units = res.units
     con.rule(f"[bold]TEAM[/bold] {escape(st.deck.title)}")
     con.print(escape(f"filter {st.filter_kind}{' (square root)' if st.square_root else ''}, propagation {st.propagation}, "
                      f"generalized covariance {'on' if st.gencov else 'off'}; reference: {source}"))

@@ -1,5 +1,5 @@
 """Eigenvector events (FRACAS SETEVN/PRINT): standard deviations, correlations and the
-eigen-decomposition of the position and velocity blocks of a covariance.  Pure numpy."""
+eigen-decomposition of the position and velocity blocks of a covariance."""
 
 from __future__ import annotations
 
@@ -7,19 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["EigenSummary", "eigen_summary", "sigma_corr"]
+from fracas.filters.covariance import correlations
 
-
-def sigma_corr(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Standard deviations and correlation coefficients (zero-variance rows: correlation 0)."""
-    P = 0.5 * (P + P.T)
-    s = np.sqrt(np.clip(np.diag(P), 0.0, None))
-    d = np.where(s > 0, s, 1.0)
-    c = P / d[:, None] / d[None, :]
-    c[s == 0, :] = 0.0
-    c[:, s == 0] = 0.0
-    np.fill_diagonal(c, np.where(s > 0, 1.0, 0.0))
-    return s, np.clip(c, -1.0, 1.0)
+__all__ = ["EigenSummary", "eigen_summary"]
 
 
 @dataclass
@@ -47,7 +37,8 @@ class EigenSummary:
 
 def eigen_summary(P: np.ndarray) -> EigenSummary:
     """The eigenvector event of one augmented covariance (state first: r km, v km/s, ...)."""
-    s, c = sigma_corr(P)
+    P = 0.5 * (P + P.T)
+    s, c = (np.asarray(a) for a in correlations(P))
     out = []
     for blk in (slice(0, 3), slice(3, 6)):
         B = 0.5 * (P[blk, blk] + P[blk, blk].T)

@@ -13,7 +13,6 @@ Eigenvector, prediction and punch events are evaluated afterwards from the histo
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -58,11 +57,29 @@ class TeamResult:
     predictions: dict[int, list[tuple[float, np.ndarray, np.ndarray | None]]] = field(default_factory=dict)
     psd_problems: list[tuple[int, str, str, float]] = field(default_factory=list)
     timing: dict[str, float] = field(default_factory=dict)
-    labels: list[str] = field(default_factory=list)  # augmented labels (state + parameters [+ noise states])
+    noise_states: bool = False  # PDOT: the three Gauss-Markov states follow the parameters
 
     @property
     def times_s(self) -> np.ndarray:
         return self.study.schedule.times_s
+
+    @property
+    def labels(self) -> list[str]:
+        """Row/column labels of the covariances: state, parameters [, PDOT noise states]."""
+        from fracas.team.pdot import NOISE_STATE_LABELS
+
+        st = self.study
+        return st.state_labels + st.labels + (NOISE_STATE_LABELS if self.noise_states else [])
+
+    @property
+    def units(self) -> list[str]:
+        st = self.study
+        return st.state_units + st.units + (["1", "rad", "rad"] if self.noise_states else [])
+
+    @property
+    def roles(self) -> list[str]:
+        st = self.study
+        return ["state"] * st.nx + st.roles + (["noise_state"] * 3 if self.noise_states else [])
 
 
 # ------------------------------------------------------------------- event inputs (numpy)
@@ -286,7 +303,7 @@ def run_study(study: Study, ref: Reference, progress=None) -> TeamResult:
     Pa_m, Pa_p, Pt_m, Pt_p, sig = run_filter(study, phi_aug, Qa, Qt, meas)
     tm["filter_s"] = time.perf_counter() - t2
     res = TeamResult(study, ref, meas, Pa_m, Pa_p, Pt_m if study.gencov else None, Pt_p if study.gencov else None,
-                     Qa, Qt, sig, labels=study.state_labels + study.labels)
+                     Qa, Qt, sig)
     finish(res, tm)
     return res
 

@@ -19,7 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from fracas import _jax  # noqa: F401
+from fracas import _jax  # noqa: F401  (x64 before jax)
 import jax
 import jax.numpy as jnp
 
@@ -66,7 +66,7 @@ def run_pdot(study: Study, ref, meas):
     t = ref.times_s
     h_max = study.deck.ertraj.pdot_step_hours * 3600.0
     # nodes: for each interval, 2N+1 equally spaced points (ends nudged inside the interval)
-    Ns, nodes, owner = [], [], []
+    Ns, nodes = [], []
     for k in range(1, K):
         dt = t[k] - t[k - 1]
         N = max(1, int(math.ceil(dt / h_max - 1e-9)))
@@ -138,7 +138,7 @@ def run_pdot(study: Study, ref, meas):
     zeros = np.zeros((K, nx, nx))
     res = TeamResult(study, ref, meas, np.array(out["am"]), np.array(out["ap"]),
                      np.array(out["tm"]) if study.gencov else None, np.array(out["tp"]) if study.gencov else None,
-                     zeros, zeros.copy(), np.array(out["sig"]), labels=study.state_labels + study.labels + NOISE_STATE_LABELS)
+                     zeros, zeros.copy(), np.array(out["sig"]), noise_states=True)
     tm = {"pdot_nodes_s": t_nodes, "pdot_nodes": int(kk)}
     finish(res, tm)
     return res

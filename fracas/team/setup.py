@@ -14,7 +14,6 @@ import dataclasses
 import importlib
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -23,6 +22,7 @@ from fracas.build import Problem, build_propagation
 from fracas.config.team import SIGMA_UNITS, APriori, TeamDeck, ThrustNoise
 from fracas.config.trajectory import TrajectoryDeck, load_deck
 from fracas.constants import DAY_S
+from fracas.dynamics.variational import THRUST_NOISE_LABELS
 from fracas.errors import DeckError
 from fracas.filters.covariance import Layout
 from fracas.measurements import trakm
@@ -32,7 +32,6 @@ from fracas.team.schedule import Schedule, build_schedule, merge_times, range_ti
 
 __all__ = ["Study", "build_study", "trajectory_problem", "THRUST_NOISE_LABELS"]
 
-THRUST_NOISE_LABELS = ("thrust_scale", "bias_in_rad", "bias_out_rad")
 _NOISE_FIELDS = ("proportionality", "in_plane_deg", "out_of_plane_deg")
 _NOISE_SCALE = (1.0, math.pi / 180.0, math.pi / 180.0)
 

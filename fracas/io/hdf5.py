@@ -58,13 +58,26 @@ def atomic_h5(path: str | os.PathLike) -> Iterator[h5py.File]:
             os.close(dfd)
 
 
+def write_strings(group: h5py.Group, name: str, values, units: str = "none", **attrs: Any) -> h5py.Dataset:
+    """A 1-D UTF-8 string dataset (empty lists included) with a ``units`` attribute."""
+    vals = [str(v) for v in values]
+    if vals:
+        ds = group.create_dataset(name, data=np.array(vals, dtype=object), dtype=STR)
+    else:
+        ds = group.create_dataset(name, shape=(0,), dtype=STR)
+    ds.attrs["units"] = units
+    for key, val in attrs.items():
+        set_attr(ds, key, val)
+    return ds
+
+
 def write(group: h5py.Group, name: str, data: Any, units: str, **attrs: Any) -> h5py.Dataset:
     """Create dataset ``name`` with a ``units`` attribute (``"1"``: dimensionless,
     ``"none"``: text or labels) and any further attributes."""
     if isinstance(data, str):
         ds = group.create_dataset(name, data=data, dtype=STR)
     elif isinstance(data, (list, tuple)) and data and all(isinstance(x, str) for x in data):
-        ds = group.create_dataset(name, data=np.array(data, dtype=object), dtype=STR)
+        return write_strings(group, name, data, units, **attrs)
     else:
         ds = group.create_dataset(name, data=np.asarray(data))
     ds.attrs["units"] = units

@@ -47,7 +47,6 @@ import numpy as np
 
 from fracas.errors import StmFileError
 from fracas.io.hdf5 import (
-    STR,
     atomic_h5,
     provenance,
     read_provenance,
@@ -55,6 +54,7 @@ from fracas.io.hdf5 import (
     set_attr,
     write,
     write_provenance,
+    write_strings,
 )
 
 FILE_KIND = "fracas-stm"
@@ -240,17 +240,6 @@ def stm_data_from_run(problem, traj, sens, event_types, deck_text, deck_hash, de
 # --------------------------------------------------------------------------- write
 
 
-def _write_strs(g: h5py.Group, name: str, values: Sequence[str], **attrs: Any) -> h5py.Dataset:
-    vals = [str(v) for v in values]
-    ds = g.create_dataset(name, data=np.array(vals, dtype=object), dtype=STR) if vals else g.create_dataset(
-        name, shape=(0,), dtype=STR
-    )
-    ds.attrs["units"] = "none"
-    for key, val in attrs.items():
-        set_attr(ds, key, val)
-    return ds
-
-
 def _validate(data: StmData, dest: Path) -> tuple[int, int]:
     def bad(what: str) -> StmFileError:
         return StmFileError(f"{dest}: cannot write the STM file: {what}")
@@ -309,11 +298,11 @@ def write_stm_file(path: str | os.PathLike, data: StmData) -> None:
                   meaning="epoch of t = 0, TDB seconds past J2000 (2000-01-01T12:00:00 TDB)")
             write(g, "times_s", np.asarray(data.times_s, np.float64), "s",
                   meaning="times on the file, s from the epoch, non-decreasing")
-            _write_strs(g, "event_types", data.event_types, meaning="event type(s) at each time ('+' joins several)")
+            write_strings(g, "event_types", data.event_types, meaning="event type(s) at each time ('+' joins several)")
             write(g, "states", np.asarray(data.states, np.float64), "col_units[j]",
                   col_labels=list(STATE_LABELS), col_units=list(STATE_UNITS),
                   meaning="r km, v km/s, m kg relative to primary[i], ICRF")
-            _write_strs(g, "primary", data.primary, meaning="centre body of states[i]")
+            write_strings(g, "primary", data.primary, meaning="centre body of states[i]")
             write(g, "stm_step", np.asarray(data.stm_step, np.float64), "row_units[i]/col_units[j]",
                   col_labels=list(STATE_LABELS), col_units=list(STATE_UNITS), **mat_attrs,
                   meaning="Phi(t_i, t_{i-1}) = dx(t_i)/dx(t_{i-1}); i = 0: from t = 0 to times_s[0]",
@@ -330,8 +319,8 @@ def write_stm_file(path: str | os.PathLike, data: StmData) -> None:
             ds.attrs["dims"] = "(parameter, time, row)"
 
             h = f.create_group("parameters")
-            _write_strs(h, "labels", data.param_labels, meaning="fracas.params labels: columns of par_step")
-            _write_strs(h, "units", data.param_units, meaning="unit of each parameter")
+            write_strings(h, "labels", data.param_labels, meaning="fracas.params labels: columns of par_step")
+            write_strings(h, "units", data.param_units, meaning="unit of each parameter")
             write(h, "values", np.asarray(data.param_values, np.float64).reshape(n_p), "units[p]",
                   meaning="nominal values the trajectory was built with")
             write(h, "steps", np.asarray(data.param_steps, np.float64).reshape(n_p), "units[p]",

@@ -10,21 +10,12 @@ import h5py
 import numpy as np
 
 from fracas.errors import DeckError
-from fracas.io.hdf5 import atomic_h5, provenance, read_str, write, write_provenance
+from fracas.io.hdf5 import atomic_h5, provenance, read_str, write, write_provenance, write_strings
 
 __all__ = ["write_team_results", "read_team_results", "write_punch", "read_punch", "RESULTS_SCHEMA", "PUNCH_SCHEMA"]
 
 RESULTS_SCHEMA = 1
 PUNCH_SCHEMA = 1
-_STR = h5py.string_dtype()
-
-
-def _strs(g, name, values, **attrs):
-    ds = g.create_dataset(name, data=np.array(list(values), dtype=object), dtype=_STR)
-    ds.attrs["units"] = "none"
-    for k, v in attrs.items():
-        ds.attrs[k] = v
-    return ds
 
 
 def write_team_results(path: str | os.PathLike, res, stm_source: str) -> None:
@@ -43,13 +34,13 @@ def write_team_results(path: str | os.PathLike, res, stm_source: str) -> None:
             g.attrs[k] = v
         g.attrs["epoch_et_s"] = st.problem.epoch_et_s
         write(g, "times_s", res.times_s, "s", description="schedule times from the trajectory epoch")
-        _strs(g, "event_types", ["+".join(e) for e in sched.events], description="events at each time, in order")
+        write_strings(g, "event_types", ["+".join(e) for e in sched.events], description="events at each time, in order")
         write(g, "states", res.ref.states, "km, km/s, kg", description="reference r, v, m rel. primary (ICRF)")
-        _strs(g, "primary", res.ref.primary)
+        write_strings(g, "primary", res.ref.primary)
         lab = g.create_group("labels")
-        _strs(lab, "names", res.labels)
-        _strs(lab, "units", res.units)
-        _strs(lab, "roles", res.roles)
+        write_strings(lab, "names", res.labels)
+        write_strings(lab, "units", res.units)
+        write_strings(lab, "roles", res.roles)
         for which, Pm, Pp, Q in (("assumed", res.Pa_minus, res.Pa_plus, res.Q_assumed),
                                  ("true", res.Pt_minus, res.Pt_plus, res.Q_true)):
             if Pm is None:
@@ -74,8 +65,8 @@ def write_team_results(path: str | os.PathLike, res, stm_source: str) -> None:
         recs = res.meas.records
         write(m, "index", np.array([r.k for r in recs], dtype=np.int64), "1", description="schedule index")
         write(m, "tracking", np.array([r.tracking for r in recs], dtype=np.int64), "1", description="[[tracking]] entry")
-        _strs(m, "type", [r.kind for r in recs])
-        _strs(m, "stations", ["+".join(r.stations) for r in recs])
+        write_strings(m, "type", [r.kind for r in recs])
+        write_strings(m, "stations", ["+".join(r.stations) for r in recs])
         write(m, "value", np.array([r.value for r in recs]), "km | km/s | rad", description="computed observable")
         write(m, "elevation_deg", np.array([r.elevation_deg for r in recs]), "deg")
         write(m, "used", np.array([r.used for r in recs], dtype=np.int8), "1", description="0: below the horizon")
@@ -96,7 +87,7 @@ def write_team_results(path: str | os.PathLike, res, stm_source: str) -> None:
                         write(q, "true", Pt, "labels/units x labels/units")
                     i += 1
         if res.psd_problems:
-            _strs(g, "psd_problems", [f"{res.times_s[k]:.3f} s {ev} {w} {e:.3g}" for k, ev, w, e in res.psd_problems])
+            write_strings(g, "psd_problems", [f"{res.times_s[k]:.3f} s {ev} {w} {e:.3g}" for k, ev, w, e in res.psd_problems])
         write_provenance(f, provenance(st.deck.source_text, st.source))
 
 
@@ -129,8 +120,8 @@ def write_punch(path: str | os.PathLike, res, indices: list[int]) -> None:
             g = f.create_group(f"punch_{i:03d}")
             write(g, "time_s", res.times_s[k], "s")
             write(g, "state", res.ref.states[k], "km, km/s, kg")
-            _strs(g, "labels", st.labels)
-            _strs(g, "state_labels", st.state_labels)
+            write_strings(g, "labels", st.labels)
+            write_strings(g, "state_labels", st.state_labels)
             write(g, "assumed", res.Pa_plus[k][: st.layout.n, : st.layout.n], "labels/units x labels/units")
             if res.Pt_plus is not None:
                 write(g, "true", res.Pt_plus[k][: st.layout.n, : st.layout.n], "labels/units x labels/units")

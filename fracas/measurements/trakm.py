@@ -198,14 +198,20 @@ class Geometry:
 @dataclass
 class ObservationBatch:
     """TRAKM + MENO output for m observations: ``values`` (m,) bias-free predicted values
-    (km, km/s, rad), ``H`` (m, nx + n_labels), ``R`` (m, m) = diag(sigma^2), and
-    ``elevation_deg`` (m,) the lowest elevation of the participating stations (nan for
-    spacecraft-based kinds; negative = below the horizon, for the caller to report or skip)."""
+    (km, km/s, rad), ``H`` (m, nx + n_labels), ``sigma`` (m,) white-noise 1σ with
+    ``R`` (m, m) = diag(sigma^2), and ``elevation_deg`` (m,) the lowest elevation of the
+    participating stations (nan for spacecraft-based kinds; negative = below the horizon,
+    for the caller to report or skip)."""
 
     values: np.ndarray
     H: np.ndarray
-    R: np.ndarray
+    sigma: np.ndarray
     elevation_deg: np.ndarray
+
+    @property
+    def R(self) -> np.ndarray:
+        """MENO: the diagonal measurement-noise covariance (m, m)."""
+        return np.diag(self.sigma * self.sigma)
 
 
 # --- kernels ------------------------------------------------------------------------
@@ -400,30 +406,35 @@ def observation_matrix_many(
 
     packed: dict[int, np.ndarray] = {}
     x = np.empty((m, _N_IN))
-    groups: dict[str, list[int]] = {}
-    body_rows: list[int] = []
+    sig_rows: dict[tuple[str, tuple[str, ...]], list[int]] = {}  # rows by observation signature
     for i, (ob, geometry) in enumerate(items):
         base = packed.get(id(geometry))
         if base is None:
             base = packed[id(geometry)] = _pack(geometry)
         x[i] = base
-        groups.setdefault(ob.kind, []).append(i)
-        for slot, name in enumerate(ob.stations):
+        sig_rows.setdefault((ob.kind, ob.stations), []).append(i)
+    groups: dict[str, list[int]] = {}
+    body_rows: list[int] = []
+    for (kind, obs_st), rows in sig_rows.items():
+        groups.setdefault(kind, []).extend(rows)
+        for slot, name in enumerate(obs_st):
             st = stations.get(name)
             if st is None:
                 raise KeyError(
-                    f"observation {i} ({ob.kind}): station {name!r} unknown; known: {', '.join(names)}"
+                    f"observation {rows[0]} ({kind}): station {name!r} unknown; known: {', '.join(names)}"
                 )
             i0 = _I_ST1 if slot == 0 else _I_ST2
-            x[i, i0:i0 + 3] = (st.radius_km, st.latitude_rad, st.longitude_rad)
-        if not ob.stations:
-            body_rows.append(i)
-            if geometry.body_r is None:
-                raise ValueError(f"observation {i} ({ob.kind}) needs Geometry.body_r")
-            if ob.kind == "planet_diameter" and geometry.body_radius_km is None:
-                raise ValueError(f"observation {i} (planet_diameter) needs Geometry.body_radius_km")
-            if ob.kind == "star_planet_angle" and geometry.star_unit is None:
-                raise ValueError(f"observation {i} (star_planet_angle) needs Geometry.star_unit")
+            x[rows, i0:i0 + 3] = (st.radius_km, st.latitude_rad, st.longitude_rad)
+        if not obs_st:
+            body_rows.extend(rows)
+            for i in rows:
+                geometry = items[i][1]
+                if geometry.body_r is None:
+                    raise ValueError(f"observation {i} ({kind}) needs Geometry.body_r")
+                if kind == "planet_diameter" and geometry.body_radius_km is None:
+                    raise ValueError(f"observation {i} (planet_diameter) needs Geometry.body_radius_km")
+                if kind == "star_planet_angle" and geometry.star_unit is None:
+                    raise ValueError(f"observation {i} (star_planet_angle) needs Geometry.star_unit")
 
     out = np.ones((m, _N_OUT + 1))  # last column: the constant 1.0 of the bias partials
     for kind, rows in groups.items():
@@ -435,10 +446,11 @@ def observation_matrix_many(
 
     H = np.zeros((m, n))
     H[:, :6] = out[:, _O_H:_O_H + 6]
-    for i, (ob, _) in enumerate(items):
-        src, col, coef = _columns(labels, names, ob.kind, ob.stations)
+    for (kind, obs_st), rows in sig_rows.items():  # one column map per signature
+        src, col, coef = _columns(labels, names, kind, obs_st)
         if col.size:  # columns are distinct within one observation (distinct stations)
-            H[i, nx + col] += coef * out[i, src]
+            r = np.asarray(rows)
+            H[r[:, None], nx + col[None, :]] += coef[None, :] * out[r[:, None], src[None, :]]
     for i in body_rows:  # ephemeris parameters through the target body's position (eqs. 35, 39)
         partials = items[i][1].body_r_partials
         if partials:
@@ -450,4 +462,4 @@ def observation_matrix_many(
         elev = np.degrees(np.fmin(out[:, _O_EL], out[:, _O_EL + 1]))  # nan-aware minimum
     elev[body_rows] = np.nan
     sigma = np.array([ob.sigma for ob, _ in items], dtype=np.float64)
-    return ObservationBatch(values=out[:, 0].copy(), H=H, R=np.diag(sigma * sigma), elevation_deg=elev)
+    return ObservationBatch(values=out[:, 0].copy(), H=H, sigma=sigma, elevation_deg=elev)

@@ -65,92 +65,70 @@ def _ephemeris_states(study: Study, ref: Reference, ks: list[int], bodies: list[
 def assemble_measurements(study: Study, ref: Reference, m_pad: int = 4) -> MeasurementSet:
     """TRAKM + MENO over the schedule: the observation matrices of every measurement event.
 
-    All observations of the study are evaluated together: one jitted, vmapped kernel call
-    per measurement type (trakm's packed kernels), then scattered into H[k] by schedule
-    index.  Skipped observations (below ``min_elevation_deg``) are counted per entry.
+    One :class:`trakm.Geometry` per measurement time, all observations of the study in one
+    :func:`trakm.observation_matrix_many` call (one vmapped kernel dispatch per type), then
+    the rows are scattered into H[k] by schedule index.  Skipped observations (below
+    ``min_elevation_deg``) are counted per tracking entry.
     """
     sched = study.schedule
     K, n, nx = sched.n, study.layout.n, study.nx
     pairs = [(k, j) for k in range(K) for j in sched.tracking[k]]
-    skipped: dict[int, int] = {}
-    records: list[MeasurementRecord] = []
+    eye = np.broadcast_to(np.eye(m_pad), (K, m_pad, m_pad))
     if not pairs:
-        return MeasurementSet(np.zeros((K, m_pad, n)), np.broadcast_to(np.eye(m_pad), (K, m_pad, m_pad)).copy(),
-                              np.broadcast_to(np.eye(m_pad), (K, m_pad, m_pad)).copy(), [], {})
+        return MeasurementSet(np.zeros((K, m_pad, n)), eye.copy(), eye.copy(), [], {})
     ks = sorted({k for k, _ in pairs})
-    kpos = {k: i for i, k in enumerate(ks)}
     body_names = sorted({t.body for t in study.deck.tracking if t.body})
     bodies = sorted(set(ref.primary[k] for k in ks) | {"earth"} | set(body_names))
     pos, vel = _ephemeris_states(study, ref, ks, bodies)
     bi = {b: i for i, b in enumerate(bodies)}
-    T = trakm
-    x = np.zeros((len(pairs), T._N_IN))
-    pk = np.array([k for k, _ in pairs])
-    pj = np.array([j for _, j in pairs])
-    pa = np.array([kpos[k] for k in pk])
-    prim = np.array([bi[ref.primary[k]] for k in pk])
-    o_r, o_v = pos[pa, prim], vel[pa, prim]
-    x[:, T._I_ET] = study.problem.epoch_et_s + ref.times_s[pk]
-    x[:, T._I_SC:T._I_SC + 6] = ref.states[pk, :6]
-    x[:, T._I_E:T._I_E + 3] = pos[pa, bi["earth"]] - o_r
-    x[:, T._I_E + 3:T._I_E + 6] = vel[pa, bi["earth"]] - o_v
+    stars = {}
     for j, t in enumerate(study.deck.tracking):
-        rows = pj == j
-        if not rows.any():
-            continue
-        for slot, name in enumerate(t.stations):
-            st = study.stations[name]
-            i0 = T._I_ST1 if slot == 0 else T._I_ST2
-            x[rows, i0:i0 + 3] = (st.radius_km, st.latitude_rad, st.longitude_rad)
-        if t.body:
-            x[rows, T._I_BODY:T._I_BODY + 3] = pos[pa[rows], bi[t.body]] - o_r[rows]
-            x[rows, T._I_RP] = BODIES[t.body].radius_km
         if t.type == "star_planet_angle":
             ra, de = math.radians(t.star_ra_deg), math.radians(t.star_dec_deg)
-            x[rows, T._I_STAR:T._I_STAR + 3] = (math.cos(de) * math.cos(ra), math.cos(de) * math.sin(ra), math.sin(de))
-    out = np.ones((len(pairs), T._N_OUT + 1))
-    groups: dict[str, list[int]] = {}
-    for i, (_, j) in enumerate(pairs):
-        groups.setdefault(study.deck.tracking[j].type, []).append(i)
-    for kind, rows in groups.items():
-        b = T._bucket(len(rows))
-        xk = np.empty((b, T._N_IN))
-        xk[: len(rows)] = x[rows]
-        xk[len(rows):] = x[rows[0]]
-        out[rows, : T._N_OUT] = np.asarray(T._batch_kernel(kind)(xk))[: len(rows)]
-    labels = tuple(study.labels)
-    names = tuple(sorted(study.stations))
-    T._label_table(labels, names)
-    with np.errstate(invalid="ignore"):
-        elev = np.degrees(np.fmin(out[:, T._O_EL], out[:, T._O_EL + 1]))
-    per_k: dict[int, list[int]] = {}
-    for i, (k, j) in enumerate(pairs):
+            stars[j] = np.array([math.cos(de) * math.cos(ra), math.cos(de) * math.sin(ra), math.sin(de)])
+    geos: dict[tuple[int, str | None], trakm.Geometry] = {}
+    items = []
+    for k, j in pairs:
         t = study.deck.tracking[j]
-        e = float(elev[i]) if study.observations[j].stations else float("nan")
+        key = (k, t.body)
+        geo = geos.get(key)
+        if geo is None:
+            a, p = ks.index(k), bi[ref.primary[k]]
+            o_r, o_v = pos[a, p], vel[a, p]
+            x = ref.states[k]
+            geo = geos[key] = trakm.Geometry(
+                et_s=float(study.problem.epoch_et_s + ref.times_s[k]), sc_r=x[:3], sc_v=x[3:6],
+                earth_r=pos[a, bi["earth"]] - o_r, earth_v=vel[a, bi["earth"]] - o_v,
+                body_r=None if t.body is None else pos[a, bi[t.body]] - o_r,
+                body_v=None if t.body is None else vel[a, bi[t.body]] - o_v,
+                body_radius_km=None if t.body is None else BODIES[t.body].radius_km,
+                star_unit=stars.get(j))
+        items.append((study.observations[j], geo))
+    batch = trakm.observation_matrix_many(items, study.stations, study.labels, nx)
+
+    skipped: dict[int, int] = {}
+    records: list[MeasurementRecord] = []
+    per_k: dict[int, int] = {}
+    for i, (k, j) in enumerate(pairs):
+        e = float(batch.elevation_deg[i])
         used = not (np.isfinite(e) and e < study.min_elevation_deg)
-        rec = MeasurementRecord(k, j, t.type, tuple(t.stations), float(out[i, 0]), e, used, study.observations[j].sigma)
-        records.append(rec)
+        rec = MeasurementRecord(k, j, study.deck.tracking[j].type, study.observations[j].stations,
+                                float(batch.values[i]), e, used, float(batch.sigma[i]))
         if used:
-            rec.row = len(per_k.setdefault(k, []))
-            per_k[k].append(i)
+            rec.row = per_k.get(k, 0)
+            per_k[k] = rec.row + 1
         else:
             skipped[j] = skipped.get(j, 0) + 1
-    m = max([len(v) for v in per_k.values()] + [1])
-    m = int(math.ceil(m / m_pad) * m_pad)
+        records.append(rec)
+    m = int(math.ceil(max(list(per_k.values()) + [1]) / m_pad) * m_pad)
     H = np.zeros((K, m, n))
     Ra = np.broadcast_to(np.eye(m), (K, m, m)).copy()
     Rt = Ra.copy()
-    used_i = np.array([i for i, r in enumerate(records) if r.used], dtype=np.intp)
-    rows_of = np.array([r.row for r in records])
-    for j, t in enumerate(study.deck.tracking):  # scatter per tracking entry (one column map each)
-        ii = used_i[pj[used_i] == j]
-        if ii.size == 0:
-            continue
-        kk, rr = pk[ii], rows_of[ii]
-        H[kk, rr, :6] = out[ii, T._O_H:T._O_H + 6]
-        src, col, coef = T._columns(labels, names, t.type, tuple(t.stations))
-        if col.size:
-            H[kk[:, None], rr[:, None], nx + col[None, :]] += coef[None, :] * out[ii[:, None], src[None, :]]
-        Ra[kk, rr, rr] = study.observations[j].sigma ** 2
-        Rt[kk, rr, rr] = study.true_sigma[j] ** 2
+    ii = np.array([i for i, r in enumerate(records) if r.used], dtype=np.intp)
+    kk = np.array([records[i].k for i in ii], dtype=np.intp)
+    rr = np.array([records[i].row for i in ii], dtype=np.intp)
+    jj = np.array([records[i].tracking for i in ii], dtype=np.intp)
+    H[kk, rr] = batch.H[ii]
+    Ra[kk, rr, rr] = batch.sigma[ii] ** 2
+    Rt[kk, rr, rr] = study.true_sigma[jj] ** 2
     return MeasurementSet(H, Ra, Rt, records, skipped)

@@ -84,8 +84,9 @@ class TeamResult:
 
 # ------------------------------------------------------------------- event inputs (numpy)
 def theta_columns(study: Study, ref: Reference) -> np.ndarray:
-    """Θ (K, nx, np) in the study's augmented column order (zero for non-dynamic labels)."""
-    K, nx = study.schedule.n, study.nx
+    """Θ (K, nx, np) of ``ref``'s K intervals in the study's augmented column order (zero for
+    non-dynamic labels)."""
+    K, nx = ref.phi.shape[0], study.nx
     th = np.zeros((K, nx, len(study.labels)))
     col = {lab: i for i, lab in enumerate(ref.labels)}
     for j, lab in enumerate(study.labels):
@@ -95,8 +96,8 @@ def theta_columns(study: Study, ref: Reference) -> np.ndarray:
 
 
 def augmented_transitions(study: Study, ref: Reference) -> np.ndarray:
-    """PTRAN/PROP eq. 3 for every interval: (K, n, n)."""
-    K, nx, n = study.schedule.n, study.nx, study.layout.n
+    """PTRAN/PROP eq. 3 for every interval of ``ref``: (K, n, n)."""
+    K, nx, n = ref.phi.shape[0], study.nx, study.layout.n
     out = np.broadcast_to(np.eye(n), (K, n, n)).copy()
     out[:, :nx, :nx] = ref.phi[:, :nx, :nx]
     out[:, :nx, nx:] = theta_columns(study, ref)

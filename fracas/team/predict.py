@@ -56,16 +56,8 @@ def predict_from(res, k: int, t_to: float):
         bodies = pr.model.bodies
         prim = [bodies[int(i)] for i in np.asarray(traj.primary)]
         sub = Reference(t_out, np.array(traj.x), prim, phi, theta, labels, "prediction")
-    # augmented transitions and noise for the pieces (reuse the schedule-based helpers)
-    saved = study.schedule
-    try:
-        from fracas.team.schedule import Schedule
-
-        study.schedule = Schedule(t_out, [["prediction"]] * len(t_out), [[]] * len(t_out))
-        phis = augmented_transitions(study, sub)
-        Qa, Qt = interval_noise(study, t_out, sub.states, prim, phi)
-    finally:
-        study.schedule = saved
+    phis = augmented_transitions(study, sub)
+    Qa, Qt = interval_noise(study, t_out, sub.states, prim, phi)
     n = study.layout.n  # PDOT's noise states (appended last) are dropped: DYNO's Q̃ stands for them
     Pa = res.Pa_plus[k][:n, :n]
     Pt = res.Pt_plus[k][:n, :n] if res.Pt_plus is not None else None

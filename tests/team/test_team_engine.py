@@ -518,3 +518,37 @@ def test_results_file_numeric_datasets_have_units(punched):
 def test_results_file_every_dataset_has_units(punched):
     found = _datasets(punched[1])
     assert [k for k, a in found.items() if "units" not in a] == []
+
+
+# ----------------------------------------------------------------------------- prediction events
+def test_prediction_equals_the_propagated_covariance(base):
+    """PRED against the engine's own time updates: without thrust noise (so DYNO's
+    interval-length dependence plays no part) and with no measurements after 3 d, the
+    knowledge predicted from 3 d to 5 d must equal the covariance the run itself reaches at
+    a propagation event at 5 d.  Two branches: (1) 5 d on the schedule -> the stored
+    transitions are composed: the same products in another grouping, rounding only (1e-10);
+    (2) 5 d not on the schedule -> fresh integration from the stored 3 d state across the
+    3.5 d thrust switch: differs from the schedule's chained steps by integration truncation
+    only, measured ~1e-9 for other output breaks (STM-file tests), so 1e-7."""
+    _, ref, _ = base
+    d = small_dict()
+    del d["thrust_noise"]
+    d["filter"]["stop_days"] = 6.0  # the run must reach 5 d for the comparison
+    off = run_study(*_study_ref(d))  # 5 d not a schedule time: integrated branch
+    d["event"].append({"type": "propagation", "times_days": [5.0]})
+    st, rf = _study_ref(d)
+    on = run_study(st, rf)  # 5 d on the schedule: composed branch
+    k5 = int(np.argmin(np.abs(on.times_s - 5.0 * 86400.0)))
+    assert abs(on.times_s[k5] - 5.0 * 86400.0) < 1e-6
+    for res, tol in ((on, 1e-10), (off, 1e-7)):
+        (k, lst), = res.predictions.items()
+        (t_to, Pa, Pt), = lst
+        assert t_to == 5.0 * 86400.0
+        print(f"prediction vs run ({tol:g} branch): {scaled_diff(Pa, on.Pa_plus[k5]):.2e}")
+        assert scaled_diff(Pa, on.Pa_plus[k5]) < tol
+        assert scaled_diff(Pt, on.Pt_plus[k5]) < tol
+
+
+def _study_ref(d):
+    st = study_of(d)
+    return st, integrate_reference(st)

@@ -152,7 +152,7 @@ def print_team(res, path: Path | None, source: str, console=None) -> None:
         con.print(f"[yellow]below {st.min_elevation_deg:g} deg elevation, skipped:[/yellow] " + escape("; ".join(parts)))
     for k, e, which, val in res.psd_problems[:5]:
         con.print(f"[red]warning:[/red] {which} covariance not positive semi-definite at t = "
-                  f"{res.times_s[k] / DAY_S:.6g} d ({e} event), smallest normalized eigenvalue {val:.3g}")
+                  f"{res.times_s[k] / DAY_S:.6g} d ({e} event), smallest eigenvalue {val:.3g} (mixed units)")
     if path is not None:
         con.print(escape(f"written: {path}"))
 

@@ -552,3 +552,19 @@ def test_prediction_equals_the_propagated_covariance(base):
 def _study_ref(d):
     st = study_of(d)
     return st, integrate_reference(st)
+
+
+def test_psd_problems_names_the_events(base):
+    """Loss of definiteness is reported with its schedule index and event: a history with one
+    indefinite covariance (a correlation of 1.01, caught by the scale-free test) and one
+    negative variance is flagged exactly there, the healthy events are not."""
+    from fracas.team.engine import psd_problems
+
+    study, _, res = base
+    P = res.Pa_plus.copy()
+    i, j = 0, 3
+    P[2, i, j] = P[2, j, i] = 1.01 * np.sqrt(P[2, i, i] * P[2, j, j])
+    P[5, 1, 1] = -1e-3 * P[5, 1, 1]
+    bad = psd_problems(study, P, "assumed")
+    assert [b[0] for b in bad] == [2, 5] and all(b[2] == "assumed" for b in bad)
+    assert bad[0][1] == study.schedule.primary_type(2)

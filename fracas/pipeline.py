@@ -116,14 +116,17 @@ def load_team(deck_path: str | Path):
     return build_study(deck, punched)
 
 
-def build_stm(deck_path: str | Path, output: str | Path | None = None, on_stage: Stage | None = None):
-    """``fracas stm build``: integrate the study's reference once and write the STM file (STMGEN)."""
+def build_stm(deck_path: str | Path, output: str | Path | None = None, on_stage: Stage | None = None, study=None):
+    """``fracas stm build``: integrate the study's reference once and write the STM file (STMGEN).
+
+    ``study``: the deck's already-built study (``run_team`` with ``errcon.build_stm``)."""
     from fracas.io.stm_file import write_stm_file
     from fracas.team.reference import build_stm_data
 
     say = on_stage or (lambda _text: None)
-    say("reading the deck")
-    study = load_team(deck_path)
+    if study is None:
+        say("reading the deck")
+        study = load_team(deck_path)
     if output is None:
         if not study.deck.errcon.stm_file:
             output = Path("stm_files") / f"{Path(deck_path).stem}.h5"
@@ -160,9 +163,8 @@ def run_team(
     stm_path = Path(stm) if stm is not None else (study.deck.resolve(ec.stm_file) if ec.stm_file else None)
     t1 = time.perf_counter()
     if ec.build_stm and stm is None:
-        path, _ = build_stm(deck_path, stm_path, on_stage)
-        stm_path = path
-    if stm_path is not None and (stm is not None or ec.stm_file):
+        stm_path, _ = build_stm(deck_path, stm_path, on_stage, study=study)
+    if stm_path is not None:
         if not stm_path.exists():
             from fracas.errors import StmFileError
 

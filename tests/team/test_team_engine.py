@@ -568,3 +568,17 @@ def test_psd_problems_names_the_events(base):
     bad = psd_problems(study, P, "assumed")
     assert [b[0] for b in bad] == [2, 5] and all(b[2] == "assumed" for b in bad)
     assert bad[0][1] == study.schedule.primary_type(2)
+
+
+def test_run_builds_its_stm_file_when_asked(base, tmp_mod):
+    """errcon.build_stm = true: run_team writes the STM file first and then reads the study
+    from it (the reference source names the file); the result equals the in-line run to the
+    file-vs-in-line tolerance of test (a) (1e-8)."""
+    _, _, res0 = base
+    d = small_dict()
+    stm = tmp_mod / "built_by_run.h5"
+    d["errcon"] = {"build_stm": True, "stm_file": str(stm)}
+    deck = write_deck(d, tmp_mod / "build_and_run.toml")
+    res, _, source = run_team(deck, output=tmp_mod / "build_and_run.h5")
+    assert stm.exists() and source == str(stm)
+    assert scaled_diff(res.Pa_plus, res0.Pa_plus) < 1e-8

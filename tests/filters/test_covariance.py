@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import jax.numpy as jnp
 
+from tests.filters.helpers import f64, random_cov, scaled_err
 from fracas.filters.covariance import (
     PSD_TOLERANCE,
     Layout,
@@ -47,20 +47,6 @@ CASES = [
 
 
 # ----------------------------------------------------------------------------- helpers
-def f64(a):
-    return jnp.asarray(a, dtype=jnp.float64)
-
-
-def random_cov(rng, n, scales=None):
-    """Random SPD matrix with correlations everywhere and condition number ~1e2."""
-    B = rng.normal(size=(n, n))
-    C = B @ B.T + 0.5 * n * np.eye(n)
-    d = np.sqrt(np.diag(C))
-    C = C / np.outer(d, d)
-    s = np.ones(n) if scales is None else scales
-    return C * np.outer(s, s)
-
-
 def random_problem(rng, L, m):
     n = L.n
     scales = 10.0 ** rng.uniform(-1.5, 1.5, size=n)  # mixed units, 3 decades
@@ -81,13 +67,6 @@ def blocks(P, L):
 
 def assemble(b, L):
     return np.block([[b[a + c] for c in ROLES] for a in ROLES])
-
-
-def scaled_err(P1, P2, ref):
-    """max |P1 - P2| in the scale-free metric D^-1/2 (.) D^-1/2, D = diag(ref)."""
-    d = np.sqrt(np.abs(np.diag(ref)))
-    d = np.where(d > 0, d, 1.0)
-    return np.max(np.abs(np.asarray(P1) - np.asarray(P2)) / np.outer(d, d))
 
 
 # ------------------------------------------------------------- literal block equations

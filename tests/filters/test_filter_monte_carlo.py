@@ -26,6 +26,7 @@ import jax.numpy as jnp
 from scipy.linalg import expm
 from scipy.stats import chi2
 
+from tests.filters.helpers import f64, random_cov
 from fracas.filters.covariance import (
     Layout,
     augmented_transition,
@@ -40,17 +41,6 @@ N_RUNS = 4000
 N_EPOCHS = 20
 M_MEAS = 2
 CONF = 0.999
-
-
-def f64(a):
-    return jnp.asarray(a, dtype=jnp.float64)
-
-
-def random_cov(rng, n, scale=1.0):
-    B = rng.normal(size=(n, n))
-    C = B @ B.T + 0.5 * n * np.eye(n)
-    d = np.sqrt(np.diag(C))
-    return scale**2 * C / np.outer(d, d)
 
 
 def linear_system(rng, L):

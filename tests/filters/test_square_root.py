@@ -11,8 +11,8 @@ bound 1e-10 after a dozen mixed updates leaves room for accumulation while any a
 from __future__ import annotations
 
 import numpy as np
-import jax.numpy as jnp
 
+from tests.filters.helpers import f64, random_cov, scaled_err
 from fracas.filters.covariance import (
     Layout,
     augmented_transition,
@@ -31,25 +31,6 @@ from fracas.filters.square_root import (
 )
 
 TOL = 1e-10
-
-
-def f64(a):
-    return jnp.asarray(a, dtype=jnp.float64)
-
-
-def random_cov(rng, n, scales=None):
-    B = rng.normal(size=(n, n))
-    C = B @ B.T + 0.5 * n * np.eye(n)
-    d = np.sqrt(np.diag(C))
-    C = C / np.outer(d, d)
-    s = np.ones(n) if scales is None else scales
-    return C * np.outer(s, s)
-
-
-def scaled_err(P1, P2, ref):
-    d = np.sqrt(np.abs(np.diag(np.asarray(ref))))
-    d = np.where(d > 0, d, 1.0)
-    return np.max(np.abs(np.asarray(P1) - np.asarray(P2)) / np.outer(d, d))
 
 
 def test_factor_of_semidefinite_covariance():

@@ -247,6 +247,13 @@ def build_study(deck: TeamDeck, punched: dict | None = None) -> Study:
         ts = np.array(e.times(), dtype=np.float64) * DAY_S
         if np.any(ts > dur):
             raise _err(src, f"event[{k}]", None, f"times must be within the trajectory (<= {dur / DAY_S:g} d)")
+        if e.predict_to_days is not None:
+            if e.predict_to_days * DAY_S > dur:
+                raise _err(src, f"event[{k}].predict_to_days", e.predict_to_days,
+                           f"must be within the trajectory (<= {dur / DAY_S:g} d, its ephemeris and thrust plan)")
+            if np.any(ts >= e.predict_to_days * DAY_S):
+                raise _err(src, f"event[{k}].predict_to_days", e.predict_to_days,
+                           "must be after every time of the prediction event")
         events.append((e.type, ts, None if e.predict_to_days is None else e.predict_to_days * DAY_S))
     switches = []
     for arc in tdeck.thrust_arc:

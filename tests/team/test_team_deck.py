@@ -193,3 +193,14 @@ def test_cli_refuses_bad_deck(name, expected):
     assert len(lines) == 1 and lines[0].startswith(f"fracas: error: {path}: ") and expected in lines[0], res.stderr
     assert "Traceback" not in res.output
     assert isinstance(res.exception, SystemExit)  # the CLI's own exit, not an escaped exception
+
+
+@pytest.mark.parametrize("predict_to, expected", [
+    (99.0, "event[1].predict_to_days = 99.0: must be within the trajectory (<= 6 d"),
+    (2.0, "event[1].predict_to_days = 2.0: must be after every time of the prediction event"),
+])
+def test_prediction_target_checked(predict_to, expected):
+    """A prediction beyond the trajectory (no ephemeris or thrust plan there) or before its
+    own event time is refused in one line naming the field."""
+    text = small_text().replace("predict_to_days = 5.0", f"predict_to_days = {predict_to}")
+    assert expected in refusal(text, build=True)

@@ -156,9 +156,12 @@ def interval_noise(study: Study, t: np.ndarray, states: np.ndarray, primary: lis
     h = noise_partials(study, t_nodes, x_nodes, p_nodes)
     h0, h1 = h[: K - 1], h[K - 1:]
     ph = phi[1:, :nx, :nx]
+    m, mp = K - 1, _bucket(K - 1)  # pad to a bucket: schedules of similar length share one compile
+    pad = lambda a: np.concatenate([a, np.zeros((mp - m,) + a.shape[1:])]) if mp > m else a  # noqa: E731
+    args = (pad(ph), pad(h0), pad(h1))
     out = []
     for sig, tau in ((study.noise_sigma_assumed, study.noise_tau_assumed), (study.noise_sigma_true, study.noise_tau_true)):
-        q = np.asarray(_dyno_batch(ph, h0, h1, jnp.asarray(sig), jnp.asarray(tau), jnp.asarray(dt)))
+        q = np.asarray(_dyno_batch(*args, jnp.asarray(sig), jnp.asarray(tau), jnp.asarray(pad(dt))))[:m]
         out.append(np.concatenate([zeros[:1], q]))
     return out[0], out[1]
 

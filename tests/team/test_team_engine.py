@@ -561,6 +561,11 @@ def test_psd_problems_names_the_events(base):
     from fracas.team.engine import psd_problems
 
     study, _, res = base
+    from fracas.filters.covariance import psd_check
+
+    # the healthy history takes the Cholesky fast path; psd_check agrees event by event
+    assert psd_problems(study, res.Pa_plus, "assumed") == []
+    assert all(bool(psd_check(p)[1]) for p in res.Pa_plus)
     P = res.Pa_plus.copy()
     i, j = 0, 3
     P[2, i, j] = P[2, j, i] = 1.01 * np.sqrt(P[2, i, i] * P[2, j, j])

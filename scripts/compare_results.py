@@ -1,0 +1,151 @@
+"""Regression check of the example studies: run them, then compare two sets of files.
+
+    python scripts/compare_results.py run OUTDIR          # every bundled study -> OUTDIR/*.h5
+    python scripts/compare_results.py compare OLD NEW     # dataset by dataset, 1e-12 relative
+
+``run`` drives the command line on the bundled decks (propagations, both TEAM studies, the
+Mercury study through its STM file, the small test study in PHI and PDOT form); ``compare``
+walks every HDF5 file present in OLD, and reports for each numeric dataset the largest
+difference relative to the dataset's largest magnitude (NaNs must sit in the same places),
+every string dataset or attribute that differs, and datasets present on one side only.
+Provenance (times, versions, host) is skipped: it is meant to differ.  Exit 1 if anything
+differs by more than ``--rtol`` (default 1e-12: "identical, or within 1e-12 relative where
+the order of arithmetic had to change").
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+SKIP = re.compile(r"(^|/)provenance(/|$)")
+
+
+def _fracas(*args: str) -> None:
+    cmd = [sys.executable, "-m", "fracas.cli", *args]
+    r = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise SystemExit(f"failed ({r.returncode}): {' '.join(args)}\n{r.stderr}")
+    print(r.stdout.strip().splitlines()[-1] if r.stdout.strip() else " ".join(args))
+
+
+def run(out: Path) -> None:
+    out = out.resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    for deck in ("leo_j2", "earth_mars_sep", "near_earth_spiral", "mercury_approach_traj"):
+        _fracas("propagate", f"namelists/{deck}.toml", "-o", str(out / f"{deck}.h5"), "--json")
+    _fracas("run", "namelists/earth_mars_team.toml", "-o", str(out / "earth_mars_team.h5"), "--quiet")
+    _fracas("stm", "build", "namelists/mercury_approach_team.toml", "-o", str(out / "mercury_approach_stm.h5"))
+    _fracas("run", "namelists/mercury_approach_team.toml", "--stm", str(out / "mercury_approach_stm.h5"),
+            "-o", str(out / "mercury_approach_team.h5"), "--quiet")
+    _fracas("run", "tests/data/team_small.toml", "-o", str(out / "team_small.h5"), "--quiet")
+    # the same small study with PDOT time updates (a deck variant beside the original)
+    src = (ROOT / "tests/data/team_small.toml").read_text(encoding="utf-8")
+    with tempfile.TemporaryDirectory(dir=ROOT / "tests/data") as tmp:
+        deck = Path(tmp) / "team_small_pdot.toml"
+        text = src.replace('deck = "team_small_traj.toml"', f'deck = "{ROOT / "tests/data/team_small_traj.toml"}"')
+        text = re.sub(r"(?m)^\[punch\][^\[]*", "", text)
+        deck.write_text(text + '\n[errcon]\npropagation = "pdot"\n', encoding="utf-8")
+        _fracas("run", str(deck), "-o", str(out / "team_small_pdot.h5"), "--quiet")
+
+
+def _items(f: h5py.File) -> dict[str, object]:
+    out: dict[str, object] = {}
+
+    def visit(name: str, obj) -> None:
+        if SKIP.search(name):
+            return
+        for k, v in obj.attrs.items():
+            out[f"{name}@{k}"] = v
+        if isinstance(obj, h5py.Dataset):
+            out[name] = obj[()]
+
+    for k, v in f.attrs.items():
+        out[f"@{k}"] = v
+    f.visititems(visit)
+    return out
+
+
+def _numeric(v) -> np.ndarray | None:
+    a = np.asarray(v)
+    return a if a.dtype.kind in "fiub" else None
+
+
+def compare_file(a: Path, b: Path, rtol: float) -> list[str]:
+    with h5py.File(a, "r") as fa, h5py.File(b, "r") as fb:
+        ia, ib = _items(fa), _items(fb)
+    bad = [f"{k}: only in {a.name if k in ia else b.name} ({'old' if k in ia else 'new'})"
+           for k in sorted(set(ia) ^ set(ib))]
+    worst = 0.0
+    for k in sorted(set(ia) & set(ib)):
+        if k.endswith(("@fracas_version", "@written_utc", "@created_utc")):
+            continue
+        x, y = _numeric(ia[k]), _numeric(ib[k])
+        if x is None or y is None:
+            if not (np.asarray(ia[k]).shape == np.asarray(ib[k]).shape and np.all(np.asarray(ia[k]) == np.asarray(ib[k]))):
+                bad.append(f"{k}: {str(ia[k])[:60]!r} != {str(ib[k])[:60]!r}")
+            continue
+        if x.shape != y.shape:
+            bad.append(f"{k}: shape {x.shape} != {y.shape}")
+            continue
+        x, y = x.astype(np.float64), y.astype(np.float64)
+        if not np.array_equal(np.isnan(x), np.isnan(y)):
+            bad.append(f"{k}: NaNs in different places")
+            continue
+        ok = ~np.isnan(x)
+        if not ok.any():
+            continue
+        scale = max(float(np.max(np.abs(x[ok]))), 1e-300)
+        d = float(np.max(np.abs(x[ok] - y[ok]))) / scale
+        worst = max(worst, d)
+        if d > rtol:
+            bad.append(f"{k}: max |diff| / max |value| = {d:.3e} > {rtol:g}")
+    print(f"{a.name:32s} {len(ia):5d} items   largest relative difference {worst:.2e}   "
+          f"{'OK' if not bad else f'{len(bad)} DIFFER'}")
+    return bad
+
+
+def compare(old: Path, new: Path, rtol: float) -> int:
+    files = sorted(old.glob("*.h5"))
+    if not files:
+        raise SystemExit(f"{old}: no .h5 files")
+    n_bad = 0
+    for a in files:
+        b = new / a.name
+        if not b.exists():
+            print(f"{a.name}: missing in {new}")
+            n_bad += 1
+            continue
+        for line in compare_file(a, b, rtol):
+            print("    " + line)
+            n_bad += 1
+    print("identical within" if n_bad == 0 else "DIFFERENCES above", f"rtol {rtol:g}")
+    return 1 if n_bad else 0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run")
+    r.add_argument("out", type=Path)
+    c = sub.add_parser("compare")
+    c.add_argument("old", type=Path)
+    c.add_argument("new", type=Path)
+    c.add_argument("--rtol", type=float, default=1e-12)
+    a = ap.parse_args()
+    if a.cmd == "run":
+        run(a.out)
+    else:
+        sys.exit(compare(a.old, a.new, a.rtol))
+
+
+if __name__ == "__main__":
+    main()

@@ -33,7 +33,7 @@ from fracas.config.team import TeamDeck, load_team_deck  # noqa: E402
 from fracas.io.stm_file import write_stm_file  # noqa: E402
 from fracas.team.engine import run_study  # noqa: E402
 from fracas.team.reference import build_stm_data, integrate_reference, reference_from_stm  # noqa: E402
-from fracas.team.setup import build_study  # noqa: E402
+from fracas.build.team import build_study  # noqa: E402
 
 DECK = ROOT / "namelists" / "mercury_approach_team.toml"
 

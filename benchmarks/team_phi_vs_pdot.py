@@ -30,7 +30,7 @@ from fracas.config.team import parse_team_deck  # noqa: E402
 from fracas.team.eigen import eigen_summary  # noqa: E402
 from fracas.team.engine import run_study  # noqa: E402
 from fracas.team.reference import integrate_reference  # noqa: E402
-from fracas.team.setup import build_study  # noqa: E402
+from fracas.build.team import build_study  # noqa: E402
 
 DECK = ROOT / "namelists" / "mercury_approach_team.toml"
 

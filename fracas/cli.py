@@ -62,9 +62,25 @@ def _progress(enabled: bool):
         yield lambda text: status.update(f"{text} ...")
 
 
+def _host_devices(ctx: click.Context, _param, value: int | None) -> int | None:
+    """Choose the XLA host-device count before anything imports jax (the command line's
+    default stays one device per core, so batches shard over the machine's cores)."""
+    import os
+
+    if value is not None:
+        os.environ["FRACAS_HOST_DEVICES"] = str(value)
+    elif not os.environ.get("FRACAS_HOST_DEVICES") and "xla_force_host_platform_device_count" not in os.environ.get(
+            "XLA_FLAGS", ""):
+        os.environ["FRACAS_HOST_DEVICES"] = str(os.cpu_count() or 1)
+    return value
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, "--version", prog_name="fracas", message="%(prog)s %(version)s")
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
+@click.option("--host-devices", type=click.IntRange(1, 1024), default=None, callback=_host_devices, expose_value=False,
+              is_eager=True, help="XLA host devices for batched work (default: one per CPU core; "
+              "env FRACAS_HOST_DEVICES).")
 @click.pass_context
 def main(ctx: click.Context, debug: bool) -> None:
     """fracas: low-thrust mission analysis (TOM, TEAM, TSIM) on an Encke/Nystrom core."""
@@ -87,8 +103,11 @@ def propagate(ctx: click.Context, deck: Path, output: Path | None, as_json: bool
         from fracas.errors import NumericalError
         from fracas.pipeline import propagate_deck
 
+        from fracas.io.trajectory_file import read_trajectory_file
+
         with _progress(True) as stage:
-            data, path = propagate_deck(deck, output, on_stage=stage)
+            _, path = propagate_deck(deck, output, on_stage=stage)
+            data = read_trajectory_file(path)  # the report reads the file it describes
             if plot is not None:
                 stage("plotting")
                 from fracas.report.trajectory import plot_trajectory
@@ -104,10 +123,13 @@ def propagate(ctx: click.Context, deck: Path, output: Path | None, as_json: bool
             from fracas.report.trajectory import print_summary
 
             print_summary(data, path)
-        if data.status in (2, 3):
-            hint = " (raise integrator.max_steps or c_nom)" if data.status == 2 else ""
+        from fracas.constants import DAY_S
+        from fracas.status import RunStatus
+
+        if data.status in (RunStatus.MAX_STEPS, RunStatus.NONFINITE):
+            hint = " (raise integrator.max_steps or c_nom)" if data.status == RunStatus.MAX_STEPS else ""
             raise NumericalError(
-                f"{deck}: propagation ended early at t = {data.t_final_s / 86400.0:.6g} days with status "
+                f"{deck}: propagation ended early at t = {data.t_final_s / DAY_S:.6g} days with status "
                 f"{data.status} ({data.status_text}){hint}; partial results written to {path}"
             )
 
@@ -162,48 +184,91 @@ def stm_info(ctx: click.Context, file: Path, debug: bool) -> None:
 @click.pass_context
 def run(ctx: click.Context, deck: Path, stm_file: Path | None, output: Path | None, plot: Path | None,
         as_json: bool, quiet: bool, debug: bool) -> None:
-    """Run a DECK in the mode it describes: a TEAM study ([ertraj] table) or a propagation."""
+    """Run a DECK in the mode it names (mode = "team": a TEAM study; a trajectory deck: a propagation)."""
     debug = debug or bool((ctx.obj or {}).get("debug"))
     with _errors(debug):
-        from fracas.config.team import is_team_text
+        from fracas.config.modes import deck_mode
+        from fracas.config.trajectory import read_deck_text
         from fracas.errors import DeckError
 
-        try:
-            text = Path(deck).read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise DeckError(f"{deck}: cannot read: {getattr(exc, 'strerror', None) or exc}") from None
-        if not is_team_text(text):
+        mode = deck_mode(read_deck_text(deck), str(deck))
+        if mode == "propagate":
             if stm_file is not None:
-                raise DeckError(f"{deck}: --stm is for TEAM decks (with an [ertraj] table); this is a trajectory deck")
+                raise DeckError(f"{deck}: --stm is for TEAM decks (mode = \"team\"); this is a trajectory deck")
             ctx.invoke(propagate, deck=deck, output=output, as_json=as_json, plot=plot, debug=debug)
             return
+        from fracas.config.team import load_team_deck
         from fracas.pipeline import run_team
 
+        cfg = load_team_deck(deck)
         with _progress(not as_json) as stage:
-            res, path, source = run_team(deck, stm_file, output, on_stage=stage)
-            if res is None:
+            product, path, source = run_team(cfg, stm_file, output, on_stage=stage)
+            if product is None:
                 click.echo(f"reference ready ({source}); errcon.analysis = false: no analysis run")
                 return
-            png = plot or (res.study.deck.resolve(res.study.deck.output.plot) if res.study.deck.output.plot else None)
-            if png is not None:
-                stage("plotting")
-                from fracas.report.team import plot_team
+            png = plot or (cfg.resolve(cfg.output.plot) if cfg.output.plot else None)
+            _team_report(path, png, as_json, quiet, stage, extra_timing=product.timing)
 
-                plot_team(res, png)
-        from fracas.report.team import print_team, summary_dict
 
+def _team_report(path: Path, png: Path | None, as_json: bool, quiet: bool, stage=None, extra_timing=None) -> None:
+    """Print (and plot) a TEAM results file: tables, --json or --quiet's one line."""
+    from fracas.report.team import load, plot_team, print_team, summary_dict
+
+    r = load(path)
+    if png is not None:
+        if stage is not None:
+            stage("plotting")
+        plot_team(r, png)
+    if as_json:
+        out = summary_dict(r)
+        out["timing_s"].update({k: round(float(v), 4) for k, v in (extra_timing or {}).items()})
+        if png is not None:
+            out["plot"] = str(png)
+        click.echo(json.dumps(out))
+    elif quiet:
+        s = summary_dict(r)
+        click.echo(f"{s['events']} events, {s['measurements_used']} measurements; final assumed RSS "
+                   f"{s['assumed']['position_rss_km']:.4g} km, {s['assumed']['velocity_rss_km_s'] * 1e6:.4g} mm/s; "
+                   f"written: {path}")
+    else:
+        print_team(r)
+
+
+@main.command()
+@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), help="Also write a PNG plot.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON summary instead of the tables.")
+@click.option("--quiet", is_flag=True, help="Print only the one-line summary.")
+@click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
+@click.pass_context
+def report(ctx: click.Context, file: Path, plot: Path | None, as_json: bool, quiet: bool, debug: bool) -> None:
+    """Print the report of a results FILE (a TEAM results file or a trajectory file)."""
+    debug = debug or bool((ctx.obj or {}).get("debug"))
+    with _errors(debug):
+        import h5py
+
+        from fracas.errors import ResultsFileError
+
+        try:
+            with h5py.File(file, "r") as f:
+                kind = f.attrs.get("file_kind", "")
+        except FileNotFoundError:
+            raise ResultsFileError(f"{file}: no such results file") from None
+        except OSError as exc:
+            raise ResultsFileError(f"{file}: not an HDF5 results file ({exc})") from None
+        if kind == "fracas-team-results":
+            _team_report(file, plot, as_json, quiet)
+            return
+        from fracas.io.trajectory_file import read_trajectory_file
+        from fracas.report.trajectory import plot_trajectory, print_summary
+
+        data = read_trajectory_file(file)
+        if plot is not None:
+            plot_trajectory(data, plot)
         if as_json:
-            out = summary_dict(res, path, source)
-            if png is not None:
-                out["plot"] = str(png)
-            click.echo(json.dumps(out))
-        elif quiet:
-            s = summary_dict(res, path, source)
-            click.echo(f"{s['events']} events, {s['measurements_used']} measurements; final assumed RSS "
-                       f"{s['assumed']['position_rss_km']:.4g} km, {s['assumed']['velocity_rss_km_s'] * 1e6:.4g} mm/s; "
-                       f"written: {path}")
+            click.echo(json.dumps({**data.summary_dict(), "file": str(file)}))
         else:
-            print_team(res, path, source)
+            print_summary(data, file)
 
 
 if __name__ == "__main__":  # python -m fracas.cli

@@ -25,6 +25,10 @@ class StmFileError(FracasError):
     """An STM file is missing, unreadable, incomplete or built from another trajectory."""
 
 
+class ResultsFileError(FracasError):
+    """A results file is missing, unreadable, of another kind or incomplete."""
+
+
 class ConvergenceError(FracasError):
     """An iteration (Kepler, event location, targeting) did not converge."""
 

@@ -24,6 +24,8 @@ import jax.numpy as jnp
 
 from fracas.dynamics.model import ForceModel, Params
 
+STATE_LABELS = ("x", "y", "z", "vx", "vy", "vz", "mass")
+STATE_UNITS = ("km", "km", "km", "km/s", "km/s", "km/s", "kg")
 ELEMENT_NAMES = ("a", "e", "i", "raan", "argp", "M")
 _ELEMENT_UNITS = ("km", "1", "rad", "rad", "rad", "rad")
 

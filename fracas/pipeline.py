@@ -1,29 +1,56 @@
-"""The stages in order: deck -> core objects -> propagation -> trajectory file.
+"""The stages in order, for every mode:
 
-Each command-line subcommand enters here; ``on_stage(text)`` (optional) is told which
-stage is running so the command line can show progress.
+    deck -> validated config -> build (core objects, canonical units) -> core
+         -> stage product -> file (trajectory, STM, results) -> report
+
+``run(deck)`` dispatches on the deck's ``mode``; each command-line subcommand enters the
+chain at its own stage.  Entry points take a path or an already validated config object
+(so a sweep can vary a study in memory); ``on_stage(text)`` (optional) is told which stage
+is running so the command line can show progress.  The core returns statuses; this is the
+layer that turns a failed single run into the one-line error users see.
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-from fracas.build import Problem, build_propagation
-from fracas.config.trajectory import load_deck
+from fracas.build.trajectory import Problem, build_propagation
+from fracas.config.modes import load_any
+from fracas.config.trajectory import TrajectoryDeck, load_deck, trajectory_hash
+from fracas.constants import DAY_S
+from fracas.errors import NumericalError, StmFileError
 from fracas.io.hdf5 import provenance
 from fracas.io.trajectory_file import SensitivityData, TrajectoryData, write_trajectory_file
+from fracas.status import RunStatus
 
 Stage = Callable[[str], None]
 
+__all__ = ["run", "propagate_deck", "load_team", "build_stm", "run_team", "reference_from_stm", "stm_product",
+           "default_output"]
 
-def default_output(deck_path: str | Path) -> Path:
+
+def _say(on_stage: Stage | None) -> Stage:
+    return on_stage or (lambda _text: None)
+
+
+def default_output(deck_path: str | Path | None, folder: str = "out") -> Path:
     """``out/<deck stem>.h5`` (relative to the working directory)."""
-    return Path("out") / f"{Path(deck_path).stem}.h5"
+    return Path(folder) / f"{Path(deck_path or 'deck').stem}.h5"
 
 
+def run(deck, **kw):
+    """Run a deck (path or validated config) in the mode it names: ``propagate`` or ``team``."""
+    cfg = load_any(deck) if isinstance(deck, (str, Path)) else deck
+    if isinstance(cfg, TrajectoryDeck):
+        return propagate_deck(cfg, kw.get("output"), kw.get("on_stage"))
+    return run_team(cfg, kw.get("stm"), kw.get("output"), kw.get("on_stage"))
+
+
+# ----------------------------------------------------------------------------- propagation
 def run_propagation(problem: Problem):
     """Propagate ``problem`` (with STM and parameter matrices when it asks): (Trajectory, Sensitivities | None)."""
     from fracas.integrate.propagate import propagate, propagate_with_sensitivities
@@ -37,9 +64,9 @@ def run_propagation(problem: Problem):
 
 
 def trajectory_data(problem: Problem, traj, sens) -> TrajectoryData:
-    """Core outputs (JAX arrays) -> :class:`TrajectoryData` (numpy, names, provenance)."""
-    from fracas.dynamics.ephemeris import et_to_calendar
+    """Core outputs (JAX arrays) -> the :class:`TrajectoryData` product (numpy, names, provenance)."""
     from fracas.params import param_unit
+    from fracas.timescales import et_to_calendar
 
     bodies = problem.model.bodies
     t = np.asarray(traj.t, dtype=np.float64)
@@ -81,111 +108,159 @@ def trajectory_data(problem: Problem, traj, sens) -> TrajectoryData:
     )
 
 
-def propagate_deck(
-    deck_path: str | Path, output: str | Path | None = None, on_stage: Stage | None = None
-) -> tuple[TrajectoryData, Path]:
-    """Read, validate and build the deck, propagate, write the trajectory file."""
-    say = on_stage or (lambda _text: None)
+def propagate_deck(deck, output: str | Path | None = None, on_stage: Stage | None = None
+                   ) -> tuple[TrajectoryData, Path]:
+    """Trajectory deck (path or TrajectoryDeck) -> build -> propagate -> trajectory file."""
+    say = _say(on_stage)
     say("reading the deck")
-    deck = load_deck(deck_path)
+    cfg = load_deck(deck) if isinstance(deck, (str, Path)) else deck
     say("building the force model and ephemeris")
-    problem = build_propagation(deck)
+    problem = build_propagation(cfg)
     say("compiling and propagating" + (" with sensitivities" if problem.sensitivities else ""))
     traj, sens = run_propagation(problem)
     data = trajectory_data(problem, traj, sens)
     say("writing the trajectory file")
-    path = write_trajectory_file(output or default_output(deck_path), data)
+    path = write_trajectory_file(output or default_output(cfg.source_path), data)
     return data, path
 
 
 # ----------------------------------------------------------------------------- TEAM
-def team_output(deck_path: str | Path) -> Path:
-    return Path("out") / f"{Path(deck_path).stem}.h5"
-
-
-def load_team(deck_path: str | Path):
-    """Read and validate a TEAM deck and build its study (with a punched a-priori if named)."""
-    from fracas.config.team import load_team_deck
+def load_team(deck):
+    """TEAM deck (path or TeamDeck) -> :class:`fracas.build.team.TeamCase` (with a punched
+    a-priori when the deck names one)."""
+    from fracas.build.team import build_case
+    from fracas.config.team import TeamDeck, load_team_deck
     from fracas.io.team_results import read_punch
-    from fracas.team.setup import build_study
 
-    deck = load_team_deck(deck_path)
+    cfg = deck if isinstance(deck, TeamDeck) else load_team_deck(deck)
     punched = None
-    if deck.a_priori is not None and deck.a_priori.from_punch:
-        punched = read_punch(deck.resolve(deck.a_priori.from_punch), str(deck_path))
-    return build_study(deck, punched)
+    if cfg.a_priori is not None and cfg.a_priori.from_punch:
+        punched = read_punch(cfg.resolve(cfg.a_priori.from_punch), cfg.source_path or "<deck>")
+    return build_case(cfg, punched)
 
 
-def build_stm(deck_path: str | Path, output: str | Path | None = None, on_stage: Stage | None = None, study=None):
-    """``fracas stm build``: integrate the study's reference once and write the STM file (STMGEN).
+def _reference_failed(case, ref) -> NumericalError:
+    return NumericalError(
+        f"{case.traj_deck.source_path}: the reference trajectory stopped before t = {ref.failed_at_s / DAY_S:.6g} d "
+        f"(status {ref.integrator_status}); the study's times must lie on the trajectory")
 
-    ``study``: the deck's already-built study (``run_team`` with ``errcon.build_stm``)."""
+
+def stm_product(case):
+    """STMGEN: integrate the case's reference once over every STM-file time with every
+    parameter column -> :class:`fracas.products.ReferenceTrajectory`."""
+    import dataclasses
+
+    from fracas.build.reference import reference_product
+    from fracas.build.team import stm_file_labels, stm_file_times
+    from fracas.team.reference import run_reference
+
+    study = case.study
+    times = stm_file_times(case)
+    labels = stm_file_labels(case)
+    traj, sens, status, failed_at = run_reference(study.problem, times, labels)
+    if status != RunStatus.OK:
+        raise NumericalError(
+            f"{case.traj_deck.source_path}: the reference trajectory stopped before t = {failed_at / DAY_S:.6g} d "
+            f"(status {int(traj.status)}); the study's times must lie on the trajectory")
+    sched = study.schedule
+    ev = []
+    for t in times:
+        k = int(np.argmin(np.abs(sched.times_s - t)))
+        ev.append("+".join(sched.events[k]) if abs(sched.times_s[k] - t) < 1e-6 else "grid")
+    if ev and times[0] == 0.0 and "initial" not in ev[0]:
+        ev[0] = "initial" if ev[0] == "grid" else "initial+" + ev[0]
+    pr = dataclasses.replace(study.problem, t_out=times, param_labels=tuple(labels))
+    tdeck = case.traj_deck
+    return reference_product(pr, traj, sens, ev, tdeck.source_text or "", trajectory_hash(tdeck), tdeck.source_path)
+
+
+def build_stm(deck, output: str | Path | None = None, on_stage: Stage | None = None, case=None):
+    """``fracas stm build``: the reference product of a TEAM deck, written as an STM file.
+
+    ``case``: the deck's already-built case (``run_team`` with ``errcon.build_stm``)."""
     from fracas.io.stm_file import write_stm_file
-    from fracas.team.reference import build_stm_data
 
-    say = on_stage or (lambda _text: None)
-    if study is None:
+    say = _say(on_stage)
+    if case is None:
         say("reading the deck")
-        study = load_team(deck_path)
+        case = load_team(deck)
     if output is None:
-        if not study.deck.errcon.stm_file:
-            output = Path("stm_files") / f"{Path(deck_path).stem}.h5"
-        else:
-            output = study.deck.resolve(study.deck.errcon.stm_file)
+        ec = case.deck.errcon
+        output = case.deck.resolve(ec.stm_file) if ec.stm_file else default_output(case.deck.source_path, "stm_files")
     say("integrating the reference and its sensitivities")
-    data = build_stm_data(study)
+    data = stm_product(case)
     say("writing the STM file")
     write_stm_file(output, data)
     return Path(output), data
 
 
-def run_team(
-    deck_path: str | Path,
-    stm: str | Path | None = None,
-    output: str | Path | None = None,
-    on_stage: Stage | None = None,
-):
-    """``fracas run`` on a TEAM deck: study -> reference (STM file or in line) -> filter -> results.
+def reference_from_stm(study, stm_path: str | Path):
+    """STMRDR: a study's columns and times from an STM file, checked against its trajectory."""
+    from fracas.io.stm_file import check_trajectory, read_stm_file
+    from fracas.team.reference import reference_from_product
 
-    Returns (TeamResult, results path, reference source).
+    data = read_stm_file(stm_path, labels=study.dynamic_labels, times_s=study.schedule.times_s)
+    check_trajectory(data, study.trajectory_hash, stm_path, study.trajectory_source)
+    if abs(float(data.epoch_et_s) - float(study.problem.epoch_et_s)) > 1e-6:
+        raise StmFileError(f"{stm_path}: epoch differs from the study's trajectory deck")
+    return reference_from_product(study, data, str(stm_path))
+
+
+def run_team(deck, stm: str | Path | None = None, output: str | Path | None = None, on_stage: Stage | None = None):
+    """``fracas run`` on a TEAM deck (path or TeamDeck): case -> reference (STM file or in
+    line) -> filter -> TeamProduct -> results file (and punch file).
+
+    Returns (TeamProduct or None when ``errcon.analysis = false``, results path, reference source).
     """
-    import time
-
     from fracas.io.team_results import write_punch, write_team_results
     from fracas.team.engine import run_study
-    from fracas.team.reference import integrate_reference, reference_from_stm
+    from fracas.team.reference import integrate_reference
+    from fracas.team.result import team_product
 
-    say = on_stage or (lambda _text: None)
+    say = _say(on_stage)
     t0 = time.perf_counter()
     say("reading the deck")
-    study = load_team(deck_path)
-    ec = study.deck.errcon
-    stm_path = Path(stm) if stm is not None else (study.deck.resolve(ec.stm_file) if ec.stm_file else None)
+    case = load_team(deck)
+    cfg, study = case.deck, case.study
+    ec = cfg.errcon
+    stm_path = Path(stm) if stm is not None else (cfg.resolve(ec.stm_file) if ec.stm_file else None)
     t1 = time.perf_counter()
     if ec.build_stm and stm is None:
-        stm_path, _ = build_stm(deck_path, stm_path, on_stage, study=study)
+        stm_path, _ = build_stm(cfg, stm_path, on_stage, case=case)
     if stm_path is not None:
         if not stm_path.exists():
-            from fracas.errors import StmFileError
-
-            raise StmFileError(f"{stm_path}: no such STM file (build it with: fracas stm build {deck_path} -o {stm_path})")
+            raise StmFileError(f"{stm_path}: no such STM file (build it with: fracas stm build "
+                               f"{cfg.source_path or 'DECK'} -o {stm_path})")
         say("reading the STM file")
         ref = reference_from_stm(study, stm_path)
     else:
         say("integrating the reference and its sensitivities")
         ref = integrate_reference(study)
+        if ref.status != RunStatus.OK:
+            raise _reference_failed(case, ref)
     t2 = time.perf_counter()
     if not ec.analysis:
         return None, None, ref.source
     res = run_study(study, ref, say)
+    for k, stats in res.prediction_status.items():
+        for t_to, s in zip(study.schedule.predict_to_s[k], stats):
+            if s:
+                raise NumericalError(f"{study.source}: prediction from {res.times_s[k] / DAY_S:.6g} d to "
+                                     f"{t_to / DAY_S:.6g} d: the integration stopped (status {int(s)})")
     t3 = time.perf_counter()
     res.timing.update({"setup_s": t1 - t0, "reference_s": t2 - t1, "analysis_s": t3 - t2})
+    tdeck = case.traj_deck
+    product = team_product(
+        res, reference_source=ref.source,
+        settings={"trajectory_deck": tdeck.source_path or "", "trajectory_hash": trajectory_hash(tdeck),
+                  "print": {"every": int(cfg.print.every), "process_noise": int(cfg.print.process_noise),
+                            "correlations": int(cfg.print.correlations)}},
+        provenance=provenance(cfg.source_text, study.source))
     out = Path(output) if output is not None else (
-        study.deck.resolve(study.deck.output.results) if study.deck.output.results else team_output(deck_path))
+        cfg.resolve(cfg.output.results) if cfg.output.results else default_output(cfg.source_path))
     say("writing the results file")
-    write_team_results(out, res, ref.source)
-    if study.deck.punch is not None:
-        idx = [k for k, e in enumerate(study.schedule.events) if "punch" in e]
-        write_punch(study.deck.resolve(study.deck.punch.file), res, idx)
-    res.timing["total_s"] = time.perf_counter() - t0
-    return res, out, ref.source
+    write_team_results(out, product)
+    if cfg.punch is not None:
+        write_punch(cfg.resolve(cfg.punch.file), product)
+    product.timing["total_s"] = time.perf_counter() - t0
+    return product, out, ref.source

@@ -7,7 +7,8 @@
 Mercury study through its STM file, the small test study in PHI and PDOT form); ``compare``
 walks every HDF5 file present in OLD, and reports for each numeric dataset the largest
 difference relative to the dataset's largest magnitude (NaNs must sit in the same places),
-every string dataset or attribute that differs, and datasets present on one side only.
+every string dataset or attribute that differs, and datasets the new files lack (new
+datasets and attributes are counted, and listed with -v, but are not differences).
 Provenance (times, versions, host) is skipped: it is meant to differ.  Exit 1 if anything
 differs by more than ``--rtol`` (default 1e-12: "identical, or within 1e-12 relative where
 the order of arithmetic had to change").
@@ -27,6 +28,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 SKIP = re.compile(r"(^|/)provenance(/|$)")
+VERBOSE = "-v" in sys.argv
 
 
 def _fracas(*args: str) -> None:
@@ -74,6 +76,16 @@ def _items(f: h5py.File) -> dict[str, object]:
     return out
 
 
+def _text(v, folder: Path) -> np.ndarray:
+    """String values with the run's own output folder written as <out> (the STM file's path)."""
+    a = np.asarray(v)
+    if a.dtype.kind in "OSU":
+        f = np.vectorize(lambda x: (x.decode() if isinstance(x, bytes) else str(x)).replace(str(folder.resolve()), "<out>"),
+                         otypes=[object])
+        return f(a) if a.size else a
+    return a
+
+
 def _numeric(v) -> np.ndarray | None:
     a = np.asarray(v)
     return a if a.dtype.kind in "fiub" else None
@@ -82,15 +94,16 @@ def _numeric(v) -> np.ndarray | None:
 def compare_file(a: Path, b: Path, rtol: float) -> list[str]:
     with h5py.File(a, "r") as fa, h5py.File(b, "r") as fb:
         ia, ib = _items(fa), _items(fb)
-    bad = [f"{k}: only in {a.name if k in ia else b.name} ({'old' if k in ia else 'new'})"
-           for k in sorted(set(ia) ^ set(ib))]
+    bad = [f"{k}: only in the old file" for k in sorted(set(ia) - set(ib))]
+    added = sorted(set(ib) - set(ia))  # new datasets and attributes are reported, not failures
     worst = 0.0
     for k in sorted(set(ia) & set(ib)):
         if k.endswith(("@fracas_version", "@written_utc", "@created_utc")):
             continue
         x, y = _numeric(ia[k]), _numeric(ib[k])
         if x is None or y is None:
-            if not (np.asarray(ia[k]).shape == np.asarray(ib[k]).shape and np.all(np.asarray(ia[k]) == np.asarray(ib[k]))):
+            xa, xb = _text(ia[k], a.parent), _text(ib[k], b.parent)
+            if not (xa.shape == xb.shape and np.all(xa == xb)):
                 bad.append(f"{k}: {str(ia[k])[:60]!r} != {str(ib[k])[:60]!r}")
             continue
         if x.shape != y.shape:
@@ -108,8 +121,10 @@ def compare_file(a: Path, b: Path, rtol: float) -> list[str]:
         worst = max(worst, d)
         if d > rtol:
             bad.append(f"{k}: max |diff| / max |value| = {d:.3e} > {rtol:g}")
-    print(f"{a.name:32s} {len(ia):5d} items   largest relative difference {worst:.2e}   "
+    print(f"{a.name:28s} {len(ia):4d} items (+{len(added)} new)  largest relative difference {worst:.2e}  "
           f"{'OK' if not bad else f'{len(bad)} DIFFER'}")
+    if added and VERBOSE:
+        print("    new: " + ", ".join(added))
     return bad
 
 
@@ -140,6 +155,7 @@ def main() -> None:
     c.add_argument("old", type=Path)
     c.add_argument("new", type=Path)
     c.add_argument("--rtol", type=float, default=1e-12)
+    c.add_argument("-v", action="store_true", help="list the datasets and attributes only the new files have")
     a = ap.parse_args()
     if a.cmd == "run":
         run(a.out)

@@ -275,6 +275,7 @@ class OutputSection(_Section):
 class TeamDeck(SourcedDeck):
     """A whole TEAM deck (frozen)."""
 
+    mode: Literal["team"] = "team"
     title: str = ""
     errcon: ErrCon = ErrCon()
     ertraj: ErTraj

@@ -40,6 +40,7 @@ one line ``path: field.path = value: what was expected``.
 from __future__ import annotations
 
 import datetime as _dt
+import hashlib
 import json
 import math
 import re
@@ -433,8 +434,11 @@ class SourcedDeck(_Section):
 
 
 class TrajectoryDeck(SourcedDeck):
-    """A whole trajectory deck (frozen).  ``source_path``/``source_text`` say where it came from."""
+    """A whole trajectory deck (frozen).  ``source_path``/``source_text`` say where it came from.
 
+    ``mode = "propagate"`` may be written; a deck without ``mode`` is a trajectory deck."""
+
+    mode: Literal["propagate"] = "propagate"
     title: str = ""
     epoch: Epoch
     initial_state: InitialState
@@ -673,3 +677,23 @@ def read_deck_text(path: str | Path) -> str:
 def load_deck(path: str | Path) -> TrajectoryDeck:
     """Read and validate a trajectory deck; every failure is a one-line DeckError."""
     return parse_deck(read_deck_text(path), str(path))
+
+
+_HASH_PREFIX = "fracas-trajectory-deck/1\n"
+
+
+def trajectory_hash(deck) -> str:
+    """SHA-256 (hex) of the canonical form of a validated :class:`TrajectoryDeck`.
+
+    The canonical form is the validated model as JSON (defaults filled in, floats in
+    shortest round-trip form, keys sorted, no whitespace) behind a version prefix, so
+    comments, layout, key order, ``7000`` vs ``7000.0``, a default written out or left
+    implicit and the file's name or place do not change the hash; any changed value does.
+    Every section counts (title and ``[output]`` included): the file is tied to exactly
+    the deck it was built from (FRACAS writes ERTRAJ at the head of the STM tape).  The
+    ``mode`` line does not count (it says what to do with the trajectory, not what it is).
+    """
+    body = json.dumps(
+        deck.model_dump(mode="json", exclude={"mode"}), sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False
+    )
+    return hashlib.sha256((_HASH_PREFIX + body).encode("utf-8")).hexdigest()

@@ -46,6 +46,18 @@ import h5py
 import numpy as np
 
 from fracas.errors import StmFileError
+from fracas.params import STATE_LABELS, STATE_UNITS
+from fracas.products import (
+    SCHEMA_VERSION,
+    TIME_TOL_S,
+    ReferenceTrajectory,
+    _days,
+    _indices,
+    chain,
+    time_indices,
+)
+
+StmData = ReferenceTrajectory  # the STM file holds one reference-trajectory product
 from fracas.io.hdf5 import (
     atomic_h5,
     provenance,
@@ -58,12 +70,6 @@ from fracas.io.hdf5 import (
 )
 
 FILE_KIND = "fracas-stm"
-SCHEMA_VERSION = 1
-TIME_TOL_S = 1e-6  # a requested time matches a file time within this (s); the deck's eps_t
-DAY_S = 86400.0
-
-STATE_LABELS = ("x", "y", "z", "vx", "vy", "vz", "mass")
-STATE_UNITS = ("km", "km", "km", "km/s", "km/s", "km/s", "kg")
 EVENT_TYPES = (
     "initial", "measurement", "propagation", "eigenvector", "prediction",
     "thrust_on", "thrust_off", "guidance", "final", "grid",
@@ -72,7 +78,6 @@ SENSITIVITY_METHODS = {
     "ad": "forward-mode automatic differentiation through the integrator (propagate_with_sensitivities)",
     "finite_difference": "central finite differences (FRACAS PTRAN), steps in /parameters/steps",
 }
-_HASH_PREFIX = "fracas-trajectory-deck/1\n"
 
 __all__ = [
     "FILE_KIND",
@@ -80,161 +85,17 @@ __all__ = [
     "STATE_LABELS",
     "STATE_UNITS",
     "StmData",
+    "ReferenceTrajectory",
     "chain",
     "check_trajectory",
     "describe",
     "read_stm_file",
-    "stm_data_from_run",
     "time_indices",
-    "trajectory_hash",
     "write_stm_file",
 ]
 
 
 # --------------------------------------------------------------------------- data
-
-
-@dataclass
-class StmData:
-    """The contents of an STM file (numpy, canonical units, ICRF axes).
-
-    times_s (n,): s from the epoch (t = 0), non-decreasing; epoch_et_s: TDB s past J2000 of
-    t = 0; event_types (n,): why each time is on the file ("initial", "measurement",
-    "propagation", "eigenvector", "prediction", "thrust_on", "thrust_off", "final", "grid";
-    several joined by "+"); states (n,7): r km, v km/s, m kg relative to primary[i];
-    stm_step (n,7,7): Phi(t_i, t_{i-1}) (i = 0: from the epoch to times_s[0], the identity
-    when times_s[0] == 0); par_step (n,7,np): Theta(t_i, t_{i-1}) = dx(t_i)/dp with
-    x(t_{i-1}) fixed, element (r, p) in STATE_UNITS[r] / param_units[p];
-    param_labels/param_units/param_values (np,): fracas.params labels, their units and
-    nominal values; param_steps (np,): perturbations of a finite-difference generation
-    (NaN for AD, see ``sensitivity_method``); deck_text/deck_hash/deck_path: the trajectory
-    deck (TOML) the file was built from and its :func:`trajectory_hash`.
-    ``source_path`` is the file it was read from ("" when built in memory).
-    """
-
-    times_s: np.ndarray
-    epoch_et_s: float
-    event_types: list[str]
-    states: np.ndarray
-    primary: list[str]
-    stm_step: np.ndarray
-    par_step: np.ndarray
-    param_labels: list[str]
-    param_units: list[str]
-    param_values: np.ndarray
-    param_steps: np.ndarray
-    deck_text: str
-    deck_hash: str
-    deck_path: str | None = None
-    title: str = ""
-    centre: str = ""
-    frame: str = "ICRF"
-    fracas_version: str = ""
-    schema_version: int = SCHEMA_VERSION
-    sensitivity_method: str = "ad"
-    provenance: dict[str, Any] = field(default_factory=dict)
-    source_path: str = ""
-
-    def __post_init__(self) -> None:
-        if not self.fracas_version:
-            from fracas import __version__
-
-            self.fracas_version = __version__
-
-    @property
-    def n_times(self) -> int:
-        return int(np.shape(self.times_s)[0])
-
-    @property
-    def where(self) -> str:
-        """How messages name this data: the file path, or the deck it was built from."""
-        return self.source_path or (f"STM data of {self.deck_path}" if self.deck_path else "STM data")
-
-
-def trajectory_hash(deck) -> str:
-    """SHA-256 (hex) of the canonical form of a validated :class:`TrajectoryDeck`.
-
-    The canonical form is the validated model as JSON (defaults filled in, floats in
-    shortest round-trip form, keys sorted, no whitespace) behind a version prefix, so
-    comments, layout, key order, ``7000`` vs ``7000.0``, a default written out or left
-    implicit and the file's name or place do not change the hash; any changed value does.
-    Every section counts (title and ``[output]`` included): the file is tied to exactly
-    the deck it was built from (FRACAS writes ERTRAJ at the head of the STM tape).
-    """
-    body = json.dumps(
-        deck.model_dump(mode="json"), sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False
-    )
-    return hashlib.sha256((_HASH_PREFIX + body).encode("utf-8")).hexdigest()
-
-
-def _days(t: float) -> str:
-    return f"{float(t) / DAY_S:.6f} d"
-
-
-def stm_data_from_run(problem, traj, sens, event_types, deck_text, deck_hash, deck_path=None) -> StmData:
-    """Assemble :class:`StmData` from a propagation with sensitivities (FRACAS STMGEN).
-
-    ``problem``: :class:`fracas.build.Problem` whose ``t_out`` are the schedule times (s,
-    ``t_out[0]`` must be 0: the propagation starts at the epoch) and ``param_labels`` the
-    columns; ``traj``, ``sens``: from
-    :func:`fracas.integrate.propagate.propagate_with_sensitivities` on that problem;
-    ``event_types``: one string per time.  Refuses (StmFileError) a trajectory that did not
-    reach every scheduled time.
-    """
-    from fracas.params import get_values, param_unit
-
-    where = deck_path or problem.source_path or "<deck>"
-    t_out = np.asarray(problem.t_out, np.float64)
-    t = np.asarray(traj.t, np.float64)
-    n = t_out.shape[0]
-    if n == 0:
-        raise StmFileError(f"{where}: cannot build an STM file: the schedule has no times")
-    if abs(float(t_out[0])) > TIME_TOL_S:
-        raise StmFileError(
-            f"{where}: cannot build an STM file: the schedule starts at t = {t_out[0]:.6f} s "
-            f"({_days(t_out[0])}), expected 0 (the propagation starts at the epoch)"
-        )
-    event_types = [str(e) for e in event_types]
-    if len(event_types) != n:
-        raise StmFileError(f"{where}: {len(event_types)} event types for {n} schedule times")
-    bad = np.nonzero(~np.isfinite(t))[0]
-    if bad.size:
-        from fracas.io.trajectory_file import STATUS_TEXT
-
-        k = int(bad[0])
-        status = int(np.asarray(traj.status))
-        raise StmFileError(
-            f"{where}: cannot build an STM file: the trajectory ended at t = {_days(np.asarray(traj.t_final))} "
-            f"({STATUS_TEXT.get(status, f'status {status}')}) before scheduled time {k} at {_days(t_out[k])} "
-            f"({event_types[k]}); shorten the schedule or fix the deck"
-        )
-    model = problem.model
-    labels = [str(x) for x in problem.param_labels]
-    stm_step = np.asarray(sens.stm_step, np.float64)
-    par_step = np.asarray(sens.par_step, np.float64).reshape(n, 7, len(labels))
-    if not (np.all(np.isfinite(stm_step)) and np.all(np.isfinite(par_step))):
-        raise StmFileError(f"{where}: cannot build an STM file: non-finite transition matrices")
-    return StmData(
-        times_s=t_out,  # the schedule itself (the integrator lands within eps_t of each)
-        epoch_et_s=float(problem.epoch_et_s),
-        event_types=event_types,
-        states=np.asarray(traj.x, np.float64),
-        primary=[model.bodies[int(i)] for i in np.asarray(traj.primary)],
-        stm_step=stm_step,
-        par_step=par_step,
-        param_labels=labels,
-        param_units=[param_unit(lab, model) for lab in labels],
-        param_values=np.asarray(get_values(problem.params, labels, model), np.float64).reshape(len(labels)),
-        param_steps=np.full(len(labels), np.nan),
-        deck_text=str(deck_text or ""),
-        deck_hash=str(deck_hash),
-        deck_path=deck_path,
-        title=problem.title,
-        centre=problem.centre,
-        frame=problem.frame,
-        sensitivity_method="ad",
-        provenance=provenance(deck_text, deck_path),
-    )
 
 
 # --------------------------------------------------------------------------- write
@@ -377,26 +238,6 @@ def _open(path: str | os.PathLike) -> tuple[Path, h5py.File]:
     return src, f
 
 
-def _nearest_message(where: str, t_file: np.ndarray, events: Sequence[str], t_req: float) -> str:
-    k = int(np.argmin(np.abs(t_file - t_req)))
-    return (
-        f"{where}: requested time {t_req:.6f} s ({_days(t_req)}) is not on the STM file "
-        f"(tolerance {TIME_TOL_S:g} s); nearest file time is {t_file[k]:.6f} s ({_days(t_file[k])}, "
-        f"{events[k] if k < len(events) else '?'}); the file has {t_file.shape[0]} times from "
-        f"{_days(t_file[0])} to {_days(t_file[-1])}: regenerate it with this time in the schedule"
-    )
-
-
-def _indices(t_file: np.ndarray, events: Sequence[str], req: np.ndarray, where: str) -> np.ndarray:
-    """Index of each requested time on the file (the last of equal file times)."""
-    idx = np.searchsorted(t_file, req + TIME_TOL_S, side="right") - 1
-    ok = (idx >= 0) & (np.abs(t_file[np.clip(idx, 0, None)] - req) <= TIME_TOL_S)
-    if not np.all(ok):
-        j = int(np.nonzero(~ok)[0][0])
-        raise StmFileError(_nearest_message(where, t_file, events, float(req[j])))
-    return idx
-
-
 def read_stm_file(
     path: str | os.PathLike,
     labels: Sequence[str] | None = None,
@@ -500,74 +341,6 @@ def check_trajectory(data: StmData, deck_hash: str, path, study_deck: str | None
 
 
 # --------------------------------------------------------------------------- chain
-
-
-def time_indices(data: StmData, times_s: Sequence[float]) -> np.ndarray:
-    """Index into ``data.times_s`` of each requested time (within 1e-6 s; StmFileError otherwise).
-
-    Equal file times resolve to the last of them (their step matrices are identities)."""
-    t_file = np.asarray(data.times_s, np.float64)
-    return _indices(t_file, data.event_types, np.atleast_1d(np.asarray(times_s, np.float64)), data.where)
-
-
-def chain(data: StmData, times_s: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
-    """Transition matrices between consecutive requested times (FRACAS STMRDR + section 3.2).
-
-    ``times_s`` (k,): s from the epoch, non-decreasing, each on the file.  Returns
-    phi (k,7,7) and theta (k,7,np) (columns as ``data.param_labels``): element j maps from
-    times_s[j-1] to times_s[j], element 0 from the epoch t = 0 to times_s[0]:
-
-        Phi(t_b, t_a)   = Phi_b ... Phi_{a+1}
-        Theta(t_b, t_a) = Phi_b Theta(t_{b-1}, t_a) + Theta_b
-
-    over the file's step matrices.  All segments are reduced together by pairwise
-    (log-depth) composition of neighbours within each segment: ~log2(longest segment)
-    batched matrix products in all, about two products per file step.
-    """
-    idx = time_indices(data, times_s)
-    k = idx.shape[0]
-    if k and np.any(np.diff(idx) < 0):
-        j = int(np.nonzero(np.diff(idx) < 0)[0][0]) + 1
-        req = np.atleast_1d(np.asarray(times_s, np.float64))
-        raise StmFileError(
-            f"{data.where}: requested times must increase: times_s[{j}] = {_days(req[j])} "
-            f"comes before times_s[{j - 1}] = {_days(req[j - 1])}"
-        )
-    stm_step = np.asarray(data.stm_step, np.float64)
-    par_step = np.asarray(data.par_step, np.float64)
-    n_p = par_step.shape[2]
-    starts = np.concatenate([[0], idx[:-1] + 1]).astype(np.int64) if k else np.zeros(0, np.int64)
-    lens = (idx - starts + 1).astype(np.int64)  # 0 where a time repeats: identity
-    phi = np.broadcast_to(np.eye(7), (k, 7, 7)).copy()
-    theta = np.zeros((k, 7, n_p))
-    if k == 0 or lens.max() <= 0:
-        return phi, theta
-    live = lens > 0
-    ls = lens[live]
-    offs = np.cumsum(ls) - ls
-    pos = np.arange(ls.sum()) - np.repeat(offs, ls)
-    fi = np.repeat(starts[live], ls) + pos
-    P, T = stm_step[fi], par_step[fi]
-    while ls.max() > 1:
-        offs = np.cumsum(ls) - ls
-        pos = np.arange(P.shape[0]) - np.repeat(offs, ls)
-        seglen = np.repeat(ls, ls)
-        left = np.nonzero(pos % 2 == 0)[0]  # first of each pair (or a lone last element)
-        has = pos[left] + 1 < seglen[left]
-        a = left[has]  # earlier step of a pair; a + 1 is the later one
-        b = a + 1
-        Pb = P[b]
-        newP, newT = P[left], T[left]
-        newP[has] = Pb @ P[a]
-        newT[has] = Pb @ T[a] + T[b]
-        P, T = newP, newT
-        ls = (ls + 1) // 2
-    phi[live] = P
-    theta[live] = T
-    return phi, theta
-
-
-# --------------------------------------------------------------------------- describe
 
 
 def describe(path: str | os.PathLike) -> str:

@@ -14,10 +14,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fracas.constants import BODIES
+from fracas.constants import BODIES, DAY_S
 from fracas.measurements import trakm
 from fracas.team.reference import Reference
-from fracas.team.setup import Study
+from fracas.team.study import Study
 
 __all__ = ["MeasurementRecord", "MeasurementSet", "assemble_measurements"]
 
@@ -57,7 +57,7 @@ def _ephemeris_states(study: Study, ref: Reference, ks: list[int], bodies: list[
     from fracas.dynamics.ephemeris import body_states, build_ephemeris
 
     et = study.problem.epoch_et_s + ref.times_s[ks]
-    table = build_ephemeris(bodies, float(et.min()), float(et.max()), margin_s=2 * 86400.0)
+    table = build_ephemeris(bodies, float(et.min()), float(et.max()), margin_s=2 * DAY_S)
     pos, vel = body_states(table, et)
     return np.asarray(pos), np.asarray(vel)
 
@@ -77,19 +77,15 @@ def assemble_measurements(study: Study, ref: Reference, m_pad: int = 4) -> Measu
     if not pairs:
         return MeasurementSet(np.zeros((K, m_pad, n)), eye.copy(), eye.copy(), [], {})
     ks = sorted({k for k, _ in pairs})
-    body_names = sorted({t.body for t in study.deck.tracking if t.body})
+    body_names = sorted({t.body for t in study.tracking if t.body})
     bodies = sorted(set(ref.primary[k] for k in ks) | {"earth"} | set(body_names))
     pos, vel = _ephemeris_states(study, ref, ks, bodies)
     bi = {b: i for i, b in enumerate(bodies)}
-    stars = {}
-    for j, t in enumerate(study.deck.tracking):
-        if t.type == "star_planet_angle":
-            ra, de = math.radians(t.star_ra_deg), math.radians(t.star_dec_deg)
-            stars[j] = np.array([math.cos(de) * math.cos(ra), math.cos(de) * math.sin(ra), math.sin(de)])
+    stars = {j: t.star_unit for j, t in enumerate(study.tracking) if t.star_unit is not None}
     geos: dict[tuple[int, str | None], trakm.Geometry] = {}
     items = []
     for k, j in pairs:
-        t = study.deck.tracking[j]
+        t = study.tracking[j]
         key = (k, t.body)
         geo = geos.get(key)
         if geo is None:
@@ -112,7 +108,7 @@ def assemble_measurements(study: Study, ref: Reference, m_pad: int = 4) -> Measu
     for i, (k, j) in enumerate(pairs):
         e = float(batch.elevation_deg[i])
         used = not (np.isfinite(e) and e < study.min_elevation_deg)
-        rec = MeasurementRecord(k, j, study.deck.tracking[j].type, study.observations[j].stations,
+        rec = MeasurementRecord(k, j, study.tracking[j].kind, study.observations[j].stations,
                                 float(batch.values[i]), e, used, float(batch.sigma[i]))
         if used:
             rec.row = per_k.get(k, 0)

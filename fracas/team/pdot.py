@@ -23,19 +23,20 @@ from fracas import _jax  # noqa: F401  (x64 before jax)
 import jax
 import jax.numpy as jnp
 
-from fracas.errors import ConfigError
+from fracas.dynamics.variational import THRUST_NOISE_LABELS, jacobians_at
 from fracas.filters.covariance import Layout
-from fracas.team.setup import THRUST_NOISE_LABELS, Study
+from fracas.filters.process_noise import pdot_propagate
+from fracas.integrate.propagate import propagate
+from fracas.team.result import NOISE_STATE_LABELS, TeamResult, finish
+from fracas.team.scan import _scan
+from fracas.team.study import Study
+from fracas.team.transitions import EPS_T, bucket, primary_index
 
 __all__ = ["run_pdot", "NOISE_STATE_LABELS"]
-
-NOISE_STATE_LABELS = ["eta_proportionality", "eta_in_plane_rad", "eta_out_of_plane_rad"]
 
 
 @lru_cache(maxsize=None)
 def _pdot_fn():
-    from fracas.filters.process_noise import pdot_propagate
-
     return jax.jit(pdot_propagate)
 
 
@@ -51,20 +52,15 @@ def run_pdot(study: Study, ref, meas):
     """The TEAM run with PDOT time updates; returns a TeamResult over n + 3 augmented states."""
     import time
 
-    from fracas.dynamics.variational import jacobians_at
-    from fracas.integrate.propagate import propagate
-    from fracas.team.engine import TeamResult, _bucket, _primary_index, _scan, finish, EPS_T
-
-    if study.filter_kind == "wls" or study.square_root:
-        raise ConfigError(f"{study.source}: errcon.propagation = \"pdot\" supports the Kalman-Schmidt and user "
-                          "filters in covariance form (use propagation = \"phi\" for WLS or the square-root mode)")
+    if study.filter_kind == "wls" or study.square_root:  # refused when the study is built (fracas.build.team)
+        raise ValueError("PDOT propagation supports the Kalman-Schmidt and user filters in covariance form only")
     L = study.layout
     nx, n = L.nx, L.n
     lay = Layout(L.nx, L.ns, L.nu, L.nv, L.nw + 3)
     sched = study.schedule
     K = sched.n
     t = ref.times_s
-    h_max = study.deck.ertraj.pdot_step_hours * 3600.0
+    h_max = study.pdot_step_s
     # nodes: for each interval, 2N+1 equally spaced points (ends nudged inside the interval)
     Ns, nodes = [], []
     for k in range(1, K):
@@ -89,10 +85,10 @@ def run_pdot(study: Study, ref, meas):
     prim_names[order] = [bodies[int(i)] for i in np.asarray(traj.primary)[1:]]
     labels = list(dict.fromkeys(list(study.dynamic_labels) + list(THRUST_NOISE_LABELS)))  # a bias may be both
     kk = all_t.size
-    kp = _bucket(kk)
+    kp = bucket(kk)
     pad = lambda a: np.concatenate([a, np.repeat(a[-1:], kp - kk, axis=0)]) if kp > kk else a  # noqa: E731
     A, B = jacobians_at(pr.model, pr.params, pr.ephem, pr.epoch_et_s, pad(all_t), pad(xs),
-                        pad(_primary_index(study, list(prim_names))), labels)
+                        pad(primary_index(study, list(prim_names))), labels)
     A, B = np.asarray(A)[:kk, :nx, :nx], np.asarray(B)[:kk, :nx, :]
     B_dyn = B[:, :, [labels.index(lab) for lab in study.dynamic_labels]]
     h = B[:, :, [labels.index(lab) for lab in THRUST_NOISE_LABELS]]

@@ -11,25 +11,25 @@ from __future__ import annotations
 
 import numpy as np
 
-from fracas.constants import DAY_S
-from fracas.errors import NumericalError
+from fracas.filters import covariance as cov
+from fracas.integrate.propagate import propagate_with_sensitivities
+from fracas.status import RunStatus
+from fracas.team.reference import Reference
+from fracas.team.transitions import augmented_transitions, interval_noise
 
 __all__ = ["predictions", "predict_from"]
 
 
 def predict_from(res, k: int, t_to: float):
-    """(P_assumed, P_true or None) predicted from schedule index k to ``t_to`` (s)."""
-    from fracas.integrate.propagate import propagate_with_sensitivities
-    from fracas.filters import covariance as cov
-    from fracas.team.engine import interval_noise
-    from fracas.team.reference import Reference
-    from fracas.team.engine import augmented_transitions
+    """(P_assumed, P_true or None, status) predicted from schedule index k to ``t_to`` (s).
 
+    A prediction whose integration stops before ``t_to`` returns NaN matrices and
+    ``RunStatus.OUTSIDE_TRAJECTORY`` (the caller reports it; nothing raises here).
+    """
     study, ref = res.study, res.ref
     pr = study.problem
     t_k = float(res.times_s[k])
-    sw = [a.start_days * DAY_S for a in study.traj_deck.thrust_arc] + [a.stop_days * DAY_S for a in study.traj_deck.thrust_arc]
-    mids = sorted(t for t in set(sw) if t_k + 1e-3 < t < t_to - 1e-3)
+    mids = sorted(t for t in set(study.thrust_switches_s) if t_k + 1e-3 < t < t_to - 1e-3)
     t_out = np.array([t_k] + mids + [t_to])
     labels = study.dynamic_labels
     on_ref = [int(np.argmin(np.abs(ref.times_s - t))) for t in t_out]
@@ -48,8 +48,9 @@ def predict_from(res, k: int, t_to: float):
                                                   labels)
         phi = np.array(sens.stm_step)
         if not np.all(np.isfinite(phi)):
-            raise NumericalError(f"{study.source}: prediction from {t_k / DAY_S:.6g} d to {t_to / DAY_S:.6g} d: "
-                                 f"the integration stopped (status {int(traj.status)})")
+            n = study.layout.n
+            nan = np.full((n, n), np.nan)
+            return nan, (nan.copy() if res.Pt_plus is not None else None), RunStatus.OUTSIDE_TRAJECTORY
         phi[0] = np.eye(7)
         theta = np.array(sens.par_step)
         theta[0] = 0.0
@@ -65,12 +66,15 @@ def predict_from(res, k: int, t_to: float):
         Pa = np.asarray(cov.time_update(Pa, phis[j], Qa[j]))
         if Pt is not None:
             Pt = np.asarray(cov.time_update(Pt, phis[j], Qt[j]))
-    return Pa, Pt
+    return Pa, Pt, RunStatus.OK
 
 
-def predictions(res) -> dict[int, list[tuple[float, np.ndarray, np.ndarray | None]]]:
-    """Every prediction event of the schedule: {k: [(t_to_s, P_assumed, P_true), ...]}."""
-    out = {}
+def predictions(res):
+    """Every prediction event of the schedule: ({k: [(t_to_s, P_assumed, P_true), ...]},
+    {k: [status, ...]})."""
+    out, status = {}, {}
     for k, targets in res.study.schedule.predict_to_s.items():
-        out[k] = [(t, *predict_from(res, k, t)) for t in targets]
-    return out
+        got = [predict_from(res, k, t) for t in targets]
+        out[k] = [(t, Pa, Pt) for t, (Pa, Pt, _) in zip(targets, got)]
+        status[k] = [int(s) for _, _, s in got]
+    return out, status

@@ -1,23 +1,24 @@
-"""The reference trajectory of a study and its transition matrices (FRACAS PATH, STMGEN, STMRDR).
+"""The reference trajectory of a study and its transition matrices (FRACAS PATH, STMRDR).
 
 Either integrated in line (one :func:`propagate_with_sensitivities` over the schedule
-times) or read from an STM file (only the study's parameter columns, matrices chained
-over the file times the study skips).  Both give a :class:`Reference`.
+times) or taken from a :class:`~fracas.products.ReferenceTrajectory` product (an STM file's
+contents: only the study's parameter columns, matrices chained over the times the study
+skips).  Both give a :class:`Reference`.  Nothing here raises on a failed integration: the
+Reference carries a :class:`~fracas.status.RunStatus` and the time it failed at.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from fracas.errors import NumericalError, StmFileError
-from fracas.io import stm_file
-from fracas.team.setup import Study, stm_file_labels, stm_file_times
+from fracas.integrate.propagate import propagate_with_sensitivities
+from fracas.products import ReferenceTrajectory, chain, time_indices
+from fracas.status import RunStatus
+from fracas.team.study import Study
 
-__all__ = ["Reference", "integrate_reference", "reference_from_stm", "build_stm_data"]
+__all__ = ["Reference", "integrate_reference", "reference_from_product", "run_reference"]
 
 
 @dataclass
@@ -26,7 +27,9 @@ class Reference:
 
     states (K, 7) r km, v km/s, m kg relative to primary[k]; phi (K, 7, 7) Φ(t_k, t_{k-1})
     (identity at k = 0); theta (K, 7, n_dyn) Θ(t_k, t_{k-1}) for ``labels`` (the study's
-    dynamic parameters); source: "integrated" or the STM file path.
+    dynamic parameters); source: "integrated" or the STM file path; status: OK, or
+    OUTSIDE_TRAJECTORY when the trajectory ended before ``failed_at_s`` (a schedule time;
+    the matrices from there on are not finite); integrator_status: the propagation's own.
     """
 
     times_s: np.ndarray
@@ -37,19 +40,19 @@ class Reference:
     labels: list[str]
     source: str
     deck_text: str | None = None
+    status: RunStatus = RunStatus.OK
+    failed_at_s: float = float("nan")
+    integrator_status: int = 0
 
 
-def _run(study: Study, t_out: np.ndarray, labels: list[str]):
-    from fracas.integrate.propagate import propagate_with_sensitivities
-
-    pr = study.problem
-    traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, pr.x0, t_out, labels)
-    if not np.all(np.isfinite(np.asarray(sens.stm_step))):
-        bad = int(np.argmax(~np.all(np.isfinite(np.asarray(sens.stm_step)), axis=(1, 2))))
-        raise NumericalError(
-            f"{study.traj_deck.source_path}: the reference trajectory stopped before t = {t_out[bad] / 86400.0:.6g} d "
-            f"(status {int(traj.status)}); the study's times must lie on the trajectory")
-    return traj, sens
+def run_reference(problem, t_out: np.ndarray, labels: list[str]):
+    """Propagate ``problem`` from its x0 with sensitivities over ``t_out``: (traj, sens, status, failed_at_s)."""
+    traj, sens = propagate_with_sensitivities(problem.model, problem.params, problem.ephem, problem.epoch_et_s,
+                                              problem.x0, t_out, labels)
+    finite = np.all(np.isfinite(np.asarray(sens.stm_step)), axis=(1, 2))
+    if np.all(finite):
+        return traj, sens, RunStatus.OK, float("nan")
+    return traj, sens, RunStatus.OUTSIDE_TRAJECTORY, float(t_out[int(np.argmax(~finite))])
 
 
 def integrate_reference(study: Study) -> Reference:
@@ -58,49 +61,29 @@ def integrate_reference(study: Study) -> Reference:
     lead = times[0] > 0.0
     t_out = np.concatenate([[0.0], times]) if lead else times
     labels = study.dynamic_labels
-    traj, sens = _run(study, t_out, labels)
+    traj, sens, status, failed_at = run_reference(study.problem, t_out, labels)
     sl = slice(1, None) if lead else slice(None)
     phi = np.array(sens.stm_step)[sl]
     theta = np.array(sens.par_step)[sl]
     phi[0] = np.eye(7)
     theta[0] = 0.0
     bodies = study.problem.model.bodies
-    prim = [bodies[int(i)] for i in np.asarray(traj.primary)[sl]]
-    return Reference(times, np.array(traj.x)[sl], prim, phi, theta, labels, "integrated")
+    prim = [bodies[int(i)] if 0 <= int(i) < len(bodies) else "" for i in np.asarray(traj.primary)[sl]]
+    return Reference(times, np.array(traj.x)[sl], prim, phi, theta, labels, "integrated", status=status,
+                     failed_at_s=failed_at, integrator_status=int(traj.status))
 
 
-def build_stm_data(study: Study) -> stm_file.StmData:
-    """STMGEN: integrate the reference once over every file time with every parameter column."""
-    times = stm_file_times(study)
-    labels = stm_file_labels(study)
-    traj, sens = _run(study, times, labels)
-    ev = []
-    sched = study.schedule
-    for t in times:
-        k = int(np.argmin(np.abs(sched.times_s - t)))
-        if abs(sched.times_s[k] - t) < 1e-6:
-            ev.append("+".join(e for e in sched.events[k]))
-        else:
-            ev.append("grid")
-    if ev and times[0] == 0.0 and "initial" not in ev[0]:
-        ev[0] = "initial" if ev[0] == "grid" else "initial+" + ev[0]
-    pr = dataclasses.replace(study.problem, t_out=times, param_labels=tuple(labels))
-    tdeck = study.traj_deck
-    return stm_file.stm_data_from_run(pr, traj, sens, ev, tdeck.source_text or "", stm_file.trajectory_hash(tdeck),
-                                      tdeck.source_path)
+def reference_from_product(study: Study, data: ReferenceTrajectory, source: str) -> Reference:
+    """STMRDR: the study's columns and times from a reference-trajectory product, chained.
 
-
-def reference_from_stm(study: Study, path: str | Path) -> Reference:
-    """STMRDR: read the study's columns and times from an STM file and chain the matrices."""
-    labels = study.dynamic_labels
+    ``data`` must hold the study's dynamic labels (in that order) and every schedule time
+    (:func:`fracas.io.stm_file.read_stm_file` with ``labels`` and ``times_s`` checks both).
+    """
     times = study.schedule.times_s
-    data = stm_file.read_stm_file(path, labels=labels, times_s=times)
-    stm_file.check_trajectory(data, stm_file.trajectory_hash(study.traj_deck), path, study.traj_deck.source_path)
-    phi, theta = stm_file.chain(data, times)
+    phi, theta = chain(data, times)
     phi[0] = np.eye(7)
     theta[0] = 0.0
-    idx = stm_file.time_indices(data, times)
+    idx = time_indices(data, times)
     prim = [data.primary[int(i)] for i in idx]
-    if not np.allclose(data.epoch_et_s, study.problem.epoch_et_s, atol=1e-6):
-        raise StmFileError(f"{path}: epoch differs from the study's trajectory deck")
-    return Reference(times, np.asarray(data.states)[idx], prim, phi, theta, labels, str(path), data.deck_text)
+    return Reference(times, np.asarray(data.states)[idx], prim, phi, theta, list(study.dynamic_labels), source,
+                     data.deck_text)

@@ -16,7 +16,7 @@ import pytest
 
 from fracas.config.team import load_team_deck, parse_team_deck
 from fracas.team.schedule import build_schedule, merge_times, range_times
-from fracas.team.setup import build_study, stm_file_times
+from fracas.build.team import build_case, build_study, stm_file_times
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 SMALL = DATA / "team_small.toml"
@@ -164,6 +164,6 @@ def test_small_study_clipped_by_filter_window():
 def test_small_study_stm_file_times(small):
     """The STM file's times: the schedule, the 2 h grid ([stm] grid_hours) over the whole
     6-day trajectory, the switches: every schedule time is on the 2 h grid, so 73."""
-    t = stm_file_times(small)
+    t = stm_file_times(build_case(load_team_deck(SMALL)))
     np.testing.assert_allclose(t, range_times(0.0, 6 * DAY, 2 * H), rtol=0, atol=1e-6)
     assert np.all(np.isin(np.round(small.schedule.times_s, 3), np.round(t, 3)))

@@ -18,7 +18,7 @@ from click.testing import CliRunner
 from fracas.cli import main
 from fracas.config.team import load_team_deck, parse_team_deck
 from fracas.errors import DeckError
-from fracas.team.setup import build_study
+from fracas.build.team import build_study
 
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO / "tests" / "data"

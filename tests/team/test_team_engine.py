@@ -26,8 +26,9 @@ from fracas.errors import StmFileError
 from fracas.pipeline import build_stm, run_team
 from fracas.team.engine import augmented_transitions, process_noise, run_study
 from fracas.team.measure import assemble_measurements
-from fracas.team.reference import integrate_reference, reference_from_stm
-from fracas.team.setup import build_study
+from fracas.pipeline import reference_from_stm
+from fracas.team.reference import integrate_reference
+from fracas.build.team import build_study
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 SMALL = DATA / "team_small.toml"

@@ -1,6 +1,6 @@
-"""From a validated TEAM deck to a :class:`Study` in canonical units (FRACAS DATA, sec. 5.3.2).
+"""From a validated TEAM deck to a :class:`~fracas.team.study.Study` in canonical units (FRACAS DATA, sec. 5.3.2).
 
-The application layer of TEAM: reads the trajectory deck named by [ertraj], sorts the
+The application layer of TEAM (the core in :mod:`fracas.team` never sees the deck): reads the trajectory deck named by [ertraj], sorts the
 study's parameters into the augmented-state roles (solve-for s, dynamic consider u,
 measurement consider v, ignore w), builds the a-priori covariances (assumed and, for
 generalized covariance, true), the Gauss-Markov thrust noise levels, the stations, the
@@ -13,89 +13,51 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
-from fracas.build import Problem, build_propagation
+from fracas.build.trajectory import Problem, build_propagation
 from fracas.config.team import SIGMA_UNITS, APriori, TeamDeck, ThrustNoise
-from fracas.config.trajectory import TrajectoryDeck, load_deck
+from fracas.config.trajectory import TrajectoryDeck, load_deck, trajectory_hash
 from fracas.constants import DAY_S
 from fracas.dynamics.variational import THRUST_NOISE_LABELS
-from fracas.errors import DeckError
+from fracas.errors import ConfigError, DeckError
 from fracas.filters.covariance import Layout
 from fracas.measurements import trakm
 from fracas.measurements.stations import DSN_STATIONS, Station
 from fracas.params import param_unit, parse_label
-from fracas.team.schedule import Schedule, build_schedule, merge_times, range_times
+from fracas.team.schedule import build_schedule, merge_times, range_times
+from fracas.team.study import Study, TrackingSpec
 
-__all__ = ["Study", "build_study", "trajectory_problem", "THRUST_NOISE_LABELS"]
+__all__ = ["TeamCase", "build_study", "build_case", "trajectory_problem", "stm_file_times", "stm_file_labels",
+           "thrust_switch_times"]
 
 _NOISE_FIELDS = ("proportionality", "in_plane_deg", "out_of_plane_deg")
 _NOISE_SCALE = (1.0, math.pi / 180.0, math.pi / 180.0)
 
 
-@dataclass
-class Study:
-    """Everything a TEAM run needs, in km, s, kg, rad (ICRF).
+@dataclass(frozen=True)
+class TeamCase:
+    """A TEAM deck with what was built from it: the application layer's handle on a study.
 
-    labels: augmented parameter labels in layout order [s, u, v, w]; dynamic[i]: whether
-    the trajectory depends on labels[i] (its column is in the STM file); P0_assumed /
-    P0_true (n, n): a-priori covariances (the assumed one has zero ignore rows/columns);
-    noise_sigma_* (3,), noise_tau_* (3,) s: Gauss-Markov thrust noise (proportionality,
-    in-plane rad, out-of-plane rad), assumed and true; observations[j], true_sigma[j]:
-    the observation of tracking entry j and the real-world noise sigma (km, km/s or rad).
+    ``study`` is what the core receives; ``deck`` and ``traj_deck`` stay here, for the
+    file names, the print options and the provenance the edges need.
     """
 
     deck: TeamDeck
-    source: str
     traj_deck: TrajectoryDeck
-    problem: Problem
-    layout: Layout
-    labels: list[str]
-    roles: list[str]
-    units: list[str]
-    dynamic: np.ndarray
-    P0_assumed: np.ndarray
-    P0_true: np.ndarray
-    noise_sigma_assumed: np.ndarray
-    noise_tau_assumed: np.ndarray
-    noise_sigma_true: np.ndarray
-    noise_tau_true: np.ndarray
-    stations: dict[str, Station]
-    observations: list[trakm.Observation]
-    true_sigma: np.ndarray
-    schedule: Schedule
-    start_s: float
-    stop_s: float
-    gencov: bool
-    filter_kind: str
-    square_root: bool
-    user_gain: Callable | None
-    min_elevation_deg: float
-    propagation: str
-    punched: dict | None = None
+    study: Study
 
     @property
-    def nx(self) -> int:
-        return self.layout.nx
+    def source(self) -> str:
+        return self.study.source
 
-    @property
-    def dynamic_labels(self) -> list[str]:
-        return [lab for lab, d in zip(self.labels, self.dynamic) if d]
 
-    @property
-    def state_labels(self) -> list[str]:
-        return ["x", "y", "z", "vx", "vy", "vz", "mass"][: self.nx]
-
-    @property
-    def state_units(self) -> list[str]:
-        return ["km", "km", "km", "km/s", "km/s", "km/s", "kg"][: self.nx]
-
-    @property
-    def has_noise(self) -> bool:
-        return bool(np.any(self.noise_sigma_assumed > 0) or (self.gencov and np.any(self.noise_sigma_true > 0)))
+def thrust_switch_times(tdeck: TrajectoryDeck) -> tuple[float, ...]:
+    """The thrust on/off times of a trajectory deck (s from its epoch, sorted, unique)."""
+    return tuple(sorted({a.start_days * DAY_S for a in tdeck.thrust_arc} | {a.stop_days * DAY_S for a in tdeck.thrust_arc}))
 
 
 def _err(src: str, field: str, value, expected: str) -> DeckError:
@@ -162,7 +124,12 @@ def load_user_gain(spec: str, src: str) -> Callable:
 
 
 def build_study(deck: TeamDeck, punched: dict | None = None) -> Study:
-    """DATA: validate the deck against the trajectory and the catalogues; build the study."""
+    """DATA: validate the deck against the trajectory and the catalogues; build the core's study."""
+    return build_case(deck, punched).study
+
+
+def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
+    """DATA: validate the deck against the trajectory and the catalogues; the study with its decks."""
     src = deck.source_path or "<deck>"
     tdeck, problem = trajectory_problem(deck, src)
     model = problem.model
@@ -203,8 +170,6 @@ def build_study(deck: TeamDeck, punched: dict | None = None) -> Study:
     if layout.nw:  # the filter does not know its ignore parameters
         p_sig_a[-layout.nw:] = 0.0
     if punched is not None:
-        from fracas.io.stm_file import trajectory_hash
-
         if punched.get("trajectory_hash") and punched["trajectory_hash"] != trajectory_hash(tdeck):
             raise _err(src, "a_priori.from_punch", deck.a_priori.from_punch,
                        f"was punched on another trajectory (hash {str(punched['trajectory_hash'])[:12]}), this study's "
@@ -227,10 +192,15 @@ def build_study(deck: TeamDeck, punched: dict | None = None) -> Study:
         raise _err(src, "thrust_noise", None, "the trajectory deck has no thrust ([propulsion] and [[thrust_arc]])")
 
     # ---- observations and their schedule
-    obs, tsig, track_times = [], [], []
+    obs, tsig, track_times, specs = [], [], [], []
     for j, t in enumerate(deck.tracking):
         unit, k = SIGMA_UNITS[t.type]
         obs.append(trakm.Observation(t.type, tuple(t.stations), t.sigma * k))
+        star = None
+        if t.type == "star_planet_angle":
+            ra, de = math.radians(t.star_ra_deg), math.radians(t.star_dec_deg)
+            star = np.array([math.cos(de) * math.cos(ra), math.cos(de) * math.sin(ra), math.sin(de)])
+        specs.append(TrackingSpec(t.type, tuple(t.stations), t.body, star))
         ts = (gen.measurement_sigma.get(t.type, t.sigma) if gen is not None else t.sigma) * k
         tsig.append(ts)
         track_times.append(range_times(t.start_days * DAY_S, t.stop_days * DAY_S, t.interval_hours * 3600.0))
@@ -258,6 +228,9 @@ def build_study(deck: TeamDeck, punched: dict | None = None) -> Study:
     switches = []
     for arc in tdeck.thrust_arc:
         switches += [(arc.start_days * DAY_S, "thrust_on"), (arc.stop_days * DAY_S, "thrust_off")]
+    if deck.errcon.propagation == "pdot" and (deck.filter.type == "wls" or deck.filter.square_root):
+        raise ConfigError(f"{src}: errcon.propagation = \"pdot\" supports the Kalman-Schmidt and user "
+                          "filters in covariance form (use propagation = \"phi\" for WLS or the square-root mode)")
     punch = np.array(deck.punch.times_days) * DAY_S if deck.punch is not None else np.zeros(0)
     sched = build_schedule(start, stop, track_times, events, switches, punch)
     if punched is not None:  # the punched covariance already includes the events at its time
@@ -268,37 +241,41 @@ def build_study(deck: TeamDeck, punched: dict | None = None) -> Study:
     gain = load_user_gain(deck.filter.user_gain, src) if deck.filter.type == "user" else None
     problem = dataclasses.replace(problem, param_labels=tuple(lab for lab, d in zip(labels, dynamic) if d),
                                   sensitivities=True)
-    return Study(
-        deck=deck, source=src, traj_deck=tdeck, problem=problem, layout=layout, labels=labels, roles=roles,
+    study = Study(
+        source=src, title=deck.title, problem=problem, layout=layout, labels=labels, roles=roles,
         units=units, dynamic=dynamic, P0_assumed=P0a, P0_true=P0t,
         noise_sigma_assumed=sig_a, noise_tau_assumed=tau_a, noise_sigma_true=sig_t, noise_tau_true=tau_t,
-        stations=stations, observations=obs, true_sigma=np.array(tsig, dtype=np.float64), schedule=sched,
-        start_s=start, stop_s=stop, gencov=gen is not None, filter_kind=deck.filter.type,
+        stations=stations, tracking=specs, observations=obs, true_sigma=np.array(tsig, dtype=np.float64),
+        schedule=sched, start_s=start, stop_s=stop, gencov=gen is not None, filter_kind=deck.filter.type,
         square_root=deck.filter.square_root, user_gain=gain, min_elevation_deg=deck.filter.min_elevation_deg,
-        propagation=deck.errcon.propagation, punched=punched,
+        propagation=deck.errcon.propagation, thrust_switches_s=thrust_switch_times(tdeck), trajectory_end_s=dur,
+        pdot_step_s=deck.ertraj.pdot_step_hours * 3600.0, user_gain_spec=deck.filter.user_gain or "",
+        trajectory_hash=trajectory_hash(tdeck), trajectory_source=tdeck.source_path or "", punched=punched,
     )
+    return TeamCase(deck, tdeck, study)
 
 
-def stm_file_times(study: Study) -> np.ndarray:
+def stm_file_times(case: TeamCase) -> np.ndarray:
     """STMGEN: the time points an STM file built from this deck holds (s from the epoch).
 
     The study's schedule, the thrust switches, the epoch and the optional uniform grid
     ([stm] grid_hours) over the whole trajectory, so other studies can use other times.
     """
-    dur = study.traj_deck.duration_days * DAY_S
+    study = case.study
+    dur = case.traj_deck.duration_days * DAY_S
     grid = np.zeros(0)
-    if study.deck.stm.grid_hours:
-        grid = range_times(0.0, dur, study.deck.stm.grid_hours * 3600.0)
-    sw = [a.start_days * DAY_S for a in study.traj_deck.thrust_arc] + [a.stop_days * DAY_S for a in study.traj_deck.thrust_arc]
-    t = merge_times([0.0], study.schedule.times_s, grid, sw, [dur])
+    if case.deck.stm.grid_hours:
+        grid = range_times(0.0, dur, case.deck.stm.grid_hours * 3600.0)
+    t = merge_times([0.0], study.schedule.times_s, grid, list(study.thrust_switches_s), [dur])
     return t[(t >= 0) & (t <= dur + 1e-6)]
 
 
-def stm_file_labels(study: Study) -> list[str]:
+def stm_file_labels(case: TeamCase) -> list[str]:
     """The parameter columns of an STM file built from this deck: the study's dynamic
     parameters, the thrust noise components, and [stm] parameters."""
+    study = case.study
     out = list(study.dynamic_labels)
-    extra = list(study.deck.stm.parameters)
+    extra = list(case.deck.stm.parameters)
     if study.problem.model.thrust:
         extra += list(THRUST_NOISE_LABELS)
     for lab in extra:

@@ -20,8 +20,6 @@ Conversions made here (and nowhere else):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from fracas import constants
@@ -39,37 +37,9 @@ from fracas.dynamics.model import (
     default_params,
 )
 from fracas.errors import ConfigError
+from fracas.integrate.problem import Problem
 
 __all__ = ["Problem", "build_propagation", "output_times_s", "model_bodies"]
-
-
-@dataclass(frozen=True)
-class Problem:
-    """Everything one propagation needs, in canonical units (km, s, kg, kW, rad; ICRF).
-
-    model, params: the core's static spec and dynamic pytree; ephem: DE421 table over the
-    propagation window (None when no body position is needed); epoch_et_s: TDB s past J2000
-    of t = 0; x0 (7,): r km, v km/s, mass kg relative to the primary; t_out (n,): output
-    times, s from the epoch; param_labels: columns of the parameter sensitivity matrices;
-    sensitivities: whether to propagate the STM and parameter matrices.
-    """
-
-    model: ForceModel
-    params: Params
-    ephem: object | None
-    epoch_et_s: float
-    x0: np.ndarray
-    t_out: np.ndarray
-    param_labels: tuple[str, ...] = ()
-    sensitivities: bool = False
-    # descriptive
-    title: str = ""
-    source_path: str | None = None
-    source_text: str | None = None
-    centre: str = ""
-    frame: str = "ICRF"
-    final_time_s: float = 0.0
-    info: dict = field(default_factory=dict)
 
 
 def _src(deck: TrajectoryDeck) -> str:

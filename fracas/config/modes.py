@@ -1,0 +1,56 @@
+"""Which mode a deck asks for (its ``mode`` line) and the validated deck of that mode.
+
+``mode = "team"`` (TEAM covariance analysis) or ``mode = "propagate"`` (a trajectory deck;
+the default, so every trajectory deck stays valid as written).  TOM, TSIM and sweeps will
+add ``"tom"``, ``"tsim"``, ``"sweep"``.  TEAM decks written before ``mode`` existed are
+still recognised by their ``[ertraj]`` table.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+from fracas.errors import DeckError
+
+__all__ = ["MODES", "PLANNED_MODES", "deck_mode", "parse_any", "load_any"]
+
+MODES = ("propagate", "team")
+PLANNED_MODES = ("tom", "tsim", "sweep")
+
+
+def deck_mode(text: str, source: str = "<deck>") -> str:
+    """The mode of deck text: its ``mode`` value, else "team" for a legacy TEAM deck (an
+    [ertraj] table), else "propagate".  DeckError for a TOML error or an unknown mode."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise DeckError(f"{source}: TOML syntax error: {exc}") from None
+    mode = data.get("mode")
+    if mode is None:
+        return "team" if "ertraj" in data else "propagate"
+    if mode in MODES:
+        return mode
+    if mode in PLANNED_MODES:
+        raise DeckError(f'{source}: mode = "{mode}": not available in this release (expected one of: '
+                        f'{", ".join(MODES)})')
+    raise DeckError(f"{source}: mode = {mode!r}: unknown mode (expected one of: {', '.join(MODES)})")
+
+
+def parse_any(text: str, source: str = "<deck>"):
+    """The validated deck of whatever mode ``text`` asks for (TrajectoryDeck or TeamDeck)."""
+    mode = deck_mode(text, source)
+    if mode == "team":
+        from fracas.config.team import parse_team_deck
+
+        return parse_team_deck(text, source)
+    from fracas.config.trajectory import parse_deck
+
+    return parse_deck(text, source)
+
+
+def load_any(path: str | Path):
+    """Read and validate a deck of any mode; every failure is a one-line DeckError."""
+    from fracas.config.trajectory import read_deck_text
+
+    return parse_any(read_deck_text(path), str(path))

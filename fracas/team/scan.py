@@ -1,0 +1,116 @@
+"""The TEAM filter as one jitted ``lax.scan`` over the event schedule (FRACAS COVP, PROP,
+FILTER, KSGAIN, WLSGAN, USRGAN), in covariance or square-root (W-matrix) form."""
+
+from __future__ import annotations
+
+from functools import partial
+
+import numpy as np
+
+from fracas import _jax  # noqa: F401
+import jax
+import jax.numpy as jnp
+
+from fracas.errors import ConfigError
+from fracas.filters import covariance as cov
+from fracas.filters import square_root as sqr
+from fracas.team.study import Study
+from fracas.team.transitions import bucket
+
+__all__ = ["run_filter", "filter_scan"]
+
+
+def _gain(kind, user_gain, layout, Pa, Pnc, H, R):
+    if kind == "kalman_schmidt":
+        return cov.kalman_schmidt_gain(Pa, H, R, layout), Pnc
+    if kind == "wls":
+        K, Pnc1 = cov.wls_gain(Pnc, H, R, layout)
+        return K, Pnc1
+    Kest = jnp.asarray(user_gain(Pa, H, R, layout))
+    K = jnp.zeros((layout.n, H.shape[0])).at[: layout.n_est].set(Kest)
+    return K, Pnc
+
+
+@partial(jax.jit, static_argnames=("layout", "kind", "gencov", "square_root", "user_gain"))
+def _scan(P0a, P0t, phi_aug, Qa, Qt, H, Ra, Rt, *, layout, kind, gencov, square_root, user_gain=None):
+    n_est = layout.n_est
+
+    def step(carry, ev):
+        A, T, Pnc = carry
+        phi, qa, qt, h, ra, rt = ev
+        if kind == "wls":
+            Pnc = cov.wls_time_update(Pnc, phi, layout)
+        if square_root:
+            Wa = sqr.sqrt_time_update(A, phi, qa)
+            Pa_m = Wa @ Wa.T
+            if kind == "kalman_schmidt":
+                K = sqr.sqrt_kalman_schmidt_gain(Wa, h, ra, layout)
+            else:
+                K, Pnc = _gain(kind, user_gain, layout, Pa_m, Pnc, h, ra)
+            Wa1 = sqr.sqrt_joseph_update(Wa, h, ra, K)
+            Pa_p = Wa1 @ Wa1.T
+            A1 = Wa1
+        else:
+            Pa_m = cov.time_update(A, phi, qa)
+            K, Pnc = _gain(kind, user_gain, layout, Pa_m, Pnc, h, ra)
+            Pa_p = cov.joseph_update(Pa_m, h, ra, K)
+            A1 = Pa_p
+        _, J = cov.innovation(Pa_m, h, ra)
+        if gencov:
+            if square_root:
+                Wt = sqr.sqrt_time_update(T, phi, qt)
+                Wt1 = sqr.sqrt_joseph_update(Wt, h, rt, K)
+                Pt_m, Pt_p, T1 = Wt @ Wt.T, Wt1 @ Wt1.T, Wt1
+            else:
+                Pt_m = cov.time_update(T, phi, qt)
+                Pt_p = cov.joseph_update(Pt_m, h, rt, K)
+                T1 = Pt_p
+        else:
+            Pt_m = Pt_p = T1 = T
+        return (A1, T1, Pnc), (Pa_m, Pa_p, Pt_m, Pt_p, jnp.sqrt(jnp.diagonal(J)))
+
+    if square_root:
+        A0, T0 = sqr.factor(P0a), sqr.factor(P0t)
+    else:
+        A0, T0 = P0a, P0t
+    Pnc0 = P0a[:n_est, :n_est]
+    _, outs = jax.lax.scan(step, (A0, T0, Pnc0), (phi_aug, Qa, Qt, H, Ra, Rt))
+    return outs
+
+
+def _pad_events(K: int, Kp: int, arrays):
+    """Append neutral events (identity Φ, zero Q and H, unit R) up to Kp."""
+    out = []
+    for name, a in arrays:
+        if Kp == K:
+            out.append(a)
+            continue
+        extra = np.zeros((Kp - K,) + a.shape[1:])
+        if name in ("phi", "R"):
+            extra[:] = np.eye(a.shape[-1])
+        out.append(np.concatenate([a, extra]))
+    return out
+
+
+def run_filter(study: Study, phi_aug, Qa, Qt, meas):
+    """Run the jitted scan over the schedule (padded to a bucket size); numpy outputs."""
+    K = study.schedule.n
+    Kp = bucket(K)
+    phi_aug, Qa, Qt, H, Ra, Rt = _pad_events(K, Kp, [("phi", phi_aug), ("Q", Qa), ("Q", Qt), ("H", meas.H),
+                                                    ("R", meas.R_assumed), ("R", meas.R_true)])
+    try:
+        outs = _scan(jnp.asarray(study.P0_assumed), jnp.asarray(study.P0_true), jnp.asarray(phi_aug), jnp.asarray(Qa),
+                     jnp.asarray(Qt), jnp.asarray(H), jnp.asarray(Ra), jnp.asarray(Rt), layout=study.layout,
+                     kind=study.filter_kind, gencov=study.gencov, square_root=study.square_root,
+                     user_gain=study.user_gain)
+    except (TypeError, ValueError, jax.errors.JAXTypeError) as exc:
+        if study.filter_kind == "user":
+            raise ConfigError(f"{study.source}: filter.user_gain = \"{study.user_gain_spec}\" failed: "
+                              f"{type(exc).__name__}: {str(exc).splitlines()[0]} (it is called as "
+                              "gain(P_assumed, H, R, layout) -> K (n_est, m) under jax tracing)") from None
+        raise
+    Pa_m, Pa_p, Pt_m, Pt_p, sig = (np.asarray(o)[:K] for o in outs)
+    return Pa_m, Pa_p, Pt_m, Pt_p, sig
+
+
+filter_scan = _scan

@@ -1,0 +1,111 @@
+"""A TEAM study as the core sees it (FRACAS DATA's output): arrays and core objects in
+canonical units, nothing that refers back to a deck.
+
+:func:`fracas.build.team.build_study` makes one from a validated TEAM deck (the one place
+where its days, hours, degrees and deck sigmas become s, rad, km and km/s); a sweep or TSIM
+may build or vary one in memory (``dataclasses.replace``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from fracas.filters.covariance import Layout
+from fracas.integrate.problem import Problem
+from fracas.measurements import trakm
+from fracas.measurements.stations import Station
+from fracas.params import STATE_LABELS, STATE_UNITS
+from fracas.team.schedule import Schedule
+
+__all__ = ["Study", "TrackingSpec", "NOISE_COMPONENTS"]
+
+NOISE_COMPONENTS = ("proportionality", "in_plane", "out_of_plane")  # Gauss-Markov thrust errors, in this order
+
+
+@dataclass(frozen=True)
+class TrackingSpec:
+    """One [[tracking]] entry: measurement kind, stations, observed body, star direction.
+
+    star_unit (3,): unit vector to the star of a star-planet angle (ICRF), else None.
+    """
+
+    kind: str
+    stations: tuple[str, ...]
+    body: str | None = None
+    star_unit: np.ndarray | None = None
+
+
+@dataclass
+class Study:
+    """Everything a TEAM run needs, in km, s, kg, rad (ICRF).
+
+    problem: the reference trajectory's propagation (its parameter columns are the study's
+    dynamic labels); labels: augmented parameter labels in layout order [s, u, v, w];
+    dynamic[i]: whether the trajectory depends on labels[i] (its column is in the STM file);
+    P0_assumed / P0_true (n, n): a-priori covariances (the assumed one has zero ignore
+    rows/columns); noise_sigma_* (3,), noise_tau_* (3,) s: Gauss-Markov thrust noise
+    (proportionality, in-plane rad, out-of-plane rad), assumed and true; tracking[j],
+    observations[j], true_sigma[j]: tracking entry j, its observation and the real-world
+    noise sigma (km, km/s or rad); thrust_switches_s: the thrust on/off times of the
+    trajectory (sorted, s); trajectory_end_s: where the reference trajectory ends (s);
+    pdot_step_s: the largest RK4 step of PDOT propagation (s); source: where the study came
+    from (a deck path, for messages); user_gain_spec: the "module:function" of a user gain.
+    """
+
+    source: str
+    title: str
+    problem: Problem
+    layout: Layout
+    labels: list[str]
+    roles: list[str]
+    units: list[str]
+    dynamic: np.ndarray
+    P0_assumed: np.ndarray
+    P0_true: np.ndarray
+    noise_sigma_assumed: np.ndarray
+    noise_tau_assumed: np.ndarray
+    noise_sigma_true: np.ndarray
+    noise_tau_true: np.ndarray
+    stations: dict[str, Station]
+    tracking: list[TrackingSpec]
+    observations: list[trakm.Observation]
+    true_sigma: np.ndarray
+    schedule: Schedule
+    start_s: float
+    stop_s: float
+    gencov: bool
+    filter_kind: str
+    square_root: bool
+    user_gain: Callable | None
+    min_elevation_deg: float
+    propagation: str
+    thrust_switches_s: tuple[float, ...] = ()
+    trajectory_end_s: float = 0.0
+    pdot_step_s: float = 3600.0
+    user_gain_spec: str = ""
+    trajectory_hash: str = ""
+    trajectory_source: str = ""
+    punched: dict | None = None
+
+    @property
+    def nx(self) -> int:
+        return self.layout.nx
+
+    @property
+    def dynamic_labels(self) -> list[str]:
+        return [lab for lab, d in zip(self.labels, self.dynamic) if d]
+
+    @property
+    def state_labels(self) -> list[str]:
+        return list(STATE_LABELS[: self.nx])
+
+    @property
+    def state_units(self) -> list[str]:
+        return list(STATE_UNITS[: self.nx])
+
+    @property
+    def has_noise(self) -> bool:
+        return bool(np.any(self.noise_sigma_assumed > 0) or (self.gencov and np.any(self.noise_sigma_true > 0)))

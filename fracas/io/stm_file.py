@@ -45,6 +45,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from fracas.constants import DAY_S
 from fracas.errors import StmFileError
 from fracas.params import STATE_LABELS, STATE_UNITS
 from fracas.products import (

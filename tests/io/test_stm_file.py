@@ -22,7 +22,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fracas.build import build_propagation
-from fracas.config.trajectory import parse_deck
+from fracas.build.reference import stm_data_from_run
+from fracas.config.trajectory import parse_deck, trajectory_hash
 from fracas.errors import StmFileError
 from fracas.integrate.propagate import (
     Sensitivities,
@@ -34,14 +35,12 @@ from fracas.io.stm_file import (
     FILE_KIND,
     SCHEMA_VERSION,
     StmData,
-    chain,
     check_trajectory,
     describe,
     read_stm_file,
-    stm_data_from_run,
-    trajectory_hash,
     write_stm_file,
 )
+from fracas.products import chain
 
 ROOT = Path(__file__).resolve().parents[2]
 DAY = 86400.0

@@ -56,14 +56,12 @@ from fracas.io.hdf5 import (
     write_provenance,
     write_strings,
 )
+from fracas.constants import DAY_S
+from fracas.params import STATE_LABELS, STATE_UNITS  # noqa: F401  (re-exported)
 
 FILE_KIND = "fracas-stm"
 SCHEMA_VERSION = 1
 TIME_TOL_S = 1e-6  # a requested time matches a file time within this (s); the deck's eps_t
-DAY_S = 86400.0
-
-STATE_LABELS = ("x", "y", "z", "vx", "vy", "vz", "mass")
-STATE_UNITS = ("km", "km", "km", "km/s", "km/s", "km/s", "kg")
 EVENT_TYPES = (
     "initial", "measurement", "propagation", "eigenvector", "prediction",
     "thrust_on", "thrust_off", "guidance", "final", "grid",
@@ -181,7 +179,8 @@ def stm_data_from_run(problem, traj, sens, event_types, deck_text, deck_hash, de
     ``event_types``: one string per time.  Refuses (StmFileError) a trajectory that did not
     reach every scheduled time.
     """
-    from fracas.params import get_values, param_unit
+    from fracas.dynamics.parameters import get_values
+    from fracas.params import param_unit
 
     where = deck_path or problem.source_path or "<deck>"
     t_out = np.asarray(problem.t_out, np.float64)

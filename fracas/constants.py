@@ -14,6 +14,7 @@ from dataclasses import dataclass
 # --- units and universal constants -------------------------------------------------
 AU_KM = 149_597_870.7  # km, IAU 2012 astronomical unit
 DAY_S = 86_400.0  # s
+SECONDS_PER_DAY = 86_400  # s, int (exact calendar arithmetic)
 JULIAN_YEAR_S = 365.25 * DAY_S  # s
 J2000_JD = 2_451_545.0  # Julian date (TDB) of J2000.0
 G0_KM_S2 = 9.80665e-3  # km/s^2, standard gravity (Isp <-> exhaust velocity)

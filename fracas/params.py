@@ -1,4 +1,4 @@
-"""The parameter catalogue: labels, units and access into :class:`fracas.dynamics.model.Params`.
+"""The parameter catalogue: labels, units, bounds and roles of every study parameter (jax-free).
 
 A label names one scalar a study can differentiate, estimate or disperse:
 
@@ -10,82 +10,204 @@ A label names one scalar a study can differentiate, estimate or disperse:
     exhaust_velocity_km_s  power_kw  efficiency  cr  area_m2  power_decay_s  impulse_isp_s
     impulse_t[0]  impulse_dv[0,1]                    impulsive events
 
+:data:`PARAMETER_KINDS` is the one table of these kinds (:class:`ParamKind`: index kind,
+unit, description, a typical a-priori sigma, physical bounds and the
+:class:`fracas.dynamics.model.Params` field).  The spacecraft state's labels and units
+(:data:`STATE_LABELS`, :data:`STATE_UNITS`) and the role vocabularies (:data:`DECK_ROLES`,
+:data:`AUGMENTED_ROLES`) live here too.  Measurement (consider) parameters are catalogued
+in :mod:`fracas.measurements.kinds`.
+
 Unknown labels raise ``KeyError`` with the list of what exists (the config layer turns that
-into a DeckError naming the deck field).
+into a DeckError naming the deck field).  This module imports neither JAX nor
+:mod:`fracas.dynamics`: :func:`parse_label` and :func:`param_unit` only read
+``model.bodies``, ``model.n_arcs`` and ``model.n_impulses``.  Reading and writing labelled
+values of a ``Params`` (JAX) is :mod:`fracas.dynamics.parameters`.
 """
 
 from __future__ import annotations
 
 import re
-from typing import Sequence
+from dataclasses import dataclass
 
-from fracas import _jax  # noqa: F401
-import jax.numpy as jnp
+__all__ = [
+    "ParamKind",
+    "PARAMETER_KINDS",
+    "INDEX_SCALAR",
+    "INDEX_BODY",
+    "INDEX_BODY_ELEMENT",
+    "INDEX_ARC",
+    "INDEX_IMPULSE",
+    "INDEX_IMPULSE_AXIS",
+    "INDEX_KINDS",
+    "ELEMENT_NAMES",
+    "ELEMENT_UNITS",
+    "STATE_LABELS",
+    "STATE_UNITS",
+    "THRUST_NOISE_LABELS",
+    "ROLE_SOLVE_FOR",
+    "ROLE_CONSIDER",
+    "ROLE_DYNAMIC_CONSIDER",
+    "ROLE_MEASUREMENT_CONSIDER",
+    "ROLE_IGNORE",
+    "DECK_ROLES",
+    "AUGMENTED_ROLES",
+    "parse_label",
+    "param_unit",
+    "parameter_kind",
+]
 
-from fracas.dynamics.model import ForceModel, Params
+# --- index kinds: how a label's [..] part addresses its Params field ------------------
+INDEX_SCALAR = "scalar"  # name                 () field
+INDEX_BODY = "body"  # name[<body>]           (nb,) field, body name from model.bodies
+INDEX_BODY_ELEMENT = "body_element"  # name[<body>,<element>]  (nb, 6) field
+INDEX_ARC = "arc"  # name[<k>]              (na,) field, k < model.n_arcs
+INDEX_IMPULSE = "impulse"  # name[<k>]              (ni,) field, k < model.n_impulses
+INDEX_IMPULSE_AXIS = "impulse_axis"  # name[<k>,<0|1|2>]      (ni, 3) field
+INDEX_KINDS = (INDEX_SCALAR, INDEX_BODY, INDEX_BODY_ELEMENT, INDEX_ARC, INDEX_IMPULSE, INDEX_IMPULSE_AXIS)
 
+ELEMENT_NAMES = ("a", "e", "i", "raan", "argp", "M")
+ELEMENT_UNITS = ("km", "1", "rad", "rad", "rad", "rad")
+_ELEMENT_UNITS = ELEMENT_UNITS  # former private name
+
+# --- the spacecraft state (rows of every STM, columns of every covariance) ------------
 STATE_LABELS = ("x", "y", "z", "vx", "vy", "vz", "mass")
 STATE_UNITS = ("km", "km", "km", "km/s", "km/s", "km/s", "kg")
-ELEMENT_NAMES = ("a", "e", "i", "raan", "argp", "M")
-_ELEMENT_UNITS = ("km", "1", "rad", "rad", "rad", "rad")
 
-_SCALAR_UNITS = {
-    "area_m2": "m^2",
-    "cr": "1",
-    "power_kw": "kW",
-    "power_decay_s": "s",
-    "efficiency": "1",
-    "exhaust_velocity_km_s": "km/s",
-    "thrust_scale": "1",
-    "bias_in_rad": "rad",
-    "bias_out_rad": "rad",
-    "impulse_isp_s": "s",
-}
-_BODY_UNITS = {"mu": "km^3/s^2", "j2": "1", "radius": "km"}
-_ARC_UNITS = {
-    "arc_t_on": "s",
-    "arc_t_off": "s",
-    "arc_alpha": "rad",
-    "arc_beta": "rad",
-    "arc_throttle": "1",
-    "arc_thrust_scale": "1",
-    "arc_bias_in_rad": "rad",
-    "arc_bias_out_rad": "rad",
-}
-_IMPULSE_UNITS = {"impulse_t": "s", "impulse_dv": "km/s"}
+#: Gauss-Markov thrust error components (FRACAS DYNO's eta; App. 9.3): overall thrust
+#: proportionality (the ``thrust_scale`` factor, dimensionless; a 2 % error is sigma = 0.02
+#: when the nominal scale is 1), in-plane and out-of-plane pointing (rad).
+THRUST_NOISE_LABELS = ("thrust_scale", "bias_in_rad", "bias_out_rad")
+
+# --- roles ---------------------------------------------------------------------------
+ROLE_SOLVE_FOR = "solve_for"
+ROLE_CONSIDER = "consider"
+ROLE_DYNAMIC_CONSIDER = "dynamic_consider"
+ROLE_MEASUREMENT_CONSIDER = "measurement_consider"
+ROLE_IGNORE = "ignore"
+#: roles a TEAM deck's [[parameter]] may give
+DECK_ROLES = (ROLE_SOLVE_FOR, ROLE_CONSIDER, ROLE_IGNORE)
+#: roles of the augmented-state layout (a deck "consider" splits by whether the parameter
+#: acts on the dynamics or on the measurements)
+AUGMENTED_ROLES = (ROLE_SOLVE_FOR, ROLE_DYNAMIC_CONSIDER, ROLE_MEASUREMENT_CONSIDER, ROLE_IGNORE)
+
+
+@dataclass(frozen=True)
+class ParamKind:
+    """One kind of study parameter.
+
+    ``name``: the label's name (before any ``[..]``); ``index``: one of :data:`INDEX_KINDS`;
+    ``unit``: canonical unit (for ``body_element`` a tuple, one per element of
+    :data:`ELEMENT_NAMES`); ``sigma``: a typical a-priori 1-sigma in ``unit`` (as in the
+    example decks; informational, never applied by the program), None where no default makes
+    sense; ``bounds``: physical (lower, upper), None for an open side (informational: the
+    deck validators enforce their own); ``field``: the :class:`fracas.dynamics.model.Params`
+    field the label addresses.
+    """
+
+    name: str
+    index: str
+    unit: str | tuple[str, ...]
+    description: str
+    sigma: float | None = None
+    bounds: tuple[float | None, float | None] = (None, None)
+    field: str = ""
+
+    def __post_init__(self):
+        if self.index not in INDEX_KINDS:
+            raise ValueError(f"parameter kind {self.name!r}: index {self.index!r} not in {INDEX_KINDS}")
+        if not self.field:
+            object.__setattr__(self, "field", self.name)
+
+    def unit_at(self, idx: tuple[int, ...]) -> str:
+        """Unit of the entry at ``idx`` (the index tuple :func:`parse_label` returns)."""
+        return self.unit[idx[1]] if self.index == INDEX_BODY_ELEMENT else self.unit
+
+
+_INF = float("inf")
+_KINDS = (
+    # spacecraft and propulsion (scalars)
+    ParamKind("area_m2", INDEX_SCALAR, "m^2", "SRP reference area", None, (0.0, None)),
+    ParamKind("cr", INDEX_SCALAR, "1", "SRP reflectivity coefficient (1 absorber .. 2 mirror)", 0.1, (0.0, 2.0)),
+    ParamKind("power_kw", INDEX_SCALAR, "kW", "base power: at 1 AU (solar) or at t = 0 (nuclear)", None, (0.0, None)),
+    ParamKind("power_decay_s", INDEX_SCALAR, "s", "nuclear power e-folding time", None, (0.0, None)),
+    ParamKind("efficiency", INDEX_SCALAR, "1", "thruster efficiency eta", None, (0.0, 1.0)),
+    ParamKind("exhaust_velocity_km_s", INDEX_SCALAR, "km/s", "exhaust velocity c", None, (0.0, None)),
+    ParamKind("thrust_scale", INDEX_SCALAR, "1", "overall thrust proportionality (1 nominal)", 0.01, (0.0, None)),
+    ParamKind("bias_in_rad", INDEX_SCALAR, "rad", "overall in-plane pointing bias", 0.005),
+    ParamKind("bias_out_rad", INDEX_SCALAR, "rad", "overall out-of-plane pointing bias", 0.005),
+    ParamKind("impulse_isp_s", INDEX_SCALAR, "s", "specific impulse of the impulsive engine", None, (0.0, None)),
+    # per body
+    ParamKind("mu", INDEX_BODY, "km^3/s^2", "gravitational parameter GM of a body", None, (0.0, None)),
+    ParamKind("j2", INDEX_BODY, "1", "unnormalised J2 of a body"),
+    ParamKind("radius", INDEX_BODY, "km", "equatorial (J2 reference) radius of a body", None, (0.0, None)),
+    ParamKind("body_elements", INDEX_BODY_ELEMENT, ELEMENT_UNITS,
+              "heliocentric conic element (a, e, i, raan, argp, M) of an EPHEM body"),
+    # per thrust arc
+    ParamKind("arc_t_on", INDEX_ARC, "s", "arc start, s from the propagation epoch"),
+    ParamKind("arc_t_off", INDEX_ARC, "s", "arc end, s from the propagation epoch"),
+    ParamKind("arc_alpha", INDEX_ARC, "rad", "arc in-plane angle / right ascension"),
+    ParamKind("arc_beta", INDEX_ARC, "rad", "arc out-of-plane angle / declination"),
+    ParamKind("arc_throttle", INDEX_ARC, "1", "arc thrust level factor", None, (0.0, 1.0)),
+    ParamKind("arc_thrust_scale", INDEX_ARC, "1", "per-arc thrust proportionality (1 nominal)", 0.01, (0.0, None)),
+    ParamKind("arc_bias_in_rad", INDEX_ARC, "rad", "per-arc in-plane pointing bias", 0.005),
+    ParamKind("arc_bias_out_rad", INDEX_ARC, "rad", "per-arc out-of-plane pointing bias", 0.005),
+    # impulsive events
+    ParamKind("impulse_t", INDEX_IMPULSE, "s", "time of an impulsive dV, s from the propagation epoch"),
+    ParamKind("impulse_dv", INDEX_IMPULSE_AXIS, "km/s", "impulsive dV component in its impulse frame"),
+)
+#: name -> :class:`ParamKind`
+PARAMETER_KINDS: dict[str, ParamKind] = {k.name: k for k in _KINDS}
+_BY_FIELD = {k.field: k for k in _KINDS}
+
+
+def _units(index: str) -> dict[str, str]:
+    return {k.name: k.unit for k in _KINDS if k.index == index}
+
+
+# Former private tables (name -> unit), derived from the catalogue.
+_SCALAR_UNITS = _units(INDEX_SCALAR)
+_BODY_UNITS = _units(INDEX_BODY)
+_ARC_UNITS = _units(INDEX_ARC)
+_IMPULSE_UNITS = {**_units(INDEX_IMPULSE), **_units(INDEX_IMPULSE_AXIS)}
 _LABEL = re.compile(r"^([a-z_0-9]+)(?:\[([^\]]+)\])?$")
 
 
-def parse_label(label: str, model: ForceModel) -> tuple[str, tuple[int, ...]]:
-    """(Params field, index tuple) of a label; KeyError with a helpful message if unknown."""
+def parse_label(label: str, model) -> tuple[str, tuple[int, ...]]:
+    """(Params field, index tuple) of a label; KeyError with a helpful message if unknown.
+
+    ``model``: anything with ``bodies`` (names), ``n_arcs`` and ``n_impulses`` (a
+    :class:`fracas.dynamics.model.ForceModel`).
+    """
     m = _LABEL.match(label.strip())
     if not m:
         raise KeyError(f"malformed parameter label {label!r}: expected name or name[index]")
     name, idx = m.group(1), m.group(2)
     parts = [s.strip() for s in idx.split(",")] if idx else []
-    if name in _SCALAR_UNITS and not parts:
-        return name, ()
-    if name in _BODY_UNITS and len(parts) == 1:
+    kind = PARAMETER_KINDS.get(name)
+    index = kind.index if kind is not None else None
+    if index == INDEX_SCALAR and not parts:
+        return kind.field, ()
+    if index == INDEX_BODY and len(parts) == 1:
         if parts[0] not in model.bodies:
             raise KeyError(f"parameter {label!r}: body {parts[0]!r} is not in the force model {model.bodies}")
-        return name, (model.bodies.index(parts[0]),)
-    if name == "body_elements" and len(parts) == 2:
+        return kind.field, (model.bodies.index(parts[0]),)
+    if index == INDEX_BODY_ELEMENT and len(parts) == 2:
         if parts[0] not in model.bodies or parts[1] not in ELEMENT_NAMES:
             raise KeyError(f"parameter {label!r}: expected body_elements[<body>,<{'|'.join(ELEMENT_NAMES)}>]")
-        return name, (model.bodies.index(parts[0]), ELEMENT_NAMES.index(parts[1]))
-    if name in _ARC_UNITS and len(parts) == 1 and parts[0].isdigit():
+        return kind.field, (model.bodies.index(parts[0]), ELEMENT_NAMES.index(parts[1]))
+    if index == INDEX_ARC and len(parts) == 1 and parts[0].isdigit():
         k = int(parts[0])
         if k >= model.n_arcs:
             raise KeyError(f"parameter {label!r}: arc {k} does not exist ({model.n_arcs} thrust arcs)")
-        return name, (k,)
-    if name in _IMPULSE_UNITS and parts and parts[0].isdigit():
+        return kind.field, (k,)
+    if index in (INDEX_IMPULSE, INDEX_IMPULSE_AXIS) and parts and parts[0].isdigit():
         k = int(parts[0])
         if k >= model.n_impulses:
             raise KeyError(f"parameter {label!r}: impulse {k} does not exist ({model.n_impulses} impulses)")
-        if name == "impulse_t" and len(parts) == 1:
-            return name, (k,)
-        if name == "impulse_dv" and len(parts) == 2 and parts[1] in "012" and len(parts[1]) == 1:
-            return name, (k, int(parts[1]))
+        if index == INDEX_IMPULSE and len(parts) == 1:
+            return kind.field, (k,)
+        if index == INDEX_IMPULSE_AXIS and len(parts) == 2 and parts[1] in "012" and len(parts[1]) == 1:
+            return kind.field, (k, int(parts[1]))
     raise KeyError(
         f"unknown parameter {label!r}; known: {sorted(_SCALAR_UNITS)}, "
         f"{sorted(_BODY_UNITS)}[body], body_elements[body,element], {sorted(_ARC_UNITS)}[arc], "
@@ -93,31 +215,13 @@ def parse_label(label: str, model: ForceModel) -> tuple[str, tuple[int, ...]]:
     )
 
 
-def param_unit(label: str, model: ForceModel) -> str:
+def parameter_kind(label: str, model) -> ParamKind:
+    """The :class:`ParamKind` of a label (validated against ``model`` like :func:`parse_label`)."""
+    parse_label(label, model)
+    return PARAMETER_KINDS[_LABEL.match(label.strip()).group(1)]
+
+
+def param_unit(label: str, model) -> str:
     """Unit string of a label (canonical units)."""
-    name, idx = parse_label(label, model)
-    if name == "body_elements":
-        return _ELEMENT_UNITS[idx[1]]
-    for table in (_SCALAR_UNITS, _BODY_UNITS, _ARC_UNITS, _IMPULSE_UNITS):
-        if name in table:
-            return table[name]
-    raise KeyError(label)  # pragma: no cover
-
-
-def get_values(params: Params, labels: Sequence[str], model: ForceModel):
-    """Current values of the labelled parameters as one float64 vector."""
-    vals = []
-    for label in labels:
-        name, idx = parse_label(label, model)
-        vals.append(jnp.asarray(getattr(params, name), jnp.float64)[idx])
-    return jnp.stack(vals) if vals else jnp.zeros(0)
-
-
-def set_values(params: Params, labels: Sequence[str], values, model: ForceModel) -> Params:
-    """Params with the labelled entries replaced by ``values`` (differentiable in ``values``)."""
-    upd = {}
-    for j, label in enumerate(labels):
-        name, idx = parse_label(label, model)
-        cur = upd.get(name, jnp.asarray(getattr(params, name), jnp.float64))
-        upd[name] = cur.at[idx].set(values[j]) if idx else values[j] + 0.0 * cur
-    return params._replace(**upd)
+    field, idx = parse_label(label, model)
+    return _BY_FIELD[field].unit_at(idx)

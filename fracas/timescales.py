@@ -68,7 +68,7 @@ def calendar_to_et(iso: str) -> float:
     if hour > 23 or minute > 59 or second > 59:
         raise ConfigError(f"date {iso!r}: time of day out of range (TDB has no leap seconds)")
     jdn = _gregorian_to_jdn(year, month, day)
-    whole = (jdn - int(constants.J2000_JD)) * 86400 + (hour - 12) * 3600 + minute * 60 + second
+    whole = (jdn - int(constants.J2000_JD)) * constants.SECONDS_PER_DAY + (hour - 12) * 3600 + minute * 60 + second
     exact = Fraction(whole) + (Fraction(frac) if len(frac) > 1 else 0)
     return float(exact)
 
@@ -80,7 +80,7 @@ def et_to_calendar(et: float, digits: int = 3) -> str:
         raise ConfigError(f"et_to_calendar: time {et!r} is not finite")
     scale = 10**digits
     ticks = round(Fraction(et_f) * scale) + 43200 * scale  # from 2000-01-01T00:00:00
-    days, rem = divmod(ticks, 86400 * scale)
+    days, rem = divmod(ticks, constants.SECONDS_PER_DAY * scale)
     year, month, day = _jdn_to_gregorian(int(constants.J2000_JD) + days)
     secs, sub = divmod(rem, scale)
     hh, rest = divmod(secs, 3600)

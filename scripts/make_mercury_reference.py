@@ -17,7 +17,7 @@ from fracas.config.trajectory import parse_deck
 from fracas.constants import DAY_S
 from fracas.dynamics.ephemeris import body_states, build_ephemeris
 from fracas.integrate.propagate import propagate
-from fracas.params import set_values
+from fracas.dynamics.parameters import set_values
 
 ARRIVAL = "1985-06-20T00:00:00"
 DECK = f"""

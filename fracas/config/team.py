@@ -55,25 +55,14 @@ from fracas.config.trajectory import (
     parse_sourced,
     read_deck_text,
 )
+from fracas.measurements.kinds import KINDS as MEASUREMENT_TYPES  # the data types, one catalogue
+from fracas.measurements.kinds import MEASUREMENT_KINDS, N_STATIONS, SIGMA_UNITS
+from fracas.params import DECK_ROLES
 
 __all__ = ["TeamDeck", "load_team_deck", "parse_team_deck", "is_team_text", "MEASUREMENT_TYPES", "SIGMA_UNITS"]
 
-MEASUREMENT_TYPES = (
-    "range2", "doppler2", "range3", "doppler3", "diff_range", "diff_doppler",
-    "azimuth", "elevation", "star_planet_angle", "planet_diameter",
-)
-#: unit of ``sigma`` in a [[tracking]] entry, per type, and the factor to km, km/s or rad
-SIGMA_UNITS = {
-    "range2": ("m", 1e-3), "range3": ("m", 1e-3), "diff_range": ("m", 1e-3),
-    "doppler2": ("mm/s", 1e-6), "doppler3": ("mm/s", 1e-6), "diff_doppler": ("mm/s", 1e-6),
-    "azimuth": ("deg", 0.017453292519943295), "elevation": ("deg", 0.017453292519943295),
-    "star_planet_angle": ("urad", 1e-6), "planet_diameter": ("urad", 1e-6),
-}
-N_STATIONS = {
-    "range2": 1, "doppler2": 1, "azimuth": 1, "elevation": 1,
-    "range3": 2, "doppler3": 2, "diff_range": 2, "diff_doppler": 2,
-    "star_planet_angle": 0, "planet_diameter": 0,
-}
+# MEASUREMENT_TYPES, SIGMA_UNITS (unit of ``sigma`` in a [[tracking]] entry, per type, and
+# the factor to km, km/s or rad) and N_STATIONS come from fracas.measurements.kinds.
 MAX_STATIONS = 9
 NonNeg = Annotated[float, Field(ge=0)]
 
@@ -155,7 +144,7 @@ class APriori(_Section):
 class Parameter(_Section):
     label: ParamLabel
     sigma: NonNeg
-    role: Literal["solve_for", "consider", "ignore"]
+    role: Literal[DECK_ROLES]  # type: ignore[valid-type]
 
 
 class NoiseComponent(_Section):
@@ -198,9 +187,10 @@ class Tracking(_Section):
             raise FieldProblem("stations", self.stations, "the two stations must differ")
         if self.stop_days < self.start_days:
             raise FieldProblem("stop_days", self.stop_days, "must be >= start_days")
-        if need == 0 and not self.body:
+        kind = MEASUREMENT_KINDS[self.type]
+        if kind.needs_body and not self.body:
             raise FieldProblem("body", None, f'required for type "{self.type}" (the observed body)')
-        if self.type == "star_planet_angle" and (self.star_ra_deg is None or self.star_dec_deg is None):
+        if kind.needs_star and (self.star_ra_deg is None or self.star_dec_deg is None):
             raise FieldProblem("star_ra_deg", None, "star_ra_deg and star_dec_deg are required for star_planet_angle")
         return self
 

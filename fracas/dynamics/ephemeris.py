@@ -250,7 +250,7 @@ def build_ephemeris(
     bodies: Sequence[str],
     et_start_s: float,
     et_end_s: float,
-    margin_s: float = 30 * 86400.0,
+    margin_s: float = 30 * constants.DAY_S,
 ) -> EphemerisTable:
     """Table of heliocentric DE421 states of ``bodies`` (in that order) over a time window.
 

@@ -38,8 +38,9 @@ import jax.numpy as jnp
 
 from fracas.dynamics import forces
 from fracas.dynamics.model import ForceModel, IntegratorSettings, Params
+from fracas.dynamics.parameters import get_values, set_values
 from fracas.integrate import encke
-from fracas.params import get_values, set_values
+from fracas.params import THRUST_NOISE_LABELS
 
 __all__ = [
     "THRUST_NOISE_LABELS",
@@ -48,10 +49,10 @@ __all__ = [
     "state_jacobians",
 ]
 
-THRUST_NOISE_LABELS = ("thrust_scale", "bias_in_rad", "bias_out_rad")
-"""Gauss-Markov thrust error components (FRACAS DYNO's eta; App. 9.3): overall thrust
-proportionality (the ``thrust_scale`` factor, dimensionless; a 2 % error is sigma = 0.02
-when the nominal scale is 1), in-plane and out-of-plane pointing (rad)."""
+# Gauss-Markov thrust error components (FRACAS DYNO's eta; App. 9.3): overall thrust
+# proportionality (the ``thrust_scale`` factor, dimensionless; a 2 % error is sigma = 0.02
+# when the nominal scale is 1), in-plane and out-of-plane pointing (rad).  Catalogued in
+# fracas.params; re-exported here.
 
 
 def state_derivative(model: ForceModel, params: Params, ephem, epoch_et_s, t, x, primary):

@@ -25,8 +25,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from fracas.dynamics.model import ForceModel, IntegratorSettings, Params
+from fracas.dynamics.parameters import get_values, set_values
 from fracas.integrate import encke
-from fracas.params import get_values, set_values
 
 
 class Trajectory(NamedTuple):

@@ -47,7 +47,7 @@ import numpy as np
 
 from fracas.constants import DAY_S
 from fracas.errors import StmFileError
-from fracas.params import STATE_LABELS, STATE_UNITS
+from fracas.params import STATE_LABELS, STATE_UNITS  # noqa: F401  (re-exported)
 from fracas.products import (
     SCHEMA_VERSION,
     TIME_TOL_S,

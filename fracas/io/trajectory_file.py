@@ -34,12 +34,11 @@ from fracas.io.hdf5 import (
     write,
     write_provenance,
 )
+from fracas.params import STATE_LABELS, STATE_UNITS  # noqa: F401  (re-exported)
 
 FORMAT = "fracas-trajectory"
 SCHEMA_VERSION = 1
 
-STATE_LABELS = ("x", "y", "z", "vx", "vy", "vz", "mass")
-STATE_UNITS = ("km", "km", "km", "km/s", "km/s", "km/s", "kg")
 STATUS_TEXT = {
     0: "reached the final time",
     1: "stop condition met",

@@ -39,6 +39,8 @@ from __future__ import annotations
 from fracas import _jax  # noqa: F401  (x64 first)
 import jax.numpy as jnp
 
+from fracas.measurements import kinds
+
 __all__ = [
     "KINDS",
     "N_STATIONS",
@@ -66,33 +68,9 @@ __all__ = [
     "planet_diameter_partials",
 ]
 
-KINDS = (
-    "range2",
-    "doppler2",
-    "range3",
-    "doppler3",
-    "diff_range",
-    "diff_doppler",
-    "azimuth",
-    "elevation",
-    "star_planet_angle",
-    "planet_diameter",
-)
-
-# Participating stations per kind (0: spacecraft-based).
-N_STATIONS = {
-    "range2": 1,
-    "doppler2": 1,
-    "range3": 2,
-    "doppler3": 2,
-    "diff_range": 2,
-    "diff_doppler": 2,
-    "azimuth": 1,
-    "elevation": 1,
-    "star_planet_angle": 0,
-    "planet_diameter": 0,
-}
-
+# The data types and their participating stations (0: spacecraft-based), from the catalogue.
+KINDS = kinds.KINDS
+N_STATIONS = kinds.N_STATIONS
 
 
 def _f64(x):

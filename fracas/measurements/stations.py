@@ -34,6 +34,7 @@ import math
 from dataclasses import dataclass
 
 from fracas import _jax  # noqa: F401  (x64 first)
+from fracas.constants import DAY_S
 import jax
 import jax.numpy as jnp
 
@@ -52,7 +53,7 @@ __all__ = [
 #   theta = 2 pi (0.7790572732640 + 1.00273781191135448 Tu),  Tu = JD(UT1) - 2451545.0
 _ERA_0 = 0.7790572732640  # revolutions at J2000 UT1
 _ERA_EXCESS = 0.00273781191135448  # revolutions per UT1 day beyond one
-ERA_RATE_RAD_S = 2.0 * math.pi * (1.0 + _ERA_EXCESS) / 86_400.0  # rad/s, d(theta)/dt
+ERA_RATE_RAD_S = 2.0 * math.pi * (1.0 + _ERA_EXCESS) / DAY_S  # rad/s, d(theta)/dt
 UT1_MINUS_TDB_S = -69.184  # s, UT1 ~ UTC = TT - 69.184 s (37 leap seconds); TDB - TT ignored
 
 
@@ -100,13 +101,13 @@ def earth_rotation_angle(et_s):
     (about 1e-11 rad at et_s ~ 1e9 s) instead of losing digits to Tu ~ 1e4 days.
     """
     et = jnp.asarray(et_s, dtype=jnp.float64)
-    days = jnp.floor(et / 86_400.0)
+    days = jnp.floor(et / DAY_S)
     # exact: both terms are multiples of ulp(et).  The barrier stops XLA from reassociating
     # (et - days*86400) - 69.184 into (et - 69.184) - days*86400, which it did when
     # constant-folding a jitted call with a literal et (an error of ~1e-12 rad).
-    sec_of_day = jax.lax.optimization_barrier(et - days * 86_400.0)
-    tu = (et + UT1_MINUS_TDB_S) / 86_400.0
-    rev = _ERA_0 + _ERA_EXCESS * tu + (sec_of_day + UT1_MINUS_TDB_S) / 86_400.0
+    sec_of_day = jax.lax.optimization_barrier(et - days * DAY_S)
+    tu = (et + UT1_MINUS_TDB_S) / DAY_S
+    rev = _ERA_0 + _ERA_EXCESS * tu + (sec_of_day + UT1_MINUS_TDB_S) / DAY_S
     return 2.0 * jnp.pi * jnp.mod(rev, 1.0)
 
 

@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import functools
 import math
-import re
 from dataclasses import dataclass, field
 from collections.abc import Mapping, Sequence
 
@@ -46,6 +45,16 @@ import jax
 import jax.numpy as jnp
 
 from fracas.measurements import models
+from fracas.measurements.kinds import (
+    GLOBAL_LABELS,
+    KIND_UNITS,
+    MEASUREMENT_KINDS,
+    STATION_LABELS,
+    _split,
+    check_measurement_label,
+    is_measurement_label,
+    measurement_label_unit,
+)
 from fracas.measurements.stations import Station, station_partials, station_state
 
 __all__ = [
@@ -61,78 +70,9 @@ __all__ = [
     "observation_matrix_many",
 ]
 
-# name -> unit, for labels indexed by a station name (name[STATION]).
-STATION_LABELS = {
-    "station_radius_km": "km",
-    "station_lat_rad": "rad",
-    "station_lon_rad": "rad",
-    "range_bias_km": "km",
-    "doppler_bias_km_s": "km/s",
-    "azimuth_bias_rad": "rad",
-    "elevation_bias_rad": "rad",
-}
-# name -> unit, for unindexed labels.
-GLOBAL_LABELS = {
-    "qvlbi_timing_km": "km",
-    "qvlbi_frequency_km_s": "km/s",
-    "star_planet_bias_rad": "rad",
-    "diameter_bias_rad": "rad",
-}
-_KIND_UNITS = {
-    "range2": "km", "doppler2": "km/s", "range3": "km", "doppler3": "km/s",
-    "diff_range": "km", "diff_doppler": "km/s", "azimuth": "rad", "elevation": "rad",
-    "star_planet_angle": "rad", "planet_diameter": "rad",
-}
-_LABEL = re.compile(r"^([a-z_0-9]+)(?:\[([^\]\[]+)\])?$")
+# Label tables and label checks live in the jax-free catalogue (re-exported here).
+_KIND_UNITS = KIND_UNITS
 _STATION_PARAM_INDEX = {"station_radius_km": 0, "station_lat_rad": 1, "station_lon_rad": 2}
-
-
-def _valid_forms() -> str:
-    forms = [f"{n}[<station>]" for n in STATION_LABELS] + list(GLOBAL_LABELS)
-    return ", ".join(forms)
-
-
-def _split(label: str) -> tuple[str, str | None] | None:
-    m = _LABEL.match(label.strip()) if isinstance(label, str) else None
-    if m is None:
-        return None
-    name, idx = m.group(1), m.group(2)
-    if name in STATION_LABELS and idx is not None and idx.strip():
-        return name, idx.strip()
-    if name in GLOBAL_LABELS and idx is None:
-        return name, None
-    return None
-
-
-def is_measurement_label(label: str) -> bool:
-    """True if ``label`` has the form of a measurement-parameter label (any station name)."""
-    return _split(label) is not None
-
-
-def measurement_label_unit(label: str) -> str:
-    """Unit of a measurement-parameter label ('km', 'km/s' or 'rad'); KeyError if unknown."""
-    parts = _split(label)
-    if parts is None:
-        raise KeyError(f"{label!r} is not a measurement-parameter label; valid forms: {_valid_forms()}")
-    name = parts[0]
-    return STATION_LABELS.get(name) or GLOBAL_LABELS[name]
-
-
-def check_measurement_label(label: str, station_names) -> None:
-    """Raise KeyError, naming the valid forms and stations, unless ``label`` is a valid
-    measurement-parameter label whose station (if any) is in ``station_names``."""
-    names = sorted(station_names)
-    parts = _split(label)
-    if parts is None:
-        raise KeyError(
-            f"unknown measurement-parameter label {label!r}: expected one of {_valid_forms()}"
-            f" (stations: {', '.join(names) or 'none'})"
-        )
-    if parts[1] is not None and parts[1] not in names:
-        raise KeyError(
-            f"measurement-parameter label {label!r}: station {parts[1]!r} is not one of "
-            f"{', '.join(names) or 'none (no stations given)'}"
-        )
 
 
 @dataclass(frozen=True)
@@ -287,21 +227,7 @@ def _bucket(m: int) -> int:
 
 # --- label bookkeeping --------------------------------------------------------------
 # Unit bias partials per kind: (label name, station slot or None, coefficient).
-_BIAS_TERMS = {
-    "range2": (("range_bias_km", 0, 1.0),),
-    "doppler2": (("doppler_bias_km_s", 0, 1.0),),
-    "range3": (("range_bias_km", 0, 1.0), ("range_bias_km", 1, 1.0), ("qvlbi_timing_km", None, 1.0)),
-    "doppler3": (("doppler_bias_km_s", 0, 1.0), ("doppler_bias_km_s", 1, 1.0),
-                 ("qvlbi_frequency_km_s", None, 1.0)),
-    "diff_range": (("range_bias_km", 0, 1.0), ("range_bias_km", 1, -1.0),
-                   ("qvlbi_timing_km", None, -1.0)),
-    "diff_doppler": (("doppler_bias_km_s", 0, 1.0), ("doppler_bias_km_s", 1, -1.0),
-                     ("qvlbi_frequency_km_s", None, -1.0)),
-    "azimuth": (("azimuth_bias_rad", 0, 1.0),),
-    "elevation": (("elevation_bias_rad", 0, 1.0),),
-    "star_planet_angle": (("star_planet_bias_rad", None, 1.0),),
-    "planet_diameter": (("diameter_bias_rad", None, 1.0),),
-}
+_BIAS_TERMS = {k.name: k.bias_terms for k in MEASUREMENT_KINDS.values()}
 
 
 @functools.lru_cache(maxsize=64)

@@ -25,10 +25,10 @@ import pytest
 from fracas.build import build_propagation
 from fracas.config.trajectory import load_deck
 from fracas.dynamics import variational
+from fracas.dynamics.parameters import get_values, set_values
 from fracas.dynamics.variational import THRUST_NOISE_LABELS, jacobians_at, state_derivative, state_jacobians
 from fracas.filters.process_noise import gm_augmented_F, pdot_propagate
 from fracas.integrate.propagate import propagate, propagate_with_sensitivities
-from fracas.params import get_values, set_values
 
 DAY = 86400.0
 DECK = Path(__file__).resolve().parents[2] / "namelists" / "earth_mars_sep.toml"

@@ -1,0 +1,196 @@
+"""The measurement catalogue: data types (FRACAS TRAKM) and measurement-parameter labels (jax-free).
+
+:data:`MEASUREMENT_KINDS` holds one :class:`MeasurementKind` per data type: the unit of its
+value (km, km/s or rad), the unit a TEAM deck gives its sigma in and the factor from that
+unit to the canonical one, how many stations take part, whether it needs a target body or
+a star direction, and its unit bias partials.  :data:`MEASUREMENT_PARAMETERS` holds the
+measurement (consider) parameters a study may carry, one :class:`MeasurementParam` per
+label name:
+
+    station_radius_km[NAME]   km     station geocentric radius   (via STAPRL)
+    station_lat_rad[NAME]     rad    station geocentric latitude (via STAPRL)
+    station_lon_rad[NAME]     rad    station east longitude      (via STAPRL)
+    range_bias_km[NAME]       km     range bias of station NAME
+    doppler_bias_km_s[NAME]   km/s   Doppler (range-rate) bias of station NAME
+    azimuth_bias_rad[NAME]    rad    azimuth bias of station NAME
+    elevation_bias_rad[NAME]  rad    elevation bias of station NAME
+    qvlbi_timing_km           km     c dt   (+ in range3, - in diff_range; TRAKM eqs. 9, 11)
+    qvlbi_frequency_km_s      km/s   c df/f (+ in doppler3, - in diff_doppler; eqs. 10, 12)
+    star_planet_bias_rad      rad    star-planet angle bias
+    diameter_bias_rad         rad    apparent-diameter bias
+
+The config layer (:mod:`fracas.config.team`), the models (:mod:`fracas.measurements.models`)
+and the observation matrices (:mod:`fracas.measurements.trakm`) all read these tables.
+This module imports no JAX.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+__all__ = [
+    "MeasurementKind",
+    "MeasurementParam",
+    "MEASUREMENT_KINDS",
+    "MEASUREMENT_PARAMETERS",
+    "KINDS",
+    "N_STATIONS",
+    "KIND_UNITS",
+    "SIGMA_UNITS",
+    "STATION_LABELS",
+    "GLOBAL_LABELS",
+    "is_measurement_label",
+    "measurement_label_unit",
+    "check_measurement_label",
+]
+
+_DEG = 0.017453292519943295  # rad per degree
+
+
+@dataclass(frozen=True)
+class MeasurementKind:
+    """One measurement data type.
+
+    ``name``: the deck's / program's name; ``unit``: canonical unit of the value and of the
+    white-noise sigma (km, km/s, rad); ``sigma_unit``, ``sigma_factor``: the unit of a TEAM
+    deck's ``sigma`` and the factor to ``unit``; ``n_stations``: participating stations (0:
+    spacecraft-based); ``needs_body``: a target body (its position, for planet_diameter its
+    radius); ``needs_star``: a star direction; ``bias_terms``: unit bias partials
+    ((label name, station slot or None, coefficient), TRAKM eq. 8); ``trakm_name``: the
+    FRACAS TRAKM data type and its equations.
+    """
+
+    name: str
+    unit: str
+    sigma_unit: str
+    sigma_factor: float
+    n_stations: int
+    description: str
+    trakm_name: str
+    bias_terms: tuple[tuple[str, int | None, float], ...] = ()
+    needs_body: bool = False
+    needs_star: bool = False
+
+
+@dataclass(frozen=True)
+class MeasurementParam:
+    """One measurement-parameter label name: ``unit`` (canonical); ``per_station``: the
+    label is ``name[STATION]`` (else plain ``name``); ``sigma``: a typical a-priori 1-sigma
+    (as in the example decks; informational, never applied), None where none makes sense."""
+
+    name: str
+    unit: str
+    per_station: bool
+    description: str
+    sigma: float | None = None
+
+
+_KINDS = (
+    MeasurementKind("range2", "km", "m", 1e-3, 1, "2-way range rho", "2-way range (TRAKM eqs. 1-2)",
+                    (("range_bias_km", 0, 1.0),)),
+    MeasurementKind("doppler2", "km/s", "mm/s", 1e-6, 1, "2-way Doppler as range rate rho_dot",
+                    "2-way Doppler (TRAKM eqs. 3-7)", (("doppler_bias_km_s", 0, 1.0),)),
+    MeasurementKind("range3", "km", "m", 1e-3, 2, "3-way range rho_1 + rho_2", "QVLBI 3-way range (TRAKM eq. 9)",
+                    (("range_bias_km", 0, 1.0), ("range_bias_km", 1, 1.0), ("qvlbi_timing_km", None, 1.0))),
+    MeasurementKind("doppler3", "km/s", "mm/s", 1e-6, 2, "3-way Doppler rho_dot_1 + rho_dot_2",
+                    "QVLBI 3-way Doppler (TRAKM eq. 10)",
+                    (("doppler_bias_km_s", 0, 1.0), ("doppler_bias_km_s", 1, 1.0),
+                     ("qvlbi_frequency_km_s", None, 1.0))),
+    MeasurementKind("diff_range", "km", "m", 1e-3, 2, "differenced range rho_1 - rho_2",
+                    "differenced range (TRAKM eqs. 11, 13-16)",
+                    (("range_bias_km", 0, 1.0), ("range_bias_km", 1, -1.0), ("qvlbi_timing_km", None, -1.0))),
+    MeasurementKind("diff_doppler", "km/s", "mm/s", 1e-6, 2, "differenced Doppler rho_dot_1 - rho_dot_2",
+                    "differenced Doppler (TRAKM eqs. 12, 14-16)",
+                    (("doppler_bias_km_s", 0, 1.0), ("doppler_bias_km_s", 1, -1.0),
+                     ("qvlbi_frequency_km_s", None, -1.0))),
+    MeasurementKind("azimuth", "rad", "deg", _DEG, 1, "topocentric azimuth of the spacecraft",
+                    "azimuth (TRAKM eqs. 21-30, rebuilt topocentric)", (("azimuth_bias_rad", 0, 1.0),)),
+    MeasurementKind("elevation", "rad", "deg", _DEG, 1, "topocentric elevation of the spacecraft",
+                    "elevation (TRAKM eqs. 17-20, rebuilt topocentric)", (("elevation_bias_rad", 0, 1.0),)),
+    MeasurementKind("star_planet_angle", "rad", "urad", 1e-6, 0, "angle between a star and a body's centre",
+                    "star-planet angle (TRAKM eqs. 32-35)", (("star_planet_bias_rad", None, 1.0),),
+                    needs_body=True, needs_star=True),
+    MeasurementKind("planet_diameter", "rad", "urad", 1e-6, 0, "apparent diameter of a body",
+                    "apparent planet diameter (TRAKM eqs. 36-39)", (("diameter_bias_rad", None, 1.0),),
+                    needs_body=True),
+)
+#: name -> :class:`MeasurementKind`, in the order decks and reports list them
+MEASUREMENT_KINDS: dict[str, MeasurementKind] = {k.name: k for k in _KINDS}
+
+_PARAMS = (
+    MeasurementParam("station_radius_km", "km", True, "station geocentric radius (via STAPRL)", 0.001),
+    MeasurementParam("station_lat_rad", "rad", True, "station geocentric latitude (via STAPRL)"),
+    MeasurementParam("station_lon_rad", "rad", True, "station east longitude (via STAPRL)", 9.6e-8),
+    MeasurementParam("range_bias_km", "km", True, "range bias of a station", 0.002),
+    MeasurementParam("doppler_bias_km_s", "km/s", True, "Doppler (range-rate) bias of a station"),
+    MeasurementParam("azimuth_bias_rad", "rad", True, "azimuth bias of a station"),
+    MeasurementParam("elevation_bias_rad", "rad", True, "elevation bias of a station"),
+    MeasurementParam("qvlbi_timing_km", "km", False, "QVLBI c dt (+ in range3, - in diff_range)", 0.003),
+    MeasurementParam("qvlbi_frequency_km_s", "km/s", False, "QVLBI c df/f (+ in doppler3, - in diff_doppler)", 3.0e-8),
+    MeasurementParam("star_planet_bias_rad", "rad", False, "star-planet angle bias"),
+    MeasurementParam("diameter_bias_rad", "rad", False, "apparent-diameter bias"),
+)
+#: label name -> :class:`MeasurementParam`
+MEASUREMENT_PARAMETERS: dict[str, MeasurementParam] = {p.name: p for p in _PARAMS}
+
+# --- derived views (the names older modules export) -----------------------------------
+KINDS = tuple(MEASUREMENT_KINDS)
+N_STATIONS = {k.name: k.n_stations for k in _KINDS}
+KIND_UNITS = {k.name: k.unit for k in _KINDS}
+#: unit of ``sigma`` in a [[tracking]] entry, per type, and the factor to km, km/s or rad
+SIGMA_UNITS = {k.name: (k.sigma_unit, k.sigma_factor) for k in _KINDS}
+#: name -> unit, for labels indexed by a station name (name[STATION])
+STATION_LABELS = {p.name: p.unit for p in _PARAMS if p.per_station}
+#: name -> unit, for unindexed labels
+GLOBAL_LABELS = {p.name: p.unit for p in _PARAMS if not p.per_station}
+
+_LABEL = re.compile(r"^([a-z_0-9]+)(?:\[([^\]\[]+)\])?$")
+
+
+def _valid_forms() -> str:
+    forms = [f"{n}[<station>]" for n in STATION_LABELS] + list(GLOBAL_LABELS)
+    return ", ".join(forms)
+
+
+def _split(label: str) -> tuple[str, str | None] | None:
+    m = _LABEL.match(label.strip()) if isinstance(label, str) else None
+    if m is None:
+        return None
+    name, idx = m.group(1), m.group(2)
+    if name in STATION_LABELS and idx is not None and idx.strip():
+        return name, idx.strip()
+    if name in GLOBAL_LABELS and idx is None:
+        return name, None
+    return None
+
+
+def is_measurement_label(label: str) -> bool:
+    """True if ``label`` has the form of a measurement-parameter label (any station name)."""
+    return _split(label) is not None
+
+
+def measurement_label_unit(label: str) -> str:
+    """Unit of a measurement-parameter label ('km', 'km/s' or 'rad'); KeyError if unknown."""
+    parts = _split(label)
+    if parts is None:
+        raise KeyError(f"{label!r} is not a measurement-parameter label; valid forms: {_valid_forms()}")
+    name = parts[0]
+    return STATION_LABELS.get(name) or GLOBAL_LABELS[name]
+
+
+def check_measurement_label(label: str, station_names) -> None:
+    """Raise KeyError, naming the valid forms and stations, unless ``label`` is a valid
+    measurement-parameter label whose station (if any) is in ``station_names``."""
+    names = sorted(station_names)
+    parts = _split(label)
+    if parts is None:
+        raise KeyError(
+            f"unknown measurement-parameter label {label!r}: expected one of {_valid_forms()}"
+            f" (stations: {', '.join(names) or 'none'})"
+        )
+    if parts[1] is not None and parts[1] not in names:
+        raise KeyError(
+            f"measurement-parameter label {label!r}: station {parts[1]!r} is not one of "
+            f"{', '.join(names) or 'none (no stations given)'}"
+        )

@@ -199,7 +199,7 @@ def stm_data_from_run(problem, traj, sens, event_types, deck_text, deck_hash, de
         raise StmFileError(f"{where}: {len(event_types)} event types for {n} schedule times")
     bad = np.nonzero(~np.isfinite(t))[0]
     if bad.size:
-        from fracas.io.trajectory_file import STATUS_TEXT
+        from fracas.status import STATUS_TEXT
 
         k = int(bad[0])
         status = int(np.asarray(traj.status))

@@ -49,6 +49,7 @@ def _parse_args():
 
 
 ARGS = _parse_args()
+os.environ.pop("FRACAS_HOST_DEVICES", None)  # --devices (or a count already in XLA_FLAGS) decides
 _flags = os.environ.get("XLA_FLAGS", "")
 if "xla_force_host_platform_device_count" not in _flags:
     os.environ["XLA_FLAGS"] = f"{_flags} --xla_force_host_platform_device_count={ARGS.devices}".strip()

@@ -15,9 +15,10 @@ size); group similar propagations into the same batch.
 
 Parallelism.  XLA's CPU backend advances one while loop on one device; it may overlap
 independent operations of the loop body on other threads, but that does not scale with the
-batch.  To use several cores, the process must expose several *host devices*, which XLA only
-does when ``XLA_FLAGS`` contains ``--xla_force_host_platform_device_count=N`` **before jax is
-first imported** (``fracas._jax`` sets it; see :func:`host_devices`).  With more than one device each chunk is split over them with
+batch.  To use several cores, the process must expose several *host devices*, which it
+chooses before its first JAX operation: ``fracas._jax.set_host_devices(N)``,
+``$FRACAS_HOST_DEVICES=N`` or ``--xla_force_host_platform_device_count=N`` in ``XLA_FLAGS``
+(by default a process has one; see :func:`host_devices`).  With more than one device each chunk is split over them with
 ``jax.shard_map``: every device runs its own while loop on its slice of the chunk, with no
 communication between devices (a plain ``NamedSharding`` of a vmapped while loop would
 all-reduce the loop condition at every iteration and keep the devices in lock step).
@@ -57,13 +58,13 @@ _AXIS = "batch"
 def host_devices(backend: str | None = None) -> list:
     """The devices a batch is split over: ``jax.devices(backend)`` (default backend).
 
-    On CPU this is one device per ``--xla_force_host_platform_device_count`` (default 1), a
-    flag XLA reads once, when jax initialises its CPU client; it has to be in ``XLA_FLAGS``
-    before ``import jax``.  ``fracas._jax`` sets it to ``$FRACAS_HOST_DEVICES`` or
-    ``os.cpu_count()`` when fracas is imported before jax and ``XLA_FLAGS`` has no count.
-    XLA's CPU runtime may run independent operations of one program concurrently, but a
-    vmapped ``while_loop`` advances on one device: sharding gave 1.5x on 2 (shared) cores in
-    ``benchmarks/results_cpu.txt``.
+    On CPU this is the number of host devices the process chose before jax created its CPU
+    backend (default 1): :func:`fracas._jax.set_host_devices`, ``$FRACAS_HOST_DEVICES``, or
+    ``--xla_force_host_platform_device_count`` in ``XLA_FLAGS`` before ``import jax``.  The
+    library never picks one device per core by itself (a cluster worker keeps one, see
+    :func:`fracas._jax.worker_setup`).  XLA's CPU runtime may run independent operations of
+    one program concurrently, but a vmapped ``while_loop`` advances on one device: sharding
+    gave 1.5x on 2 (shared) cores in ``benchmarks/results_cpu.txt``.
 
     Several host devices do not slow single propagations (they run on device 0).  On a GPU
     backend this returns the GPUs.

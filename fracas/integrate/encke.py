@@ -44,11 +44,13 @@ from fracas.dynamics.model import (
     ForceModel,
     Params,
 )
+from fracas.status import RunStatus
 
-STATUS_OK = 0  # reached the final time
-STATUS_STOPPED = 1  # the stop condition was met (located)
-STATUS_MAX_STEPS = 2  # max_steps reached
-STATUS_NONFINITE = 3  # the state became NaN/inf
+# status codes (names kept for compatibility; the enumeration is fracas.status.RunStatus)
+STATUS_OK = int(RunStatus.OK)  # reached the final time
+STATUS_STOPPED = int(RunStatus.STOPPED)  # the stop condition was met (located)
+STATUS_MAX_STEPS = int(RunStatus.MAX_STEPS)  # max_steps reached
+STATUS_NONFINITE = int(RunStatus.NONFINITE)  # the state became NaN/inf
 _INACTIVE = 1.0e30  # event-function value of an inactive event (never crosses zero)
 
 

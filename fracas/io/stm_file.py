@@ -99,6 +99,152 @@ __all__ = [
 # --------------------------------------------------------------------------- data
 
 
+<<<<<<< HEAD
+=======
+@dataclass
+class StmData:
+    """The contents of an STM file (numpy, canonical units, ICRF axes).
+
+    times_s (n,): s from the epoch (t = 0), non-decreasing; epoch_et_s: TDB s past J2000 of
+    t = 0; event_types (n,): why each time is on the file ("initial", "measurement",
+    "propagation", "eigenvector", "prediction", "thrust_on", "thrust_off", "final", "grid";
+    several joined by "+"); states (n,7): r km, v km/s, m kg relative to primary[i];
+    stm_step (n,7,7): Phi(t_i, t_{i-1}) (i = 0: from the epoch to times_s[0], the identity
+    when times_s[0] == 0); par_step (n,7,np): Theta(t_i, t_{i-1}) = dx(t_i)/dp with
+    x(t_{i-1}) fixed, element (r, p) in STATE_UNITS[r] / param_units[p];
+    param_labels/param_units/param_values (np,): fracas.params labels, their units and
+    nominal values; param_steps (np,): perturbations of a finite-difference generation
+    (NaN for AD, see ``sensitivity_method``); deck_text/deck_hash/deck_path: the trajectory
+    deck (TOML) the file was built from and its :func:`trajectory_hash`.
+    ``source_path`` is the file it was read from ("" when built in memory).
+    """
+
+    times_s: np.ndarray
+    epoch_et_s: float
+    event_types: list[str]
+    states: np.ndarray
+    primary: list[str]
+    stm_step: np.ndarray
+    par_step: np.ndarray
+    param_labels: list[str]
+    param_units: list[str]
+    param_values: np.ndarray
+    param_steps: np.ndarray
+    deck_text: str
+    deck_hash: str
+    deck_path: str | None = None
+    title: str = ""
+    centre: str = ""
+    frame: str = "ICRF"
+    fracas_version: str = ""
+    schema_version: int = SCHEMA_VERSION
+    sensitivity_method: str = "ad"
+    provenance: dict[str, Any] = field(default_factory=dict)
+    source_path: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.fracas_version:
+            from fracas import __version__
+
+            self.fracas_version = __version__
+
+    @property
+    def n_times(self) -> int:
+        return int(np.shape(self.times_s)[0])
+
+    @property
+    def where(self) -> str:
+        """How messages name this data: the file path, or the deck it was built from."""
+        return self.source_path or (f"STM data of {self.deck_path}" if self.deck_path else "STM data")
+
+
+def trajectory_hash(deck) -> str:
+    """SHA-256 (hex) of the canonical form of a validated :class:`TrajectoryDeck`.
+
+    The canonical form is the validated model as JSON (defaults filled in, floats in
+    shortest round-trip form, keys sorted, no whitespace) behind a version prefix, so
+    comments, layout, key order, ``7000`` vs ``7000.0``, a default written out or left
+    implicit and the file's name or place do not change the hash; any changed value does.
+    Every section counts (title and ``[output]`` included): the file is tied to exactly
+    the deck it was built from (FRACAS writes ERTRAJ at the head of the STM tape).
+    """
+    body = json.dumps(
+        deck.model_dump(mode="json"), sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False
+    )
+    return hashlib.sha256((_HASH_PREFIX + body).encode("utf-8")).hexdigest()
+
+
+def _days(t: float) -> str:
+    return f"{float(t) / DAY_S:.6f} d"
+
+
+def stm_data_from_run(problem, traj, sens, event_types, deck_text, deck_hash, deck_path=None) -> StmData:
+    """Assemble :class:`StmData` from a propagation with sensitivities (FRACAS STMGEN).
+
+    ``problem``: :class:`fracas.build.Problem` whose ``t_out`` are the schedule times (s,
+    ``t_out[0]`` must be 0: the propagation starts at the epoch) and ``param_labels`` the
+    columns; ``traj``, ``sens``: from
+    :func:`fracas.integrate.propagate.propagate_with_sensitivities` on that problem;
+    ``event_types``: one string per time.  Refuses (StmFileError) a trajectory that did not
+    reach every scheduled time.
+    """
+    from fracas.params import get_values, param_unit
+
+    where = deck_path or problem.source_path or "<deck>"
+    t_out = np.asarray(problem.t_out, np.float64)
+    t = np.asarray(traj.t, np.float64)
+    n = t_out.shape[0]
+    if n == 0:
+        raise StmFileError(f"{where}: cannot build an STM file: the schedule has no times")
+    if abs(float(t_out[0])) > TIME_TOL_S:
+        raise StmFileError(
+            f"{where}: cannot build an STM file: the schedule starts at t = {t_out[0]:.6f} s "
+            f"({_days(t_out[0])}), expected 0 (the propagation starts at the epoch)"
+        )
+    event_types = [str(e) for e in event_types]
+    if len(event_types) != n:
+        raise StmFileError(f"{where}: {len(event_types)} event types for {n} schedule times")
+    bad = np.nonzero(~np.isfinite(t))[0]
+    if bad.size:
+        from fracas.status import STATUS_TEXT
+
+        k = int(bad[0])
+        status = int(np.asarray(traj.status))
+        raise StmFileError(
+            f"{where}: cannot build an STM file: the trajectory ended at t = {_days(np.asarray(traj.t_final))} "
+            f"({STATUS_TEXT.get(status, f'status {status}')}) before scheduled time {k} at {_days(t_out[k])} "
+            f"({event_types[k]}); shorten the schedule or fix the deck"
+        )
+    model = problem.model
+    labels = [str(x) for x in problem.param_labels]
+    stm_step = np.asarray(sens.stm_step, np.float64)
+    par_step = np.asarray(sens.par_step, np.float64).reshape(n, 7, len(labels))
+    if not (np.all(np.isfinite(stm_step)) and np.all(np.isfinite(par_step))):
+        raise StmFileError(f"{where}: cannot build an STM file: non-finite transition matrices")
+    return StmData(
+        times_s=t_out,  # the schedule itself (the integrator lands within eps_t of each)
+        epoch_et_s=float(problem.epoch_et_s),
+        event_types=event_types,
+        states=np.asarray(traj.x, np.float64),
+        primary=[model.bodies[int(i)] for i in np.asarray(traj.primary)],
+        stm_step=stm_step,
+        par_step=par_step,
+        param_labels=labels,
+        param_units=[param_unit(lab, model) for lab in labels],
+        param_values=np.asarray(get_values(problem.params, labels, model), np.float64).reshape(len(labels)),
+        param_steps=np.full(len(labels), np.nan),
+        deck_text=str(deck_text or ""),
+        deck_hash=str(deck_hash),
+        deck_path=deck_path,
+        title=problem.title,
+        centre=problem.centre,
+        frame=problem.frame,
+        sensitivity_method="ad",
+        provenance=provenance(deck_text, deck_path),
+    )
+
+
+>>>>>>> status
 # --------------------------------------------------------------------------- write
 
 

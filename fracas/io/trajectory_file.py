@@ -35,16 +35,11 @@ from fracas.io.hdf5 import (
     write_provenance,
 )
 from fracas.params import STATE_LABELS, STATE_UNITS  # noqa: F401  (re-exported)
+from fracas.status import PROPAGATION_STATUSES, STATUS_TEXT, status_text  # STATUS_TEXT re-exported
 
 FORMAT = "fracas-trajectory"
 SCHEMA_VERSION = 1
 
-STATUS_TEXT = {
-    0: "reached the final time",
-    1: "stop condition met",
-    2: "maximum number of steps reached",
-    3: "non-finite state",
-}
 
 __all__ = [
     "FORMAT",
@@ -82,7 +77,7 @@ class TrajectoryData:
 
     t_s (n,) s from the epoch (NaN after an early stop); r_km (n,3), v_km_s (n,3),
     mass_kg (n,) relative to ``primary[k]`` (a body name, "" where undefined); status
-    0 final time / 1 stop condition / 2 max steps / 3 non-finite.
+    0 final time / 1 stop condition / 2 max steps / 3 non-finite (:class:`fracas.status.RunStatus`).
     """
 
     epoch_et_s: float
@@ -108,7 +103,7 @@ class TrajectoryData:
 
     @property
     def status_text(self) -> str:
-        return STATUS_TEXT.get(int(self.status), f"unknown status {self.status}")
+        return status_text(self.status)
 
     def summary_dict(self) -> dict[str, Any]:
         """Plain-JSON summary of the end of the propagation."""
@@ -170,7 +165,7 @@ def write_trajectory_file(path: str | os.PathLike, data: TrajectoryData) -> Path
             idx = [data.bodies.index(p) if p in data.bodies else -1 for p in data.primary]
             write(g, "primary_index", np.asarray(idx, np.int32), "1", meaning="index into /@bodies (-1 undefined)")
             write(g, "status", np.int32(data.status), "1",
-                  meaning="; ".join(f"{k} {v}" for k, v in STATUS_TEXT.items()))
+                  meaning="; ".join(f"{int(k)} {k.text}" for k in PROPAGATION_STATUSES))
             write(g, "t_final_s", np.float64(data.t_final_s), "s", meaning="time where the propagation ended")
             write(g, "r_final_km", np.asarray(data.r_final_km, np.float64), "km")
             write(g, "v_final_km_s", np.asarray(data.v_final_km_s, np.float64), "km/s")

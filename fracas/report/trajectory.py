@@ -16,10 +16,12 @@ import numpy as np
 
 from fracas.constants import AU_KM, DAY_S
 from fracas.io.trajectory_file import TrajectoryData
+from fracas.status import RunStatus, status_text
 
 __all__ = ["print_summary", "summary_table", "plot_trajectory"]
 
-_STATUS_STYLE = {0: "green", 1: "cyan", 2: "yellow", 3: "red"}
+_STATUS_STYLE = {RunStatus.OK: "green", RunStatus.STOPPED: "cyan", RunStatus.MAX_STEPS: "yellow",
+                 RunStatus.NONFINITE: "red"}  # any other code: red
 
 
 def _valid(data: TrajectoryData) -> np.ndarray:
@@ -58,8 +60,9 @@ def summary_table(data: TrajectoryData):
     t.add_row("epoch (TDB)", escape(data.epoch_tdb or f"ET {data.epoch_et_s:.3f} s"), "")
     t.add_row("steps", "", f"{int(data.n_steps)}")
     t.add_row("rectifications", "", f"{int(data.n_rect)}")
-    style = _STATUS_STYLE.get(int(data.status), "red")
-    t.add_row("status", "", f"[{style}]{int(data.status)}: {data.status_text}[/{style}]")
+    code = int(data.status)
+    style = _STATUS_STYLE.get(code, "red")
+    t.add_row("status", "", f"[{style}]{code}: {escape(status_text(code))}[/{style}]")
     return t
 
 

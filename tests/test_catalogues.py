@@ -119,7 +119,7 @@ def test_get_and_set_values_live_in_dynamics_and_keep_the_old_name():
 
 
 def test_state_and_thrust_noise_labels_are_defined_once():
-    from fracas.dynamics import variational
+    from fracas.integrate import variational
     from fracas.io import stm_file, trajectory_file
 
     assert params.STATE_LABELS == ("x", "y", "z", "vx", "vy", "vz", "mass")

@@ -22,7 +22,7 @@ from fracas.build.trajectory import Problem, build_propagation
 from fracas.config.team import SIGMA_UNITS, APriori, TeamDeck, ThrustNoise
 from fracas.config.trajectory import TrajectoryDeck, load_deck, trajectory_hash
 from fracas.constants import DAY_S
-from fracas.dynamics.variational import THRUST_NOISE_LABELS
+from fracas.integrate.variational import THRUST_NOISE_LABELS
 from fracas.errors import ConfigError, DeckError
 from fracas.filters.covariance import Layout
 from fracas.measurements import trakm

@@ -1,7 +1,7 @@
 """Gauss-Markov thrust process noise for TEAM, two ways (FRACAS DYNO, DERY, PATH; App. 9.3).
 
 The time-varying thrust errors eta (k components: proportionality, in-plane and
-out-of-plane pointing, ``fracas.dynamics.variational.THRUST_NOISE_LABELS``) are
+out-of-plane pointing, ``fracas.integrate.variational.THRUST_NOISE_LABELS``) are
 stationary first-order Gauss-Markov processes (App. 9.3 eq. 3):
 
     eta_i' = -eta_i / tau_i + q_i,   E[eta_i(t1) eta_i(t2)] = sigma_i^2 exp(-|t1 - t2| / tau_i),

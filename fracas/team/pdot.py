@@ -23,7 +23,7 @@ from fracas import _jax  # noqa: F401  (x64 before jax)
 import jax
 import jax.numpy as jnp
 
-from fracas.dynamics.variational import THRUST_NOISE_LABELS, jacobians_at
+from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at
 from fracas.filters.covariance import Layout
 from fracas.filters.process_noise import pdot_propagate
 from fracas.integrate.propagate import propagate

@@ -13,7 +13,7 @@ from fracas import _jax  # noqa: F401
 import jax
 import jax.numpy as jnp
 
-from fracas.dynamics.variational import THRUST_NOISE_LABELS, jacobians_at
+from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at
 from fracas.filters.process_noise import dyno_q
 from fracas.team.study import Study
 

@@ -1,4 +1,4 @@
-"""Variational equations (fracas.dynamics.variational) on the first day of the Earth-Mars
+"""Variational equations (fracas.integrate.variational) on the first day of the Earth-Mars
 solar-electric cruise (namelists/earth_mars_sep.toml: Sun + Venus, Earth, Mars, Jupiter from
 DE421, SRP, solar-powered thrust in the velocity frame, so A has d a/dv and d a/dm terms and
 the mass row d mdot/dr).
@@ -24,9 +24,9 @@ import pytest
 
 from fracas.build import build_propagation
 from fracas.config.trajectory import load_deck
-from fracas.dynamics import variational
+from fracas.integrate import variational
 from fracas.dynamics.parameters import get_values, set_values
-from fracas.dynamics.variational import THRUST_NOISE_LABELS, jacobians_at, state_derivative, state_jacobians
+from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at, state_derivative, state_jacobians
 from fracas.filters.process_noise import gm_augmented_F, pdot_propagate
 from fracas.integrate.propagate import propagate, propagate_with_sensitivities
 

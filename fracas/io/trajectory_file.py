@@ -34,7 +34,7 @@ from fracas.io.hdf5 import (
     write,
     write_provenance,
 )
-from fracas.status import PROPAGATION_STATUSES, STATUS_TEXT, status_text  # STATUS_TEXT re-exported
+from fracas.status import PROPAGATION_STATUSES, STATUS_TEXT, status_text
 
 FORMAT = "fracas-trajectory"
 SCHEMA_VERSION = 1

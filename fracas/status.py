@@ -30,7 +30,7 @@ towards ``max_steps``, so a location that never converges ends as ``MAX_STEPS``.
 from __future__ import annotations
 
 import enum
-from typing import Iterable
+from collections.abc import Iterable
 
 __all__ = [
     "RunStatus",

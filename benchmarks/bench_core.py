@@ -39,10 +39,16 @@ def _parse_args():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small sizes and preset step settings (< 2 min)")
     ap.add_argument("--devices", type=int, default=2, help="host devices to force via XLA_FLAGS (default 2)")
-    ap.add_argument("--keep-cache", action="store_true",
-                    help="use the persistent compilation cache (first-call times are then cache loads)")
-    ap.add_argument("--stm-10k", action="store_true",
-                    help="run the 10,000-propagation LEO STM batch instead of extrapolating it from 1,000")
+    ap.add_argument(
+        "--keep-cache",
+        action="store_true",
+        help="use the persistent compilation cache (first-call times are then cache loads)",
+    )
+    ap.add_argument(
+        "--stm-10k",
+        action="store_true",
+        help="run the 10,000-propagation LEO STM batch instead of extrapolating it from 1,000",
+    )
     ap.add_argument("--no-heyoka", action="store_true", help="skip the heyoka baselines")
     ap.add_argument("--repeat", type=int, default=None, help="repeats of the short timings (default 5, quick 3)")
     return ap.parse_args()
@@ -60,13 +66,13 @@ sys.path.insert(0, str(ROOT))
 
 T_START = time.perf_counter()
 
-import numpy as np  # noqa: E402
-
-from fracas import _jax  # noqa: E402,F401
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
+import tests.reference as ref  # noqa: E402
+from fracas import _jax  # noqa: E402,F401
 from fracas import constants as C  # noqa: E402
 from fracas.dynamics import forces  # noqa: E402
 from fracas.dynamics.ephemeris import build_ephemeris, calendar_to_et  # noqa: E402
@@ -74,7 +80,6 @@ from fracas.dynamics.model import ForceModel, IntegratorSettings, default_params
 from fracas.integrate import encke  # noqa: E402
 from fracas.integrate.batch import host_devices, propagate_batch  # noqa: E402
 from fracas.integrate.propagate import propagate, propagate_with_sensitivities  # noqa: E402
-import tests.reference as ref  # noqa: E402
 
 QUICK = ARGS.quick
 REPEAT = ARGS.repeat or (3 if QUICK else 5)
@@ -155,10 +160,16 @@ def git_state() -> str:
     import subprocess
 
     try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
-                              timeout=10).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "fracas"], cwd=ROOT,
-                               capture_output=True, text=True, timeout=10).stdout.split("\n")
+        head = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True, timeout=10
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no", "fracas"],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=10,
+        ).stdout.split("\n")
         dirty = [ln[3:] for ln in dirty if ln.strip()]
         return f"commit {head}" + (f" + uncommitted changes in {', '.join(dirty)}" if dirty else " (clean)")
     except (OSError, subprocess.SubprocessError):  # pragma: no cover
@@ -250,13 +261,27 @@ CR_EPH = build_ephemeris(CR_BODIES, CR_ET0, CR_ET0 + 300 * DAY)
 
 
 def cruise_model(dt_max_days: float, c_nom: float = 0.05) -> ForceModel:
-    return ForceModel(bodies=CR_BODIES, primary=0, third_bodies=(1, 2, 3, 4), thrust=True, velocity_dependent=True,
-                      n_arcs=2, integrator=IntegratorSettings(c_nom=c_nom, dt_max_s=dt_max_days * DAY))
+    return ForceModel(
+        bodies=CR_BODIES,
+        primary=0,
+        third_bodies=(1, 2, 3, 4),
+        thrust=True,
+        velocity_dependent=True,
+        n_arcs=2,
+        integrator=IntegratorSettings(c_nom=c_nom, dt_max_s=dt_max_days * DAY),
+    )
 
 
-CR_P = default_params(cruise_model(0.5), power_kw=10.0, efficiency=0.65, exhaust_velocity_km_s=30.0,
-                      arc_t_on=[0, 150 * DAY], arc_t_off=[100 * DAY, 300 * DAY],
-                      arc_alpha=[0, np.radians(10)], arc_beta=[0, np.radians(5)])
+CR_P = default_params(
+    cruise_model(0.5),
+    power_kw=10.0,
+    efficiency=0.65,
+    exhaust_velocity_km_s=30.0,
+    arc_t_on=[0, 150 * DAY],
+    arc_t_off=[100 * DAY, 300 * DAY],
+    arc_alpha=[0, np.radians(10)],
+    arc_beta=[0, np.radians(5)],
+)
 
 
 def cruise_states(n: int, seed: int = 1) -> np.ndarray:
@@ -277,8 +302,14 @@ def _cruise_rhs():
     fac = lambda t: 1.0 if (t < 100 * DAY or t >= 150 * DAY) else 0.0  # noqa: E731
     al = lambda t: 0.0 if t < 100 * DAY else np.radians(10)  # noqa: E731
     be = lambda t: 0.0 if t < 100 * DAY else np.radians(5)  # noqa: E731
-    return ref.cowell_rhs_factory(mus["sun"], "sun", CR_BODIES[1:], mus, epoch_et=CR_ET0,
-                                  thrust=dict(p0_kw=10.0, eta=0.65, c=30.0, alpha=al, beta=be, factor=fac))
+    return ref.cowell_rhs_factory(
+        mus["sun"],
+        "sun",
+        CR_BODIES[1:],
+        mus,
+        epoch_et=CR_ET0,
+        thrust={"p0_kw": 10.0, "eta": 0.65, "c": 30.0, "alpha": al, "beta": be, "factor": fac},
+    )
 
 
 def dop853(rhs, y0, breaks, rtol, atol):
@@ -442,13 +473,19 @@ def main() -> None:  # noqa: C901 - a linear script
     banner("fracas core benchmark" + (" (--quick)" if QUICK else ""))
     print(f"date {time.strftime('%Y-%m-%d %H:%M:%S')}  host {platform.node()}  python {platform.python_version()}")
     print(f"cpu: {cpu}; os.cpu_count() = {os.cpu_count()}; load average at start {loadavg()}")
-    print(f"jax {jax.__version__}, backend {jax.default_backend()}, devices {len(devs)} "
-          f"({', '.join(str(d) for d in devs)}); XLA_FLAGS='{os.environ.get('XLA_FLAGS', '')}'")
-    print(f"heyoka {hy_version if hy_version else 'not installed'}"
-          + (f" (recommended SIMD batch size {hy.recommended_simd_size()})" if hy else ""))
+    print(
+        f"jax {jax.__version__}, backend {jax.default_backend()}, devices {len(devs)} "
+        f"({', '.join(str(d) for d in devs)}); XLA_FLAGS='{os.environ.get('XLA_FLAGS', '')}'"
+    )
+    print(
+        f"heyoka {hy_version if hy_version else 'not installed'}"
+        + (f" (recommended SIMD batch size {hy.recommended_simd_size()})" if hy else "")
+    )
     print(f"fracas: {git_state()}")
-    print(f"compilation cache: {os.environ.get('FRACAS_CACHE_DIR', '~/.cache/fracas/jax (persistent)')}; "
-          f"timings: best and median of {REPEAT} unless stated; wall-clock, one process")
+    print(
+        f"compilation cache: {os.environ.get('FRACAS_CACHE_DIR', '~/.cache/fracas/jax (persistent)')}; "
+        f"timings: best and median of {REPEAT} unless stated; wall-clock, one process"
+    )
 
     # ------------------------------------------------------------------ 1. references
     banner("1. References: scipy DOP853 rtol 1e-13, atol 1e-12 (Cowell, tests/reference.py RHS)")
@@ -463,17 +500,22 @@ def main() -> None:  # noqa: C901 - a linear script
     t_ref_cr = (time.perf_counter() - t0) / n_ref_cr
     y_leo = np.array([r[0] for r in ref_leo])
     y_cr = np.array([r[0] for r in ref_cr])
-    rows = [["LEO 1 day", n_ref_leo, f"{np.mean([r[1] for r in ref_leo]):.0f}", fs(t_ref_leo)],
-            ["cruise 300 d", n_ref_cr, f"{np.mean([r[1] for r in ref_cr]):.0f}", fs(t_ref_cr)]]
+    rows = [
+        ["LEO 1 day", n_ref_leo, f"{np.mean([r[1] for r in ref_leo]):.0f}", fs(t_ref_leo)],
+        ["cruise 300 d", n_ref_cr, f"{np.mean([r[1] for r in ref_cr]):.0f}", fs(t_ref_cr)],
+    ]
     if not QUICK:
         u_leo = pos_err(dop853(leo_rhs, x_leo_big[0], LEO_T, 1e-12, 1e-12)[0], y_leo[0])
         u_cr = pos_err(dop853(cr_rhs, x_cr_big[0], CR_BREAKS, 1e-12, 1e-12)[0], y_cr[0])
         rows[0].append(fm(u_leo))
         rows[1].append(fm(u_cr))
-    table(["problem", "states", "steps", "time/prop"] + ([] if QUICK else ["|rtol 1e-12 - 1e-13|"]), rows,
-          "Accuracy below = max final position error over these reference states (row 0 = nominal).\n"
-          "The cruise RHS uses a two-part Julian date (see helio_position_2part): with the one-part JD of\n"
-          "tests/reference.py the reference itself is off by ~12 m after 300 days.")
+    table(
+        ["problem", "states", "steps", "time/prop"] + ([] if QUICK else ["|rtol 1e-12 - 1e-13|"]),
+        rows,
+        "Accuracy below = max final position error over these reference states (row 0 = nominal).\n"
+        "The cruise RHS uses a two-part Julian date (see helio_position_2part): with the one-part JD of\n"
+        "tests/reference.py the reference itself is off by ~12 m after 300 days.",
+    )
 
     # --------------------------------------------------------------- 2. step settings
     banner(f"2. Encke step settings for <= {TARGET_M:g} m (error vs the references)")
@@ -502,11 +544,15 @@ def main() -> None:  # noqa: C901 - a linear script
     else:
         (c_leo, e_leo), tried_leo = tune_step(leo_err, 0.05, TARGET_M * 1e-3)
         (d_cr, e_cr), tried_cr = tune_step(cr_err, 0.25, TARGET_M * 1e-3)
-    table(["problem", "setting", "error", "tried"],
-          [["LEO", f"c_nom {c_leo:g} (dt_max 4000 s)", fm(e_leo), fmt_tried(tried_leo)],
-           ["cruise", f"dt_max {d_cr:g} d (c_nom 0.05)", fm(e_cr), fmt_tried(tried_cr, lambda h: f"{h:g} d")]],
-          "In the cruise the step is set by dt_max: c_nom r^1.5/sqrt(mu_sun) at 1 AU is c_nom x 58 days."
-          + ("  (--quick: preset settings, no tuning)" if QUICK else ""))
+    table(
+        ["problem", "setting", "error", "tried"],
+        [
+            ["LEO", f"c_nom {c_leo:g} (dt_max 4000 s)", fm(e_leo), fmt_tried(tried_leo)],
+            ["cruise", f"dt_max {d_cr:g} d (c_nom 0.05)", fm(e_cr), fmt_tried(tried_cr, lambda h: f"{h:g} d")],
+        ],
+        "In the cruise the step is set by dt_max: c_nom r^1.5/sqrt(mu_sun) at 1 AU is c_nom x 58 days."
+        + ("  (--quick: preset settings, no tuning)" if QUICK else ""),
+    )
     m_leo, m_cr = leo_model(c_leo), cruise_model(d_cr)
 
     # ------------------------------------------------------- 3. compile and single runs
@@ -522,14 +568,16 @@ def main() -> None:  # noqa: C901 - a linear script
         rows.append(["LEO 1 d, + 7x7 STM (jacfwd)", fs(tc), fs(best), fs(med), n, f"{best / n * 1e6:.1f}"])
     tr, best, med, _ = timed(lambda: propagate(m_cr, CR_P, CR_EPH, CR_ET0, x0c, CR_T), REPEAT)
     n = int(tr.n_steps)
-    rows.append(["cruise 300 d, propagate", fs(singles[m_cr.bodies][0]), fs(best), fs(med), n,
-                 f"{best / n * 1e6:.1f}"])
-    table(["case", "first call", "warm best", "warm median", "steps", "us/step"], rows,
-          f"LEO c_nom {c_leo:g}; cruise dt_max {d_cr:g} d.  First call = trace + XLA compile + one run"
-          + (" (persistent cache may be warm: --quick)" if (QUICK or ARGS.keep_cache) else " (cold cache)")
-          + f",\nat the first setting tried (LEO c_nom {singles[m_leo.bodies][1].c_nom:g}, cruise dt_max "
-          f"{singles[m_cr.bodies][1].dt_max_s / DAY:g} d): later settings reuse the executable (the core\n"
-          "traces c_nom, dt_max, rect_ratio ... as arguments: propagate.split_model).")
+    rows.append(["cruise 300 d, propagate", fs(singles[m_cr.bodies][0]), fs(best), fs(med), n, f"{best / n * 1e6:.1f}"])
+    table(
+        ["case", "first call", "warm best", "warm median", "steps", "us/step"],
+        rows,
+        f"LEO c_nom {c_leo:g}; cruise dt_max {d_cr:g} d.  First call = trace + XLA compile + one run"
+        + (" (persistent cache may be warm: --quick)" if (QUICK or ARGS.keep_cache) else " (cold cache)")
+        + f",\nat the first setting tried (LEO c_nom {singles[m_leo.bodies][1].c_nom:g}, cruise dt_max "
+        f"{singles[m_cr.bodies][1].dt_max_s / DAY:g} d): later settings reuse the executable (the core\n"
+        "traces c_nom, dt_max, rect_ratio ... as arguments: propagate.split_model).",
+    )
 
     # ------------------------------------------------------------------- 4. batches
     banner("4. Batches with propagate_batch (vmap; one host device)")
@@ -537,8 +585,9 @@ def main() -> None:  # noqa: C901 - a linear script
 
     def run_batch(label, model, params, eph, epoch, xs, t, chunk, sens, devices, repeat, yref, n_ref):
         def fn(tt=t):
-            return propagate_batch(model, params, eph, epoch, xs, tt, chunk_size=chunk, with_sensitivities=sens,
-                                   devices=devices)
+            return propagate_batch(
+                model, params, eph, epoch, xs, tt, chunk_size=chunk, with_sensitivities=sens, devices=devices
+            )
 
         # compile: the same chunk program on a zero-length span (every lane is done at once)
         _, tcomp = first_call(lambda: fn(np.zeros_like(t)))
@@ -546,11 +595,24 @@ def main() -> None:  # noqa: C901 - a linear script
         tr = out[0] if sens else out
         n = xs.shape[0]
         steps = tr.n_steps.astype(float)
-        rows_c = [steps[i:i + chunk] for i in range(0, n, chunk)]
+        rows_c = [steps[i : i + chunk] for i in range(0, n, chunk)]
         eff = sum(r.sum() for r in rows_c) / sum(len(r) * r.max() for r in rows_c)
         err = pos_err(tr.x_final[:n_ref], yref)
-        res = dict(label=label, n=n, chunk=chunk, tcomp=tcomp, best=best, med=med, cpu=cpu,
-                   steps=steps.sum(), eff=eff, err=err, out=out, ndev=len(devices), repeat=repeat)
+        res = {
+            "label": label,
+            "n": n,
+            "chunk": chunk,
+            "tcomp": tcomp,
+            "best": best,
+            "med": med,
+            "cpu": cpu,
+            "steps": steps.sum(),
+            "eff": eff,
+            "err": err,
+            "out": out,
+            "ndev": len(devices),
+            "repeat": repeat,
+        }
         batch_results[(label, len(devices), n)] = res
         return res
 
@@ -558,43 +620,119 @@ def main() -> None:  # noqa: C901 - a linear script
         scale = 1.0 if extrapolate_to is None else extrapolate_to / r["n"]
         n = r["n"] if extrapolate_to is None else extrapolate_to
         best, med = r["best"] * scale, r["med"] * scale
-        return [r["label"] + (" (extrapolated)" if extrapolate_to else ""), f"{n:,}",
-                f"{r['chunk']}x{r['ndev']}", fs(r["tcomp"]) if extrapolate_to is None else "",
-                fs(best), fs(med), si(n / best, "/s"), si(r["steps"] * scale / best, "/s"),
-                f"{r['eff']:.2f}", fm(r["err"]), f"{r['cpu']:.2f}"]
+        return [
+            r["label"] + (" (extrapolated)" if extrapolate_to else ""),
+            f"{n:,}",
+            f"{r['chunk']}x{r['ndev']}",
+            fs(r["tcomp"]) if extrapolate_to is None else "",
+            fs(best),
+            fs(med),
+            si(n / best, "/s"),
+            si(r["steps"] * scale / best, "/s"),
+            f"{r['eff']:.2f}",
+            fm(r["err"]),
+            f"{r['cpu']:.2f}",
+        ]
 
-    hdr = ["batch", "N", "chunk x dev", "compile", "best", "median", "props/s", "steps/s", "lane eff", "error",
-           "cpu/wall"]
+    hdr = [
+        "batch",
+        "N",
+        "chunk x dev",
+        "compile",
+        "best",
+        "median",
+        "props/s",
+        "steps/s",
+        "lane eff",
+        "error",
+        "cpu/wall",
+    ]
     rows = []
     for n in leo_sizes:
         rep = 3 if n <= 1000 else (1 if QUICK else 2)  # 10,000 = 10 chunks of 1,000
-        r = run_batch("LEO", m_leo, LEO_P, None, 0.0, x_leo_big[:n], LEO_T, leo_chunk, False, one_dev, rep,
-                      y_leo, n_ref_leo)
+        r = run_batch(
+            "LEO", m_leo, LEO_P, None, 0.0, x_leo_big[:n], LEO_T, leo_chunk, False, one_dev, rep, y_leo, n_ref_leo
+        )
         rows.append(batch_row(r))
-    r = run_batch("LEO + STM", m_leo, LEO_P, None, 0.0, x_leo_big[:leo_stm_n], LEO_T, leo_chunk, True, one_dev, 1,
-                  y_leo, n_ref_leo)
+    r = run_batch(
+        "LEO + STM",
+        m_leo,
+        LEO_P,
+        None,
+        0.0,
+        x_leo_big[:leo_stm_n],
+        LEO_T,
+        leo_chunk,
+        True,
+        one_dev,
+        1,
+        y_leo,
+        n_ref_leo,
+    )
     rows.append(batch_row(r))
     if not QUICK:
         if ARGS.stm_10k:
-            r10 = run_batch("LEO + STM", m_leo, LEO_P, None, 0.0, x_leo_big[:10_000], LEO_T, leo_chunk, True,
-                            one_dev, 1, y_leo, n_ref_leo)
+            r10 = run_batch(
+                "LEO + STM",
+                m_leo,
+                LEO_P,
+                None,
+                0.0,
+                x_leo_big[:10_000],
+                LEO_T,
+                leo_chunk,
+                True,
+                one_dev,
+                1,
+                y_leo,
+                n_ref_leo,
+            )
             rows.append(batch_row(r10))
         else:
             rows.append(batch_row(r, extrapolate_to=10_000))
     for n in cr_sizes:
-        r = run_batch("cruise", m_cr, CR_P, CR_EPH, CR_ET0, x_cr_big[:n], CR_T, cr_chunk, False, one_dev,
-                      3 if n <= cr_chunk else 1, y_cr, n_ref_cr)
+        r = run_batch(
+            "cruise",
+            m_cr,
+            CR_P,
+            CR_EPH,
+            CR_ET0,
+            x_cr_big[:n],
+            CR_T,
+            cr_chunk,
+            False,
+            one_dev,
+            3 if n <= cr_chunk else 1,
+            y_cr,
+            n_ref_cr,
+        )
         rows.append(batch_row(r))
     if cr_stm_n:
-        r = run_batch("cruise + STM", m_cr, CR_P, CR_EPH, CR_ET0, x_cr_big[:cr_stm_n], CR_T, cr_stm_n, True,
-                      one_dev, 1, y_cr, n_ref_cr)
+        r = run_batch(
+            "cruise + STM",
+            m_cr,
+            CR_P,
+            CR_EPH,
+            CR_ET0,
+            x_cr_big[:cr_stm_n],
+            CR_T,
+            cr_stm_n,
+            True,
+            one_dev,
+            1,
+            y_cr,
+            n_ref_cr,
+        )
         rows.append(batch_row(r))
-    table(hdr, rows,
-          "compile = first call on a zero-length span (trace + compile of the chunk program); props/s = N / best; steps/s =\n"
-          "sum of per-propagation Encke steps / best; lane eff = useful lane-steps / (lanes x loop iterations)\n"
-          "(a vmapped while loop runs every lane until the slowest of its chunk is done); error = max over the\n"
-          "reference states, which are the first rows of each batch; cpu/wall = process CPU time / wall time.\n"
-          "STM = 7x7 state transition matrix by jacfwd through the integrator (propagate_with_sensitivities).")
+    table(
+        hdr,
+        rows,
+        "compile = first call on a zero-length span (trace + compile of the chunk program); props/s = N / best; steps/s =\n"  # noqa: E501
+        "sum of per-propagation Encke steps / best; lane eff = useful lane-steps / (lanes x loop iterations)\n"
+        "(a vmapped while loop runs every lane until the slowest of its chunk is done); error = max over the\n"
+        "reference states, which are the first rows of each batch; cpu/wall = process CPU time / wall time.\n"
+        "STM = 7x7 state transition matrix by jacfwd through the integrator (propagate_with_sensitivities).",
+    )
     stm_leo = np.asarray(batch_results[("LEO + STM", 1, leo_stm_n)]["out"][1].stm[:, -1])
 
     # ------------------------------------------------------------------- 5. sharded
@@ -603,15 +741,16 @@ def main() -> None:  # noqa: C901 - a linear script
         print("only one device: set XLA_FLAGS=--xla_force_host_platform_device_count=N before importing jax")
     else:
         rows = []
-        pairs = [("LEO", m_leo, LEO_P, None, 0.0, x_leo_big[:leo_sizes[-1]], LEO_T, leo_chunk, False, y_leo,
-                  n_ref_leo),
-                 ("cruise", m_cr, CR_P, CR_EPH, CR_ET0, x_cr_big[:cr_sizes[-1]], CR_T, cr_chunk, False, y_cr,
-                  n_ref_cr)]
+        pairs = [
+            ("LEO", m_leo, LEO_P, None, 0.0, x_leo_big[: leo_sizes[-1]], LEO_T, leo_chunk, False, y_leo, n_ref_leo),
+            ("cruise", m_cr, CR_P, CR_EPH, CR_ET0, x_cr_big[: cr_sizes[-1]], CR_T, cr_chunk, False, y_cr, n_ref_cr),
+        ]
         if QUICK:
             pairs = pairs[:1]
         else:
-            pairs.append(("LEO + STM", m_leo, LEO_P, None, 0.0, x_leo_big[:leo_stm_n], LEO_T, leo_chunk, True,
-                          y_leo, n_ref_leo))
+            pairs.append(
+                ("LEO + STM", m_leo, LEO_P, None, 0.0, x_leo_big[:leo_stm_n], LEO_T, leo_chunk, True, y_leo, n_ref_leo)
+            )
         for label, *a in pairs:
             base = batch_results.get((label, 1, a[4].shape[0]))
             if base is None:
@@ -619,22 +758,42 @@ def main() -> None:  # noqa: C901 - a linear script
             r = run_batch(label, *a[:7], a[7], devs, base["repeat"], a[8], a[9])
             rows.append(batch_row(base) + [""])
             rows.append(batch_row(r) + [f"{base['best'] / r['best']:.2f}x"])
-            same = np.max(np.abs(r["out"][0].x_final - base["out"][0].x_final) if a[7] else
-                          np.abs(r["out"].x_final - base["out"].x_final))
+            same = np.max(
+                np.abs(r["out"][0].x_final - base["out"][0].x_final)
+                if a[7]
+                else np.abs(r["out"].x_final - base["out"].x_final)
+            )
             rows[-1][0] += f" [max |dx| vs 1 dev {same:.1e}]"
-        table(hdr + ["speedup"], rows,
-              f"Load average now {loadavg()} on {os.cpu_count()} cores: other processes compete for the cores, so\n"
-              "the speedup is bounded by the idle cores, not by the code (cpu/wall shows the cores obtained).")
+        table(
+            hdr + ["speedup"],
+            rows,
+            f"Load average now {loadavg()} on {os.cpu_count()} cores: other processes compete for the cores, so\n"
+            "the speedup is bounded by the idle cores, not by the code (cpu/wall shows the cores obtained).",
+        )
 
     # ------------------------------------------------------------------ 6. baselines
     banner(f"6. Baselines at <= {TARGET_M:g} m")
     rows = []
     # scipy DOP853, Cowell, Python RHS
     dtols = [1e-8, 3e-9, 1e-9, 3e-10, 1e-10, 3e-11, 1e-11, 3e-12, 1e-12]
-    dop_err_leo = lambda tol: pos_err([dop853(leo_rhs, x, LEO_T, tol, tol * 1e-3)[0]  # noqa: E731
-                                       for x in x_leo_big[:n_ref_leo]], y_leo)
-    dop_err_cr = lambda tol: pos_err([dop853(cr_rhs, x, CR_BREAKS, tol, tol * 1e-3)[0]  # noqa: E731
-                                      for x in x_cr_big[:n_ref_cr]], y_cr)
+    dop_err_leo = (
+        lambda tol: pos_err(
+            [
+                dop853(leo_rhs, x, LEO_T, tol, tol * 1e-3)[0]  # noqa: E731
+                for x in x_leo_big[:n_ref_leo]
+            ],
+            y_leo,
+        )
+    )
+    dop_err_cr = (
+        lambda tol: pos_err(
+            [
+                dop853(cr_rhs, x, CR_BREAKS, tol, tol * 1e-3)[0]  # noqa: E731
+                for x in x_cr_big[:n_ref_cr]
+            ],
+            y_cr,
+        )
+    )
     if QUICK:
         tol_l, tol_c = 1e-10, 1e-11
         e_l, e_c = dop_err_leo(tol_l), dop_err_cr(tol_c)
@@ -642,14 +801,25 @@ def main() -> None:  # noqa: C901 - a linear script
         (tol_l, e_l), _ = tune_tol(dop_err_leo, dtols, TARGET_M * 1e-3)
         (tol_c, e_c), _ = tune_tol(dop_err_cr, dtols[4:] + [3e-13], TARGET_M * 1e-3)
     for label, rhs, xs, brk, tol, e, nloop, sizes in (
-            ("LEO", leo_rhs, x_leo_big, LEO_T, tol_l, e_l, dop_loop_leo, leo_sizes),
-            ("cruise", cr_rhs, x_cr_big, CR_BREAKS, tol_c, e_c, dop_loop_cr, cr_sizes)):
+        ("LEO", leo_rhs, x_leo_big, LEO_T, tol_l, e_l, dop_loop_leo, leo_sizes),
+        ("cruise", cr_rhs, x_cr_big, CR_BREAKS, tol_c, e_c, dop_loop_cr, cr_sizes),
+    ):
         t0 = time.perf_counter()
         st = [dop853(rhs, x, brk, tol, tol * 1e-3)[1] for x in xs[:nloop]]
         dt = (time.perf_counter() - t0) / nloop
         for n in sizes[-1:]:
-            rows.append([f"scipy DOP853 {label} (rtol {tol:g}, atol {tol * 1e-3:g})", f"{n:,}", "", fs(dt * n),
-                         si(1 / dt, "/s"), si(np.mean(st) / dt, "/s"), fm(e), f"loop of {nloop}, extrapolated"])
+            rows.append(
+                [
+                    f"scipy DOP853 {label} (rtol {tol:g}, atol {tol * 1e-3:g})",
+                    f"{n:,}",
+                    "",
+                    fs(dt * n),
+                    si(1 / dt, "/s"),
+                    si(np.mean(st) / dt, "/s"),
+                    fm(e),
+                    f"loop of {nloop}, extrapolated",
+                ]
+            )
     stm_note = ""
     if hy is None:
         print("heyoka not installed" if hy_version is None else "heyoka skipped (--no-heyoka)")
@@ -660,8 +830,14 @@ def main() -> None:  # noqa: C901 - a linear script
         k = -MU_E / (r2 * rr)
         s = z / rr
         cj = -1.5 * MU_E * J2_E * R_E * R_E / (r2 * r2)
-        odes = [(x, vx), (y, vy), (z, vz), (vx, k * x + cj * (1 - 5 * s * s) * x / rr),
-                (vy, k * y + cj * (1 - 5 * s * s) * y / rr), (vz, k * z + cj * ((1 - 5 * s * s) * z / rr + 2 * s))]
+        odes = [
+            (x, vx),
+            (y, vy),
+            (z, vz),
+            (vx, k * x + cj * (1 - 5 * s * s) * x / rr),
+            (vy, k * y + cj * (1 - 5 * s * s) * y / rr),
+            (vz, k * z + cj * ((1 - 5 * s * s) * z / rr + 2 * s)),
+        ]
         B = 8
 
         def hy_run(ta, xs, var0=None):
@@ -672,13 +848,13 @@ def main() -> None:  # noqa: C901 - a linear script
             out = np.empty((nb * B, ta.state.shape[0]))
             steps = 0
             for g in range(nb):
-                ta.state[:6] = pad[g * B:(g + 1) * B].T
+                ta.state[:6] = pad[g * B : (g + 1) * B].T
                 if var0 is not None:
                     ta.state[6:] = var0
                 ta.set_time(0.0)
                 ta.propagate_until(DAY)
                 steps += sum(r[3] for r in ta.propagate_res[: min(B, n - g * B)])
-                out[g * B:(g + 1) * B] = ta.state.T
+                out[g * B : (g + 1) * B] = ta.state.T
             return out[:n], steps
 
         st0 = np.tile(LEO_X0[:6, None], (1, B))
@@ -699,9 +875,18 @@ def main() -> None:  # noqa: C901 - a linear script
         tcomp, ta = comp[tol_h]
         for n in leo_sizes:
             (_, st), best, med, _ = timed(lambda: hy_run(ta, x_leo_big[:n]), 3 if n <= 1000 else 1)
-            rows.append([f"heyoka batch {B} LEO (tol {tol_h:g}, order {ta.order})", f"{n:,}",
-                         f"{fs(comp['first'])}/{fs(tcomp)}", fs(best),
-                         si(n / best, "/s"), si(st / best, "/s"), fm(e_h), f"median {fs(med)}"])
+            rows.append(
+                [
+                    f"heyoka batch {B} LEO (tol {tol_h:g}, order {ta.order})",
+                    f"{n:,}",
+                    f"{fs(comp['first'])}/{fs(tcomp)}",
+                    fs(best),
+                    si(n / best, "/s"),
+                    si(st / best, "/s"),
+                    fm(e_h),
+                    f"median {fs(med)}",
+                ]
+            )
         t0 = time.perf_counter()
         vsys = hy.var_ode_sys(odes, hy.var_args.vars, order=1)
         tv = hy.taylor_adaptive_batch(vsys, st0, tol=tol_h)
@@ -710,40 +895,91 @@ def main() -> None:  # noqa: C901 - a linear script
         for n in (leo_stm_n,) if QUICK else (leo_stm_n, 10_000):
             (outv, st), best, med, _ = timed(lambda: hy_run(tv, x_leo_big[:n], var0), 1)
             ev = pos_err(outv[:n_ref_leo], y_leo)
-            rows.append([f"heyoka var_ode_sys batch {B} LEO + 6x6 STM", f"{n:,}", fs(tcv), fs(best),
-                         si(n / best, "/s"), si(st / best, "/s"), fm(ev), ""])
+            rows.append(
+                [
+                    f"heyoka var_ode_sys batch {B} LEO + 6x6 STM",
+                    f"{n:,}",
+                    fs(tcv),
+                    fs(best),
+                    si(n / best, "/s"),
+                    si(st / best, "/s"),
+                    fm(ev),
+                    "",
+                ]
+            )
         # STM agreement with fracas (6x6 block), rows 0..n_ref-1
         phi_h = outv[:n_ref_leo, 6:42].reshape(n_ref_leo, 6, 6)
         phi_f = stm_leo[:n_ref_leo, :6, :6]
         rel = np.max(np.linalg.norm(phi_h - phi_f, axis=(1, 2)) / np.linalg.norm(phi_f, axis=(1, 2)))
-        stm_note = (f"\nSTM check: max ||Phi_heyoka - Phi_fracas|| / ||Phi_fracas|| over the reference states = "
-                    f"{rel:.1e} (6x6 block).\nheyoka tolerances tried: "
-                    + ", ".join(f"{t:g}: {fm(e)}" for t, e in tried_h))
+        stm_note = (
+            f"\nSTM check: max ||Phi_heyoka - Phi_fracas|| / ||Phi_fracas|| over the reference states = "
+            f"{rel:.1e} (6x6 block).\nheyoka tolerances tried: " + ", ".join(f"{t:g}: {fm(e)}" for t, e in tried_h)
+        )
     fr = batch_results
     for n in leo_sizes:
         for nd in sorted({1, len(devs)}):
             r = fr.get(("LEO", nd, n))
             if r:
-                rows.append([f"fracas Encke LEO (c_nom {c_leo:g}), {nd} device(s)", f"{n:,}", fs(r["tcomp"]),
-                             fs(r["best"]), si(n / r["best"], "/s"), si(r["steps"] / r["best"], "/s"), fm(r["err"]),
-                             ""])
+                rows.append(
+                    [
+                        f"fracas Encke LEO (c_nom {c_leo:g}), {nd} device(s)",
+                        f"{n:,}",
+                        fs(r["tcomp"]),
+                        fs(r["best"]),
+                        si(n / r["best"], "/s"),
+                        si(r["steps"] / r["best"], "/s"),
+                        fm(r["err"]),
+                        "",
+                    ]
+                )
     r = fr.get(("LEO + STM", 1, leo_stm_n))
-    rows.append(["fracas Encke LEO + 7x7 STM, 1 device", f"{leo_stm_n:,}", fs(r["tcomp"]), fs(r["best"]),
-                 si(leo_stm_n / r["best"], "/s"), si(r["steps"] / r["best"], "/s"), fm(r["err"]), ""])
-    table(["method", "N", "compile", "time", "props/s", "steps/s", "error", "note"], rows,
-          ("heyoka: Taylor method (LLVM JIT), Cowell, point mass + J2 with the same constants, one thread,\n"
-           "states set group by group from Python; steps = accepted Taylor steps.  " if hy else "")
-          + "DOP853 time for N = N x time of one." + stm_note)
+    rows.append(
+        [
+            "fracas Encke LEO + 7x7 STM, 1 device",
+            f"{leo_stm_n:,}",
+            fs(r["tcomp"]),
+            fs(r["best"]),
+            si(leo_stm_n / r["best"], "/s"),
+            si(r["steps"] / r["best"], "/s"),
+            fm(r["err"]),
+            "",
+        ]
+    )
+    table(
+        ["method", "N", "compile", "time", "props/s", "steps/s", "error", "note"],
+        rows,
+        (
+            "heyoka: Taylor method (LLVM JIT), Cowell, point mass + J2 with the same constants, one thread,\n"
+            "states set group by group from Python; steps = accepted Taylor steps.  "
+            if hy
+            else ""
+        )
+        + "DOP853 time for N = N x time of one."
+        + stm_note,
+    )
 
     # -------------------------------------------------------- 7. Encke vs Cowell RKN4
     banner("7. Encke vs plain Cowell (same RKN4 scheme and step rule) at equal accuracy")
     rows = []
     targets = (1e3,) if QUICK else (1.0, 1e3)
-    cases = [("LEO", leo_model, LEO_P, None, 0.0, x_leo_big[:n_ref_leo], LEO_T, y_leo, "c_nom",
-              x_leo_big[:leo_sizes[0]])]
+    cases = [
+        ("LEO", leo_model, LEO_P, None, 0.0, x_leo_big[:n_ref_leo], LEO_T, y_leo, "c_nom", x_leo_big[: leo_sizes[0]])
+    ]
     if not QUICK:
-        cases.append(("cruise", cruise_model, CR_P, CR_EPH, CR_ET0, x_cr_big[:n_ref_cr], CR_T, y_cr, "dt_max",
-                      x_cr_big[:cr_sizes[0]]))
+        cases.append(
+            (
+                "cruise",
+                cruise_model,
+                CR_P,
+                CR_EPH,
+                CR_ET0,
+                x_cr_big[:n_ref_cr],
+                CR_T,
+                y_cr,
+                "dt_max",
+                x_cr_big[: cr_sizes[0]],
+            )
+        )
     for label, mk, params, eph, epoch, xs, t, yref, knob, xs_b in cases:
         nb = xs_b.shape[0]
         base_model = mk(0.05) if knob == "c_nom" else mk(d_cr)
@@ -770,32 +1006,84 @@ def main() -> None:  # noqa: C901 - a linear script
                     fn = lambda: propagate(model, params, eph, epoch, xs[0], t)  # noqa: E731
                     tr, best, med, _ = timed(fn, REPEAT)
                     nst = int(tr.n_steps)
-                    fb = lambda: propagate_batch(model, params, eph, epoch, xs_b, t, chunk_size=nb,  # noqa: E731
-                                                 devices=one_dev)
+                    fb = lambda: propagate_batch(
+                        model,
+                        params,
+                        eph,
+                        epoch,
+                        xs_b,
+                        t,
+                        chunk_size=nb,  # noqa: E731
+                        devices=one_dev,
+                    )
                     first_call(fb)  # same executable as section 4 (integrator constants are traced)
                     _, tb, _, _ = timed(fb, 2)
                 else:
                     h0 = (c_leo / 8 if knob == "c_nom" else d_cr / 2) * (target_m / TARGET_M) ** 0.25
                     (h, e), _ = tune_step(cow_err, h0, tgt)
                     c_nom, dtm = (h, 4000.0) if knob == "c_nom" else (0.05, h * DAY)
-                    fn = lambda: cowell_single(base_model, params, eph, epoch, jnp.asarray(xs[0]),  # noqa: E731
-                                               t_end, c_nom, dtm)
+                    fn = lambda: cowell_single(
+                        base_model,
+                        params,
+                        eph,
+                        epoch,
+                        jnp.asarray(xs[0]),  # noqa: E731
+                        t_end,
+                        c_nom,
+                        dtm,
+                    )
                     first_call(fn)
                     (xe, nst), best, med, _ = timed(fn, REPEAT)
                     nst = int(nst)
-                    fb = lambda: cowell_many(base_model, params, eph, epoch, jnp.asarray(xs_b),  # noqa: E731
-                                             t_end, c_nom, dtm)
+                    fb = lambda: cowell_many(
+                        base_model,
+                        params,
+                        eph,
+                        epoch,
+                        jnp.asarray(xs_b),  # noqa: E731
+                        t_end,
+                        c_nom,
+                        dtm,
+                    )
                     first_call(fb)
                     _, tb, _, _ = timed(fb, 2)
                 setting = f"c_nom {h:g}" if knob == "c_nom" else f"dt_max {h:g} d"
-                rows.append([label, f"{target_m:g} m", meth, setting, fm(e), nst, fs(best), fs(med),
-                             f"{best / nst * 1e6:.1f}", f"{nb:,}", si(nb / tb, "/s"),
-                             f"{tb / (nb * nst) * 1e6:.2f}"])
-    table(["problem", "target", "method", "setting", "error", "steps", "single best", "median", "us/step",
-           "batch N", "batch props/s", "us/lane-step"], rows,
-          "single = one propagation of the nominal state (jit, warm); batch = vmap over the first N states of\n"
-          "section 4 (one device, best of 2); error = max over the reference states.  Both use\n"
-          "dt = min(c_nom r^1.5/sqrt(mu), dt_max, next switch); Encke adds two Kepler solves per step.")
+                rows.append(
+                    [
+                        label,
+                        f"{target_m:g} m",
+                        meth,
+                        setting,
+                        fm(e),
+                        nst,
+                        fs(best),
+                        fs(med),
+                        f"{best / nst * 1e6:.1f}",
+                        f"{nb:,}",
+                        si(nb / tb, "/s"),
+                        f"{tb / (nb * nst) * 1e6:.2f}",
+                    ]
+                )
+    table(
+        [
+            "problem",
+            "target",
+            "method",
+            "setting",
+            "error",
+            "steps",
+            "single best",
+            "median",
+            "us/step",
+            "batch N",
+            "batch props/s",
+            "us/lane-step",
+        ],
+        rows,
+        "single = one propagation of the nominal state (jit, warm); batch = vmap over the first N states of\n"
+        "section 4 (one device, best of 2); error = max over the reference states.  Both use\n"
+        "dt = min(c_nom r^1.5/sqrt(mu), dt_max, next switch); Encke adds two Kepler solves per step.",
+    )
 
     banner("done")
     print(f"total wall time {time.perf_counter() - T_START:.0f} s; load average at end {loadavg()}")

@@ -34,9 +34,10 @@ def main() -> None:
     args = ap.parse_args()
 
     t_imp = time.perf_counter()
-    from fracas.dynamics import ephemeris as E
     import jax
     import jax.numpy as jnp
+
+    from fracas.dynamics import ephemeris as E
 
     t_imp = time.perf_counter() - t_imp
     import de421
@@ -85,14 +86,12 @@ def main() -> None:
     loop_eph, loop_bare = looped(True), looped(False)
     jax.block_until_ready(loop_eph(table, ets_j[0]))
     jax.block_until_ready(loop_bare(table, ets_j[0]))
-    t_loop_in = (
-        _best(lambda: jax.block_until_ready(loop_eph(table, ets_j[0])), args.repeat)
-        - _best(lambda: jax.block_until_ready(loop_bare(table, ets_j[0])), args.repeat)
+    t_loop_in = _best(lambda: jax.block_until_ready(loop_eph(table, ets_j[0])), args.repeat) - _best(
+        lambda: jax.block_until_ready(loop_bare(table, ets_j[0])), args.repeat
     )
 
     eph = Ephemeris(de421)
-    series = ["sun", "earthmoon", "moon", "mercury", "venus", "mars", "jupiter", "saturn",
-              "uranus", "neptune", "pluto"]
+    series = ["sun", "earthmoon", "moon", "mercury", "venus", "mars", "jupiter", "saturn", "uranus", "neptune", "pluto"]
     for s in series:
         eph.load(s)
     tdb = 2451545.0 + ets / 86400.0
@@ -111,8 +110,10 @@ def main() -> None:
 
     dev = jax.devices()[0]
     print(f"fracas EPHEM benchmark: 11 bodies, device {dev.platform}:{dev.device_kind}, N = {args.n}")
-    print(f"(import {t_imp:.2f} s, build table {t_build * 1e3:.0f} ms, "
-          f"compile scalar {t_c1:.2f} s, compile vmapped {t_cn:.2f} s)")
+    print(
+        f"(import {t_imp:.2f} s, build table {t_build * 1e3:.0f} ms, "
+        f"compile scalar {t_c1:.2f} s, compile vmapped {t_cn:.2f} s)"
+    )
     rows = [
         ("fracas body_states, jit, 1 time", t_one, 1),
         (f"fracas body_states, jit+vmap, {args.n} times", t_many, args.n),

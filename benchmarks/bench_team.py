@@ -23,17 +23,18 @@ import statistics
 import sys
 import tempfile
 import time
-import tomllib
 from pathlib import Path
+
+import tomllib
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from fracas.build.team import build_study  # noqa: E402
 from fracas.config.team import TeamDeck, load_team_deck  # noqa: E402
 from fracas.io.stm_file import write_stm_file  # noqa: E402
 from fracas.team.engine import run_study  # noqa: E402
 from fracas.team.reference import build_stm_data, integrate_reference, reference_from_stm  # noqa: E402
-from fracas.build.team import build_study  # noqa: E402
 
 DECK = ROOT / "namelists" / "mercury_approach_team.toml"
 
@@ -81,33 +82,43 @@ def main():
     data = build_stm_data(st)
     write_stm_file(stm, data)
     t_build = time.perf_counter() - t0
-    print(f"STM file build (STMGEN, cold process, includes compile): {t_build:.2f} s; "
-          f"{data.n_times} times x {len(data.param_labels)} parameters, {stm.stat().st_size / 1e6:.1f} MB")
+    print(
+        f"STM file build (STMGEN, cold process, includes compile): {t_build:.2f} s; "
+        f"{data.n_times} times x {len(data.param_labels)} parameters, {stm.stat().st_size / 1e6:.1f} MB"
+    )
     rows = [
         timed("Mercury study through the STM file", lambda: one(lambda: load_team_deck(DECK), stm), a.repeat),
         timed("same study integrated in line", lambda: one(lambda: load_team_deck(DECK)), a.repeat),
         timed("changed tracking schedule, same file", lambda: one(changed_deck, stm), a.repeat),
     ]
-    hdr = f"{'case':<40s} {'events':>6s} {'meas':>5s} {'n':>3s} {'setup':>7s} {'reference':>9s} {'analysis':>8s} {'total s':>8s}"
+    hdr = f"{'case':<40s} {'events':>6s} {'meas':>5s} {'n':>3s} {'setup':>7s} {'reference':>9s} {'analysis':>8s} {'total s':>8s}"  # noqa: E501
     print(hdr)
     print("-" * len(hdr))
     for label, m, _ in rows:
-        print(f"{label:<40s} {m['events']:6d} {m['meas']:5d} {m['n']:3d} {m['setup']:7.3f} {m['reference']:9.3f} "
-              f"{m['analysis']:8.3f} {m['total']:8.3f}")
+        print(
+            f"{label:<40s} {m['events']:6d} {m['meas']:5d} {m['n']:3d} {m['setup']:7.3f} {m['reference']:9.3f} "
+            f"{m['analysis']:8.3f} {m['total']:8.3f}"
+        )
     f, i = rows[0][1]["total"], rows[1][1]["total"]
-    print(f"\nthrough the file: {f:.3f} s (goal < 0.5 s: {'met' if f < 0.5 else 'NOT met'}); "
-          f"in line / file = {i / f:.1f}x (goal >= 10x: {'met' if i / f >= 10 else 'NOT met'})")
+    print(
+        f"\nthrough the file: {f:.3f} s (goal < 0.5 s: {'met' if f < 0.5 else 'NOT met'}); "
+        f"in line / file = {i / f:.1f}x (goal >= 10x: {'met' if i / f >= 10 else 'NOT met'})"
+    )
     r = rows[0][2]
     b = rows[1][2]
     import numpy as np
 
-    d = np.max(np.abs(r.Pa_plus - b.Pa_plus) / np.sqrt(np.abs(np.einsum('kii,kjj->kij', r.Pa_plus, r.Pa_plus)) + 1e-300))
+    d = np.max(
+        np.abs(r.Pa_plus - b.Pa_plus) / np.sqrt(np.abs(np.einsum("kii,kjj->kij", r.Pa_plus, r.Pa_plus)) + 1e-300)
+    )
     print(f"file vs in-line: max |dP| / sqrt(P_ii P_jj) over all events = {d:.2e}")
     from fracas.io.team_results import write_team_results
 
     t0 = time.perf_counter()
     write_team_results(tmp / "res.h5", r, str(stm))
-    print(f"writing the results file: {time.perf_counter() - t0:.3f} s ({(tmp / 'res.h5').stat().st_size / 1e6:.1f} MB)")
+    print(
+        f"writing the results file: {time.perf_counter() - t0:.3f} s ({(tmp / 'res.h5').stat().st_size / 1e6:.1f} MB)"
+    )
     print("timings: " + "; ".join(f"{k} {v:.3f}" for k, v in r.timing.items()))
 
 

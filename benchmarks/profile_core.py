@@ -16,7 +16,8 @@ microseconds per lane-step (wall time / (lanes x loop iterations)):
   STM: dt no-grad      propagate_with_sensitivities with the step-size rule under stop_gradient
 
 (the Kepler variants follow the core of early 2026-11-22: ``kepler_fg(..., n_newton, short_arc)``;
-a variant the current core does not support is reported as n/a), plus the ephemeris cost (``body_states`` of the cruise's five bodies, vmapped inside a loop;
+a variant the current core does not support is reported as n/a), plus the ephemeris cost
+(``body_states`` of the cruise's five bodies, vmapped inside a loop;
 the step calls it three times), a while loop with a trivial body (loop overhead) and the
 number of Laguerre iterations the warm-started solves take.  Numbers are wall clock on a shared machine:
 compare rows of one run, not runs.
@@ -34,15 +35,14 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-import numpy as np  # noqa: E402
-
-from fracas import _jax  # noqa: E402,F401
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
 
 import fracas.dynamics.kepler as K  # noqa: E402
 import fracas.integrate.encke as E  # noqa: E402
 import fracas.integrate.propagate as PR  # noqa: E402
+from fracas import _jax  # noqa: E402,F401
 
 DAY = 86400.0
 
@@ -69,9 +69,11 @@ def kepler_none(r0_vec, v0_vec, tau, mu, x_start=None, **_):
 
 def kepler_with(**force):
     """kepler_fg with some keyword arguments forced (e.g. short_arc=False, n_newton=None)."""
+
     def fn(*a, **k):
         k.update(force)
         return K.kepler_fg(*a, **k)
+
     return fn
 
 
@@ -120,7 +122,9 @@ def ephemeris_cost(table, et0, n_lanes, n_iter=2000):
                     return acc + jnp.sin(t)
                 p, v = body_states(table, t)
                 return acc + jnp.sin(t) + p[2, 0] + v[3, 1]
+
             return jax.lax.fori_loop(0, n_iter, body, 0.0)
+
         return jax.jit(jax.vmap(one))
 
     ts = et0 + jnp.arange(n_lanes) * 1000.0
@@ -153,8 +157,16 @@ def prepare_variant(pr, model, params, eph, epoch, xs, t_out, sens=False):
     ob = jax.block_until_ready(many(xb))
     tr1 = o1[0] if sens else o1
     trb = ob[0] if sens else ob
-    return dict(single=lambda: single(x0), many=lambda: many(xb), it1=int(tr1.n_steps),
-                it=int(np.max(np.asarray(trb.n_steps))), n=xs.shape[0], out=ob, t1=np.inf, tb=np.inf)
+    return {
+        "single": lambda: single(x0),
+        "many": lambda: many(xb),
+        "it1": int(tr1.n_steps),
+        "it": int(np.max(np.asarray(trb.n_steps))),
+        "n": xs.shape[0],
+        "out": ob,
+        "t1": np.inf,
+        "tb": np.inf,
+    }
 
 
 def round_robin(preps: dict, rounds: int, single_reps: int = 3) -> None:
@@ -171,10 +183,12 @@ def round_robin(preps: dict, rounds: int, single_reps: int = 3) -> None:
 
 def loop_overhead(n_lanes, n_iter, width=40):
     """A vmapped while loop with a trivial body and ~``width`` float carry per lane."""
+
     def one(c):
         def body(s):
             i, a = s
             return i + 1, a * 1.0000001 + 1e-9
+
         return jax.lax.while_loop(lambda s: s[0] < n_iter, body, (jnp.zeros((), jnp.int32), c))[1]
 
     f1 = jax.jit(one)
@@ -219,8 +233,10 @@ def main():
     n_leo = 256 if args.quick else 1000
     n_cr = 16 if args.quick else 64
     rep = 3 if args.quick else 5
-    print(f"fracas core profile (ablations); jax {jax.__version__}, {jax.devices()[0].platform}, "
-          f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
+    print(
+        f"fracas core profile (ablations); jax {jax.__version__}, {jax.devices()[0].platform}, "
+        f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores"
+    )
 
     # LEO
     sys.argv = [sys.argv[0], "--quick"]  # bench_core parses its own arguments at import
@@ -232,8 +248,9 @@ def main():
     xs_cr = B.cruise_states(n_cr)
     rows = []
     for label, model, params, eph, epoch, xs, t in (
-            ("LEO", m_leo, B.LEO_P, None, 0.0, xs_leo, B.LEO_T),
-            ("cruise", m_cr, B.CR_P, B.CR_EPH, B.CR_ET0, xs_cr, B.CR_T)):
+        ("LEO", m_leo, B.LEO_P, None, 0.0, xs_leo, B.LEO_T),
+        ("cruise", m_cr, B.CR_P, B.CR_EPH, B.CR_ET0, xs_cr, B.CR_T),
+    ):
         preps = {}
         for name, pr in build_variants().items():
             try:
@@ -249,14 +266,25 @@ def main():
             if not isinstance(r, dict):
                 rows.append((label, name, "n/a", "n/a", "", "", r))
                 continue
-            dx = np.max(np.linalg.norm(np.asarray(r["out"].x_final)[:, :3] - np.asarray(base["out"].x_final)[:, :3],
-                                       axis=1))
-            rows.append((label, name, f"{r['us1']:.2f}", f"{r['usb']:.2f}", f"{r['usb'] / base['usb']:.2f}",
-                         r["it"], f"{dx * 1e3:.2g} m"))
+            dx = np.max(
+                np.linalg.norm(np.asarray(r["out"].x_final)[:, :3] - np.asarray(base["out"].x_final)[:, :3], axis=1)
+            )
+            rows.append(
+                (
+                    label,
+                    name,
+                    f"{r['us1']:.2f}",
+                    f"{r['usb']:.2f}",
+                    f"{r['usb'] / base['usb']:.2f}",
+                    r["it"],
+                    f"{dx * 1e3:.2g} m",
+                )
+            )
             print(*rows[-1], sep="  |  ", flush=True)
     for label, model, params, eph, epoch, xs, t in (
-            ("LEO", m_leo, B.LEO_P, None, 0.0, xs_leo[: max(8, n_leo // 8)], B.LEO_T),
-            ("cruise", m_cr, B.CR_P, B.CR_EPH, B.CR_ET0, xs_cr[: max(4, n_cr // 8)], B.CR_T)):
+        ("LEO", m_leo, B.LEO_P, None, 0.0, xs_leo[: max(8, n_leo // 8)], B.LEO_T),
+        ("cruise", m_cr, B.CR_P, B.CR_EPH, B.CR_ET0, xs_cr[: max(4, n_cr // 8)], B.CR_T),
+    ):
         base = prepare_variant(PR, model, params, eph, epoch, xs, t, sens=True)
         ng = prepare_variant(stm_nograd_variant(), model, params, eph, epoch, xs, t, sens=True)
         round_robin({"base": base, "ng": ng}, max(2, rep // 2), single_reps=1)
@@ -264,16 +292,47 @@ def main():
         s1 = np.asarray(ng["out"][1].stm[:, -1])
         rel = np.max(np.linalg.norm(s1 - s0, axis=(1, 2)) / np.linalg.norm(s0, axis=(1, 2)))
         for name, r, note in (("STM: jacfwd (as is)", base, ""), ("STM: dt no-grad", ng, f"dSTM {rel:.1e} rel")):
-            rows.append((label + f" (N={xs.shape[0]})", name, f"{r['us1']:.2f}", f"{r['usb']:.2f}",
-                         f"{r['usb'] / base['usb']:.2f}", r["it"], note))
+            rows.append(
+                (
+                    label + f" (N={xs.shape[0]})",
+                    name,
+                    f"{r['us1']:.2f}",
+                    f"{r['usb']:.2f}",
+                    f"{r['usb'] / base['usb']:.2f}",
+                    r["it"],
+                    note,
+                )
+            )
             print(*rows[-1], sep="  |  ", flush=True)
 
     print()
-    w = [max(len(str(r[i])) for r in rows + [("problem", "variant", "us/step N=1", "us/lane-step batch",
-                                              "vs baseline", "loop iters", "max |dr| vs baseline")])
-         for i in range(7)]
-    hdr = ("problem", "variant", "us/step N=1", "us/lane-step batch", "vs baseline", "loop iters",
-           "max |dr| vs baseline")
+    w = [
+        max(
+            len(str(r[i]))
+            for r in rows
+            + [
+                (
+                    "problem",
+                    "variant",
+                    "us/step N=1",
+                    "us/lane-step batch",
+                    "vs baseline",
+                    "loop iters",
+                    "max |dr| vs baseline",
+                )
+            ]
+        )
+        for i in range(7)
+    ]
+    hdr = (
+        "problem",
+        "variant",
+        "us/step N=1",
+        "us/lane-step batch",
+        "vs baseline",
+        "loop iters",
+        "max |dr| vs baseline",
+    )
     print("  ".join(str(h).ljust(w[i]) for i, h in enumerate(hdr)))
     for r in rows:
         print("  ".join(str(c).ljust(w[i]) for i, c in enumerate(r)))
@@ -281,15 +340,22 @@ def main():
 
     e1 = ephemeris_cost(B.CR_EPH, B.CR_ET0, 1)
     eb = ephemeris_cost(B.CR_EPH, B.CR_ET0, n_cr)
-    print(f"\nephemeris, 5 bodies (positions + velocities): {e1:.2f} us/call (N=1), {eb:.2f} us/lane-call "
-          f"(N={n_cr}); the Nystrom step makes 3 calls")
+    print(
+        f"\nephemeris, 5 bodies (positions + velocities): {e1:.2f} us/call (N=1), {eb:.2f} us/lane-call "
+        f"(N={n_cr}); the Nystrom step makes 3 calls"
+    )
     o1, ob = loop_overhead(n_leo, 20_000)
-    print(f"while loop with a trivial body, 40 floats of carry: {o1:.2f} us/iteration (N=1), "
-          f"{ob * 1e3:.1f} ns/lane-iteration (N={n_leo})")
+    print(
+        f"while loop with a trivial body, 40 floats of carry: {o1:.2f} us/iteration (N=1), "
+        f"{ob * 1e3:.1f} ns/lane-iteration (N={n_leo})"
+    )
     hist = kepler_iterations(0.036)
-    print("Laguerre-Conway iterations of warm-started (first-order predictor) half-step solves, LEO "
-          "c_nom 0.036: " + ", ".join(f"{k}: {c}" for k, c in enumerate(hist) if c)
-          + " (the last iteration only confirms convergence)")
+    print(
+        "Laguerre-Conway iterations of warm-started (first-order predictor) half-step solves, LEO "
+        "c_nom 0.036: "
+        + ", ".join(f"{k}: {c}" for k, c in enumerate(hist) if c)
+        + " (the last iteration only confirms convergence)"
+    )
 
 
 if __name__ == "__main__":

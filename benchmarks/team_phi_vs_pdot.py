@@ -26,11 +26,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from fracas.build.team import build_study  # noqa: E402
 from fracas.config.team import parse_team_deck  # noqa: E402
 from fracas.team.eigen import eigen_summary  # noqa: E402
 from fracas.team.engine import run_study  # noqa: E402
 from fracas.team.reference import integrate_reference  # noqa: E402
-from fracas.build.team import build_study  # noqa: E402
 
 DECK = ROOT / "namelists" / "mercury_approach_team.toml"
 
@@ -68,9 +68,11 @@ def phi_vs_pdot(at_days: float):
     ep = table(f"PDOT state errors at t = {out['pdot'][2]:.2f} d (assumed knowledge; km, km/s)", out["pdot"][0], labels)
     eh = table(f"PHI state errors at t = {out['phi'][2]:.2f} d", out["phi"][0], labels)
     r = eh.sigma[:6] / ep.sigma[:6]
-    print("\nPHI / PDOT 1-sigma ratio: " + "  ".join(f"{l} {v:.3f}" for l, v in zip(labels, r)))
+    print("\nPHI / PDOT 1-sigma ratio: " + "  ".join(f"{lab} {v:.3f}" for lab, v in zip(labels, r)))
     print(f"position RSS  PHI {eh.pos_rss:.4g} km  PDOT {ep.pos_rss:.4g} km  ratio {eh.pos_rss / ep.pos_rss:.3f}")
-    print(f"velocity RSS  PHI {eh.vel_rss * 1e6:.4g} mm/s  PDOT {ep.vel_rss * 1e6:.4g} mm/s  ratio {eh.vel_rss / ep.vel_rss:.3f}")
+    print(
+        f"velocity RSS  PHI {eh.vel_rss * 1e6:.4g} mm/s  PDOT {ep.vel_rss * 1e6:.4g} mm/s  ratio {eh.vel_rss / ep.vel_rss:.3f}"  # noqa: E501
+    )
     print(f"max |corr difference| (state block): {np.max(np.abs(eh.corr[:6, :6] - ep.corr[:6, :6])):.3f}")
     print(f"run time (warm-ish, one run each): PHI {out['phi'][1]:.2f} s, PDOT {out['pdot'][1]:.2f} s")
 
@@ -91,6 +93,7 @@ def run_dict(d: dict):
 
 def effective_bias(days: float):
     import copy
+
     import tomllib
 
     base = tomllib.loads(DECK.read_text())
@@ -99,13 +102,17 @@ def effective_bias(days: float):
     base["a_priori"] = {"position_rss_km": 1e-6, "velocity_rss_km_s": 1e-9}
     base["filter"]["stop_days"] = days
     sig = {"proportionality": 0.02, "in_plane_deg": 0.5, "out_of_plane_deg": 0.5}
-    print(f"\nEffective bias after {days:g} days without tracking (Appendix 9.3 eq. 5); "
-          "noise 2 %, 0.5 deg, 0.5 deg; bias of the same sigmas")
+    print(
+        f"\nEffective bias after {days:g} days without tracking (Appendix 9.3 eq. 5); "
+        "noise 2 %, 0.5 deg, 0.5 deg; bias of the same sigmas"
+    )
     print(f"{'tau (d)':>8s} {'RSS noise (km)':>15s} {'RSS unit bias (km)':>19s} {'ratio':>8s} {'0.30+0.05tau':>13s}")
     bias = copy.deepcopy(base)
-    bias["parameter"] = [{"label": "thrust_scale", "sigma": 0.02, "role": "consider"},
-                         {"label": "bias_in_rad", "sigma": 0.0087266, "role": "consider"},
-                         {"label": "bias_out_rad", "sigma": 0.0087266, "role": "consider"}]
+    bias["parameter"] = [
+        {"label": "thrust_scale", "sigma": 0.02, "role": "consider"},
+        {"label": "bias_in_rad", "sigma": 0.0087266, "role": "consider"},
+        {"label": "bias_out_rad", "sigma": 0.0087266, "role": "consider"},
+    ]
     rss_b = eigen_summary(run_dict(bias).Pa_plus[-1]).pos_rss
     for tau in (0.5, 1.0, 2.0, 5.0, 10.0):
         noise = copy.deepcopy(base)

@@ -118,9 +118,7 @@ def configure(host_devices: int | None = None) -> None:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    cache_dir = os.environ.get(
-        "FRACAS_CACHE_DIR", os.path.join(os.path.expanduser("~"), ".cache", "fracas", "jax")
-    )
+    cache_dir = os.environ.get("FRACAS_CACHE_DIR", os.path.join(os.path.expanduser("~"), ".cache", "fracas", "jax"))
     if cache_dir.lower() not in ("", "0", "off", "none"):
         try:
             os.makedirs(cache_dir, exist_ok=True)

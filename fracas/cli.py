@@ -70,7 +70,8 @@ def _host_devices(ctx: click.Context, _param, value: int | None) -> int | None:
     if value is not None:
         os.environ["FRACAS_HOST_DEVICES"] = str(value)
     elif not os.environ.get("FRACAS_HOST_DEVICES") and "xla_force_host_platform_device_count" not in os.environ.get(
-            "XLA_FLAGS", ""):
+        "XLA_FLAGS", ""
+    ):
         os.environ["FRACAS_HOST_DEVICES"] = str(os.cpu_count() or 1)
     return value
 
@@ -78,9 +79,15 @@ def _host_devices(ctx: click.Context, _param, value: int | None) -> int | None:
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, "--version", prog_name="fracas", message="%(prog)s %(version)s")
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
-@click.option("--host-devices", type=click.IntRange(1, 1024), default=None, callback=_host_devices, expose_value=False,
-              is_eager=True, help="XLA host devices for batched work (default: one per CPU core; "
-              "env FRACAS_HOST_DEVICES).")
+@click.option(
+    "--host-devices",
+    type=click.IntRange(1, 1024),
+    default=None,
+    callback=_host_devices,
+    expose_value=False,
+    is_eager=True,
+    help="XLA host devices for batched work (default: one per CPU core; env FRACAS_HOST_DEVICES).",
+)
 @click.pass_context
 def main(ctx: click.Context, debug: bool) -> None:
     """fracas: low-thrust mission analysis (TOM, TEAM, TSIM) on an Encke/Nystrom core."""
@@ -90,20 +97,29 @@ def main(ctx: click.Context, debug: bool) -> None:
 
 @main.command()
 @click.argument("deck", type=click.Path(dir_okay=True, path_type=Path))
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
-              help="Trajectory file to write (default out/<deck stem>.h5).")
-@click.option("--json", "as_json", is_flag=True, help="Print one JSON object with the final state instead of the table.")
-@click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), help="Also write a PNG plot of the trajectory.")
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Trajectory file to write (default out/<deck stem>.h5).",
+)
+@click.option(
+    "--json", "as_json", is_flag=True, help="Print one JSON object with the final state instead of the table."
+)
+@click.option(
+    "--plot", type=click.Path(dir_okay=False, path_type=Path), help="Also write a PNG plot of the trajectory."
+)
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
 @click.pass_context
-def propagate(ctx: click.Context, deck: Path, output: Path | None, as_json: bool, plot: Path | None, debug: bool) -> None:
+def propagate(
+    ctx: click.Context, deck: Path, output: Path | None, as_json: bool, plot: Path | None, debug: bool
+) -> None:
     """Propagate the trajectory of a TOML DECK and write it to an HDF5 file."""
     debug = debug or bool((ctx.obj or {}).get("debug"))
     with _errors(debug):
         from fracas.errors import NumericalError
-        from fracas.pipeline import propagate_deck
-
         from fracas.io.trajectory_file import read_trajectory_file
+        from fracas.pipeline import propagate_deck
 
         with _progress(True) as stage:
             _, path = propagate_deck(deck, output, on_stage=stage)
@@ -142,8 +158,12 @@ def stm() -> None:
 
 @stm.command("build")
 @click.argument("deck", type=click.Path(dir_okay=True, path_type=Path))
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
-              help="STM file to write (default: errcon.stm_file, else stm_files/<deck stem>.h5).")
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="STM file to write (default: errcon.stm_file, else stm_files/<deck stem>.h5).",
+)
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
 @click.pass_context
 def stm_build(ctx: click.Context, deck: Path, output: Path | None, debug: bool) -> None:
@@ -154,8 +174,10 @@ def stm_build(ctx: click.Context, deck: Path, output: Path | None, debug: bool) 
 
         with _progress(True) as stage:
             path, data = build_stm(deck, output, on_stage=stage)
-        click.echo(f"written: {path} ({data.n_times} times, {len(data.param_labels)} parameters: "
-                   f"{', '.join(data.param_labels)})")
+        click.echo(
+            f"written: {path} ({data.n_times} times, {len(data.param_labels)} parameters: "
+            f"{', '.join(data.param_labels)})"
+        )
 
 
 @stm.command("info")
@@ -173,17 +195,33 @@ def stm_info(ctx: click.Context, file: Path, debug: bool) -> None:
 
 @main.command()
 @click.argument("deck", type=click.Path(dir_okay=True, path_type=Path))
-@click.option("--stm", "stm_file", type=click.Path(dir_okay=False, path_type=Path),
-              help="Read the reference and transition matrices from this STM file instead of integrating.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
-              help="Results file to write (default: the deck's [output] results, else out/<deck stem>.h5).")
+@click.option(
+    "--stm",
+    "stm_file",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Read the reference and transition matrices from this STM file instead of integrating.",
+)
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Results file to write (default: the deck's [output] results, else out/<deck stem>.h5).",
+)
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), help="Also write a PNG plot.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON summary instead of the tables.")
 @click.option("--quiet", is_flag=True, help="Print only the one-line summary.")
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
 @click.pass_context
-def run(ctx: click.Context, deck: Path, stm_file: Path | None, output: Path | None, plot: Path | None,
-        as_json: bool, quiet: bool, debug: bool) -> None:
+def run(
+    ctx: click.Context,
+    deck: Path,
+    stm_file: Path | None,
+    output: Path | None,
+    plot: Path | None,
+    as_json: bool,
+    quiet: bool,
+    debug: bool,
+) -> None:
     """Run a DECK in the mode it names (mode = "team": a TEAM study; a trajectory deck: a propagation)."""
     debug = debug or bool((ctx.obj or {}).get("debug"))
     with _errors(debug):
@@ -194,7 +232,7 @@ def run(ctx: click.Context, deck: Path, stm_file: Path | None, output: Path | No
         mode = deck_mode(read_deck_text(deck), str(deck))
         if mode == "propagate":
             if stm_file is not None:
-                raise DeckError(f"{deck}: --stm is for TEAM decks (mode = \"team\"); this is a trajectory deck")
+                raise DeckError(f'{deck}: --stm is for TEAM decks (mode = "team"); this is a trajectory deck')
             ctx.invoke(propagate, deck=deck, output=output, as_json=as_json, plot=plot, debug=debug)
             return
         from fracas.config.team import load_team_deck
@@ -227,9 +265,11 @@ def _team_report(path: Path, png: Path | None, as_json: bool, quiet: bool, stage
         click.echo(json.dumps(out))
     elif quiet:
         s = summary_dict(r)
-        click.echo(f"{s['events']} events, {s['measurements_used']} measurements; final assumed RSS "
-                   f"{s['assumed']['position_rss_km']:.4g} km, {s['assumed']['velocity_rss_km_s'] * 1e6:.4g} mm/s; "
-                   f"written: {path}")
+        click.echo(
+            f"{s['events']} events, {s['measurements_used']} measurements; final assumed RSS "
+            f"{s['assumed']['position_rss_km']:.4g} km, {s['assumed']['velocity_rss_km_s'] * 1e6:.4g} mm/s; "
+            f"written: {path}"
+        )
     else:
         print_team(r)
 

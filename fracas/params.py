@@ -140,8 +140,12 @@ _KINDS = (
     ParamKind("mu", INDEX_BODY, "km^3/s^2", "gravitational parameter GM of a body", None, (0.0, None)),
     ParamKind("j2", INDEX_BODY, "1", "unnormalised J2 of a body"),
     ParamKind("radius", INDEX_BODY, "km", "equatorial (J2 reference) radius of a body", None, (0.0, None)),
-    ParamKind("body_elements", INDEX_BODY_ELEMENT, ELEMENT_UNITS,
-              "heliocentric conic element (a, e, i, raan, argp, M) of an EPHEM body"),
+    ParamKind(
+        "body_elements",
+        INDEX_BODY_ELEMENT,
+        ELEMENT_UNITS,
+        "heliocentric conic element (a, e, i, raan, argp, M) of an EPHEM body",
+    ),
     # per thrust arc
     ParamKind("arc_t_on", INDEX_ARC, "s", "arc start, s from the propagation epoch"),
     ParamKind("arc_t_off", INDEX_ARC, "s", "arc end, s from the propagation epoch"),

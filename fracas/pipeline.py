@@ -29,8 +29,16 @@ from fracas.status import RunStatus
 
 Stage = Callable[[str], None]
 
-__all__ = ["run", "propagate_deck", "load_team", "build_stm", "run_team", "reference_from_stm", "stm_product",
-           "default_output"]
+__all__ = [
+    "run",
+    "propagate_deck",
+    "load_team",
+    "build_stm",
+    "run_team",
+    "reference_from_stm",
+    "stm_product",
+    "default_output",
+]
 
 
 def _say(on_stage: Stage | None) -> Stage:
@@ -108,8 +116,9 @@ def trajectory_data(problem: Problem, traj, sens) -> TrajectoryData:
     )
 
 
-def propagate_deck(deck, output: str | Path | None = None, on_stage: Stage | None = None
-                   ) -> tuple[TrajectoryData, Path]:
+def propagate_deck(
+    deck, output: str | Path | None = None, on_stage: Stage | None = None
+) -> tuple[TrajectoryData, Path]:
     """Trajectory deck (path or TrajectoryDeck) -> build -> propagate -> trajectory file."""
     say = _say(on_stage)
     say("reading the deck")
@@ -142,7 +151,8 @@ def load_team(deck):
 def _reference_failed(case, ref) -> NumericalError:
     return NumericalError(
         f"{case.traj_deck.source_path}: the reference trajectory stopped before t = {ref.failed_at_s / DAY_S:.6g} d "
-        f"(status {ref.integrator_status}); the study's times must lie on the trajectory")
+        f"(status {ref.integrator_status}); the study's times must lie on the trajectory"
+    )
 
 
 def stm_product(case):
@@ -161,7 +171,8 @@ def stm_product(case):
     if status != RunStatus.OK:
         raise NumericalError(
             f"{case.traj_deck.source_path}: the reference trajectory stopped before t = {failed_at / DAY_S:.6g} d "
-            f"(status {int(traj.status)}); the study's times must lie on the trajectory")
+            f"(status {int(traj.status)}); the study's times must lie on the trajectory"
+        )
     sched = study.schedule
     ev = []
     for t in times:
@@ -229,8 +240,10 @@ def run_team(deck, stm: str | Path | None = None, output: str | Path | None = No
         stm_path, _ = build_stm(cfg, stm_path, on_stage, case=case)
     if stm_path is not None:
         if not stm_path.exists():
-            raise StmFileError(f"{stm_path}: no such STM file (build it with: fracas stm build "
-                               f"{cfg.source_path or 'DECK'} -o {stm_path})")
+            raise StmFileError(
+                f"{stm_path}: no such STM file (build it with: fracas stm build "
+                f"{cfg.source_path or 'DECK'} -o {stm_path})"
+            )
         say("reading the STM file")
         ref = reference_from_stm(study, stm_path)
     else:
@@ -245,19 +258,32 @@ def run_team(deck, stm: str | Path | None = None, output: str | Path | None = No
     for k, stats in res.prediction_status.items():
         for t_to, s in zip(study.schedule.predict_to_s[k], stats):
             if s:
-                raise NumericalError(f"{study.source}: prediction from {res.times_s[k] / DAY_S:.6g} d to "
-                                     f"{t_to / DAY_S:.6g} d: the integration stopped (status {int(s)})")
+                raise NumericalError(
+                    f"{study.source}: prediction from {res.times_s[k] / DAY_S:.6g} d to "
+                    f"{t_to / DAY_S:.6g} d: the integration stopped (status {int(s)})"
+                )
     t3 = time.perf_counter()
     res.timing.update({"setup_s": t1 - t0, "reference_s": t2 - t1, "analysis_s": t3 - t2})
     tdeck = case.traj_deck
     product = team_product(
-        res, reference_source=ref.source,
-        settings={"trajectory_deck": tdeck.source_path or "", "trajectory_hash": trajectory_hash(tdeck),
-                  "print": {"every": int(cfg.print.every), "process_noise": int(cfg.print.process_noise),
-                            "correlations": int(cfg.print.correlations)}},
-        provenance=provenance(cfg.source_text, study.source))
-    out = Path(output) if output is not None else (
-        cfg.resolve(cfg.output.results) if cfg.output.results else default_output(cfg.source_path))
+        res,
+        reference_source=ref.source,
+        settings={
+            "trajectory_deck": tdeck.source_path or "",
+            "trajectory_hash": trajectory_hash(tdeck),
+            "print": {
+                "every": int(cfg.print.every),
+                "process_noise": int(cfg.print.process_noise),
+                "correlations": int(cfg.print.correlations),
+            },
+        },
+        provenance=provenance(cfg.source_text, study.source),
+    )
+    out = (
+        Path(output)
+        if output is not None
+        else (cfg.resolve(cfg.output.results) if cfg.output.results else default_output(cfg.source_path))
+    )
     say("writing the results file")
     write_team_results(out, product)
     if cfg.punch is not None:

@@ -32,7 +32,6 @@ def _days(t: float) -> str:
     return f"{float(t) / DAY_S:.6f} d"
 
 
-
 @dataclass
 class ReferenceTrajectory:
     """A reference trajectory with its transition matrices: the contents of an STM file
@@ -92,7 +91,6 @@ class ReferenceTrajectory:
         return self.source_path or (f"STM data of {self.deck_path}" if self.deck_path else "STM data")
 
 
-
 def _nearest_message(where: str, t_file: np.ndarray, events: Sequence[str], t_req: float) -> str:
     k = int(np.argmin(np.abs(t_file - t_req)))
     return (
@@ -111,7 +109,6 @@ def _indices(t_file: np.ndarray, events: Sequence[str], req: np.ndarray, where: 
         j = int(np.nonzero(~ok)[0][0])
         raise StmFileError(_nearest_message(where, t_file, events, float(req[j])))
     return idx
-
 
 
 def time_indices(data: ReferenceTrajectory, times_s: Sequence[float]) -> np.ndarray:
@@ -180,8 +177,6 @@ def chain(data: ReferenceTrajectory, times_s: Sequence[float]) -> tuple[np.ndarr
 
 
 # --------------------------------------------------------------------------- describe
-
-
 
 
 # --------------------------------------------------------------------------- TEAM

@@ -50,9 +50,7 @@ def calendar_to_et(iso: str) -> float:
     """
     match = _ISO.match(iso) if isinstance(iso, str) else None
     if match is None:
-        raise ConfigError(
-            f"date {iso!r}: expected ISO 'YYYY-MM-DDTHH:MM:SS[.fff]' (TDB)"
-        )
+        raise ConfigError(f"date {iso!r}: expected ISO 'YYYY-MM-DDTHH:MM:SS[.fff]' (TDB)")
     year, month, day = (int(g) for g in match.group(1, 2, 3))
     hour = int(match.group(4) or 0)
     minute = int(match.group(5) or 0)
@@ -90,7 +88,6 @@ def et_to_calendar(et: float, digits: int = 3) -> str:
     if digits > 0:
         text += f".{sub:0{digits}d}"
     return text
-
 
 
 def epoch_to_et(value: str | float) -> float:

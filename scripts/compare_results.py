@@ -46,8 +46,15 @@ def run(out: Path) -> None:
         _fracas("propagate", f"namelists/{deck}.toml", "-o", str(out / f"{deck}.h5"), "--json")
     _fracas("run", "namelists/earth_mars_team.toml", "-o", str(out / "earth_mars_team.h5"), "--quiet")
     _fracas("stm", "build", "namelists/mercury_approach_team.toml", "-o", str(out / "mercury_approach_stm.h5"))
-    _fracas("run", "namelists/mercury_approach_team.toml", "--stm", str(out / "mercury_approach_stm.h5"),
-            "-o", str(out / "mercury_approach_team.h5"), "--quiet")
+    _fracas(
+        "run",
+        "namelists/mercury_approach_team.toml",
+        "--stm",
+        str(out / "mercury_approach_stm.h5"),
+        "-o",
+        str(out / "mercury_approach_team.h5"),
+        "--quiet",
+    )
     _fracas("run", "tests/data/team_small.toml", "-o", str(out / "team_small.h5"), "--quiet")
     # the same small study with PDOT time updates (a deck variant beside the original)
     src = (ROOT / "tests/data/team_small.toml").read_text(encoding="utf-8")
@@ -80,8 +87,10 @@ def _text(v, folder: Path) -> np.ndarray:
     """String values with the run's own output folder written as <out> (the STM file's path)."""
     a = np.asarray(v)
     if a.dtype.kind in "OSU":
-        f = np.vectorize(lambda x: (x.decode() if isinstance(x, bytes) else str(x)).replace(str(folder.resolve()), "<out>"),
-                         otypes=[object])
+        f = np.vectorize(
+            lambda x: (x.decode() if isinstance(x, bytes) else str(x)).replace(str(folder.resolve()), "<out>"),
+            otypes=[object],
+        )
         return f(a) if a.size else a
     return a
 
@@ -121,8 +130,10 @@ def compare_file(a: Path, b: Path, rtol: float) -> list[str]:
         worst = max(worst, d)
         if d > rtol:
             bad.append(f"{k}: max |diff| / max |value| = {d:.3e} > {rtol:g}")
-    print(f"{a.name:28s} {len(ia):4d} items (+{len(added)} new)  largest relative difference {worst:.2e}  "
-          f"{'OK' if not bad else f'{len(bad)} DIFFER'}")
+    print(
+        f"{a.name:28s} {len(ia):4d} items (+{len(added)} new)  largest relative difference {worst:.2e}  "
+        f"{'OK' if not bad else f'{len(bad)} DIFFER'}"
+    )
     if added and VERBOSE:
         print("    new: " + ", ".join(added))
     return bad

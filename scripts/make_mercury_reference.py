@@ -9,15 +9,15 @@ Mercury's neighbourhood).  Prints the initial state of the forward deck.  Run:
     .venv/bin/python scripts/make_mercury_reference.py
 """
 
-from fracas import _jax  # noqa: F401
 import numpy as np
 
+from fracas import _jax  # noqa: F401
 from fracas.build import build_propagation
 from fracas.config.trajectory import parse_deck
 from fracas.constants import DAY_S
 from fracas.dynamics.ephemeris import body_states, build_ephemeris
-from fracas.integrate.propagate import propagate
 from fracas.dynamics.parameters import set_values
+from fracas.integrate.propagate import propagate
 
 ARRIVAL = "1985-06-20T00:00:00"
 DECK = f"""

@@ -24,8 +24,16 @@ N_ARCS, N_IMPULSES = 2, 2
 def _model():
     from fracas.dynamics.model import ForceModel, IntegratorSettings
 
-    return ForceModel(bodies=BODIES, primary=0, third_bodies=(1, 2), thrust=True, n_arcs=N_ARCS,
-                      n_impulses=N_IMPULSES, conic_bodies=(2,), integrator=IntegratorSettings(c_nom=0.05))
+    return ForceModel(
+        bodies=BODIES,
+        primary=0,
+        third_bodies=(1, 2),
+        thrust=True,
+        n_arcs=N_ARCS,
+        n_impulses=N_IMPULSES,
+        conic_bodies=(2,),
+        integrator=IntegratorSettings(c_nom=0.05),
+    )
 
 
 def _labels(kind: params.ParamKind) -> list[str]:

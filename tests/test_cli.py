@@ -31,7 +31,11 @@ def fracas(*args: str, cwd: Path | None = None, timeout: float = 600) -> subproc
     """Run the command line in a fresh interpreter (``python -m fracas.cli``, = the ``fracas`` script)."""
     return subprocess.run(
         [sys.executable, "-m", "fracas.cli", *args],
-        cwd=cwd or REPO, env=_env(), capture_output=True, text=True, timeout=timeout,
+        cwd=cwd or REPO,
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=timeout,
     )
 
 

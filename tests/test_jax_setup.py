@@ -30,8 +30,15 @@ def _run(code: str, **env_set) -> dict:
     env = {k: v for k, v in os.environ.items() if k not in ("FRACAS_HOST_DEVICES", "XLA_FLAGS")}
     env["JAX_PLATFORMS"] = "cpu"
     env.update(env_set)
-    out = subprocess.run([sys.executable, "-c", textwrap.dedent(code) + _REPORT], check=False, cwd=ROOT, env=env,
-                         capture_output=True, text=True, timeout=300)
+    out = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code) + _REPORT],
+        check=False,
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert out.returncode == 0, out.stdout + out.stderr
     res = {}
     for line in out.stdout.splitlines():
@@ -118,8 +125,15 @@ def test_worker_setup_keeps_one_device_even_when_the_environment_asks_for_more()
 def test_bad_environment_variable_is_a_clear_error():
     env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS",)}
     env.update(JAX_PLATFORMS="cpu", FRACAS_HOST_DEVICES="many")
-    out = subprocess.run([sys.executable, "-c", "import fracas._jax"], check=False, cwd=ROOT, env=env,
-                         capture_output=True, text=True, timeout=300)
+    out = subprocess.run(
+        [sys.executable, "-c", "import fracas._jax"],
+        check=False,
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert out.returncode != 0 and "FRACAS_HOST_DEVICES" in out.stderr and "'many'" in out.stderr
 
 

@@ -8,8 +8,9 @@ still recognised by their ``[ertraj]`` table.
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
+
+import tomllib
 
 from fracas.errors import DeckError
 
@@ -32,8 +33,9 @@ def deck_mode(text: str, source: str = "<deck>") -> str:
     if mode in MODES:
         return mode
     if mode in PLANNED_MODES:
-        raise DeckError(f'{source}: mode = "{mode}": not available in this release (expected one of: '
-                        f'{", ".join(MODES)})')
+        raise DeckError(
+            f'{source}: mode = "{mode}": not available in this release (expected one of: {", ".join(MODES)})'
+        )
     raise DeckError(f"{source}: mode = {mode!r}: unknown mode (expected one of: {', '.join(MODES)})")
 
 

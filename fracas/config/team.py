@@ -40,10 +40,10 @@ consider (u), measurement labels (station locations, biases) are measurement con
 from __future__ import annotations
 
 import re
-import tomllib
 from pathlib import Path
 from typing import Annotated, Literal
 
+import tomllib
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from fracas.config.trajectory import (
@@ -135,7 +135,7 @@ class APriori(_Section):
 
     def sigmas(self) -> tuple[list[float], list[float]]:
         """(position sigma km (3), velocity sigma km/s (3)); an RSS value is split equally."""
-        s3 = 3.0 ** 0.5
+        s3 = 3.0**0.5
         pos = self.position_sigma_km or [self.position_rss_km / s3] * 3
         vel = self.velocity_sigma_km_s or [self.velocity_rss_km_s / s3] * 3
         return list(pos), list(vel)
@@ -182,7 +182,9 @@ class Tracking(_Section):
     def _consistent(self) -> Tracking:
         need = N_STATIONS[self.type]
         if len(self.stations) != need:
-            raise FieldProblem("stations", self.stations, f'type "{self.type}" needs {need} station{"s" if need != 1 else ""}')
+            raise FieldProblem(
+                "stations", self.stations, f'type "{self.type}" needs {need} station{"s" if need != 1 else ""}'
+            )
         if need == 2 and self.stations[0] == self.stations[1]:
             raise FieldProblem("stations", self.stations, "the two stations must differ")
         if self.stop_days < self.start_days:
@@ -282,7 +284,6 @@ class TeamDeck(SourcedDeck):
     gencov: GenCov | None = None
     output: OutputSection = OutputSection()
 
-
     def resolve(self, rel: str) -> Path:
         """A path named in the deck, relative to the deck's folder."""
         p = Path(rel)
@@ -302,22 +303,34 @@ class TeamDeck(SourcedDeck):
         if self.gencov is not None:
             for k, g in enumerate(self.gencov.parameter):
                 if g.label not in seen and g.role != "ignore":
-                    raise FieldProblem(("gencov", "parameter", k, "label"), g.label,
-                                       'is not a study parameter; add role = "ignore" to make it an ignore parameter')
+                    raise FieldProblem(
+                        ("gencov", "parameter", k, "label"),
+                        g.label,
+                        'is not a study parameter; add role = "ignore" to make it an ignore parameter',
+                    )
                 if g.label in seen and g.role == "ignore":
-                    raise FieldProblem(("gencov", "parameter", k, "role"), "ignore",
-                                       f"{g.label} is already a study parameter (parameter[{seen[g.label]}])")
+                    raise FieldProblem(
+                        ("gencov", "parameter", k, "role"),
+                        "ignore",
+                        f"{g.label} is already a study parameter (parameter[{seen[g.label]}])",
+                    )
         names = [s.name for s in self.station]
         if len(set(names)) != len(names):
             raise FieldProblem("station", names, "station names must be unique")
         builtin = {"goldstone", "madrid", "canberra"}
         if len(builtin | set(names)) > MAX_STATIONS:
-            raise FieldProblem("station", names, f"at most {MAX_STATIONS} stations in all (including the 3 DSN defaults)")
+            raise FieldProblem(
+                "station", names, f"at most {MAX_STATIONS} stations in all (including the 3 DSN defaults)"
+            )
         known = builtin | set(names)
         for k, t in enumerate(self.tracking):
             for j, s in enumerate(t.stations):
                 if s not in known:
-                    raise FieldProblem(("tracking", k, "stations", j), s, f"unknown station (expected one of: {', '.join(sorted(known))})")
+                    raise FieldProblem(
+                        ("tracking", k, "stations", j),
+                        s,
+                        f"unknown station (expected one of: {', '.join(sorted(known))})",
+                    )
         return self
 
 

@@ -44,12 +44,12 @@ import hashlib
 import json
 import math
 import re
-import tomllib
 import types
 import typing
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+import tomllib
 from pydantic import (
     AfterValidator,
     BaseModel,
@@ -116,14 +116,12 @@ def _iso_value(v: Any) -> str:
     if isinstance(v, _dt.date):
         return _dt.datetime(v.year, v.month, v.day).isoformat()
     if not isinstance(v, str):
-        raise ValueError("must be an ISO calendar date string such as \"2030-01-01T00:00:00\" (TDB)")
+        raise ValueError('must be an ISO calendar date string such as "2030-01-01T00:00:00" (TDB)')
     text = v.strip()
     try:
         calendar_to_et(text)  # the one calendar conversion (fracas.timescales)
     except ConfigError:
-        raise ValueError(
-            "must be an ISO calendar date such as \"2030-01-01T00:00:00\" (TDB)"
-        ) from None
+        raise ValueError('must be an ISO calendar date such as "2030-01-01T00:00:00" (TDB)') from None
     return re.sub(r"\s*TDB$", "", text, flags=re.IGNORECASE)
 
 
@@ -172,9 +170,7 @@ _LABEL_RE = re.compile(r"^[a-z][a-z0-9_]*(\[[A-Za-z0-9_]+(,[A-Za-z0-9_]+)*\])?$"
 
 def _check_label(v: str) -> str:
     if not _LABEL_RE.match(v):
-        raise ValueError(
-            'must be a parameter label such as "mu[sun]", "thrust_scale" or "arc_thrust_scale[0]"'
-        )
+        raise ValueError('must be a parameter label such as "mu[sun]", "thrust_scale" or "arc_thrust_scale[0]"')
     return v
 
 
@@ -242,7 +238,8 @@ class Elements(_Section):
             nu = (self.true_anomaly_deg + 180.0) % 360.0 - 180.0
             if abs(nu) >= limit:
                 raise FieldProblem(
-                    "true_anomaly_deg", self.true_anomaly_deg,
+                    "true_anomaly_deg",
+                    self.true_anomaly_deg,
                     f"must satisfy |nu| < {limit:.6g} deg (the hyperbola's asymptote) for e = {self.e:g}",
                 )
         return self
@@ -358,13 +355,13 @@ def _check_body_keys(v: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-
 def _no_repeats(v: list[str]) -> list[str]:
     """A list field's entries must be distinct (names the index of the repeat)."""
     for k, item in enumerate(v):
         if item in v[:k]:
             raise FieldProblem((k,), item, "listed twice")
     return v
+
 
 class Forces(_Section):
     third_bodies: list[BodyName] = []
@@ -451,7 +448,6 @@ class TrajectoryDeck(SourcedDeck):
     stop: Stop
     output: Output = Output()
 
-
     @property
     def primary(self) -> str:
         return self.initial_state.centre
@@ -472,33 +468,54 @@ class TrajectoryDeck(SourcedDeck):
         f = self.forces
         if centre in f.third_bodies:
             k = f.third_bodies.index(centre)
-            raise FieldProblem(("forces", "third_bodies", k), centre, f"is the primary (initial_state.centre = \"{centre}\"); it cannot also be a third body")
+            raise FieldProblem(
+                ("forces", "third_bodies", k),
+                centre,
+                f'is the primary (initial_state.centre = "{centre}"); it cannot also be a third body',
+            )
         if self.thrust_arc and self.propulsion is None:
             raise FieldProblem(("propulsion",), None, "a [propulsion] section is required when thrust arcs are given")
         prev = None
         for k, arc in enumerate(self.thrust_arc):
             if prev is not None and arc.start_days < prev.stop_days:
                 raise FieldProblem(
-                    ("thrust_arc", k, "start_days"), arc.start_days,
+                    ("thrust_arc", k, "start_days"),
+                    arc.start_days,
                     f"must be >= thrust_arc[{k - 1}].stop_days = {prev.stop_days:g} (arcs ordered, not overlapping)",
                 )
             if arc.stop_days > dur * (1 + 1e-12):
-                raise FieldProblem(("thrust_arc", k, "stop_days"), arc.stop_days, f"must be <= the final time, {dur:g} days")
+                raise FieldProblem(
+                    ("thrust_arc", k, "stop_days"), arc.stop_days, f"must be <= the final time, {dur:g} days"
+                )
             prev = arc
         for k, imp in enumerate(self.impulse):
             if imp.time_days > dur * (1 + 1e-12):
-                raise FieldProblem(("impulse", k, "time_days"), imp.time_days, f"must be <= the final time, {dur:g} days")
+                raise FieldProblem(
+                    ("impulse", k, "time_days"), imp.time_days, f"must be <= the final time, {dur:g} days"
+                )
             if k > 0 and imp.time_days < self.impulse[k - 1].time_days:
-                raise FieldProblem(("impulse", k, "time_days"), imp.time_days, f"must be >= impulse[{k - 1}].time_days (impulses in time order)")
+                raise FieldProblem(
+                    ("impulse", k, "time_days"),
+                    imp.time_days,
+                    f"must be >= impulse[{k - 1}].time_days (impulses in time order)",
+                )
             if imp.isp_s != self.impulse[0].isp_s:
-                raise FieldProblem(("impulse", k, "isp_s"), imp.isp_s, f"must equal impulse[0].isp_s = {self.impulse[0].isp_s:g} (one impulsive engine)")
+                raise FieldProblem(
+                    ("impulse", k, "isp_s"),
+                    imp.isp_s,
+                    f"must equal impulse[0].isp_s = {self.impulse[0].isp_s:g} (one impulsive engine)",
+                )
         if f.srp and self.spacecraft.area_m2 <= 0.0:
             raise FieldProblem(("spacecraft", "area_m2"), self.spacecraft.area_m2, "must be > 0 when forces.srp = true")
         for name in f.conic_bodies:
             if name == "sun":
-                raise FieldProblem(("forces", "conic_bodies", name), name, "the Sun cannot have heliocentric conic elements")
+                raise FieldProblem(
+                    ("forces", "conic_bodies", name), name, "the Sun cannot have heliocentric conic elements"
+                )
             if name != centre and name not in f.third_bodies and name != self.stop.body:
-                raise FieldProblem(("forces", "conic_bodies", name), name, "must be the centre, a third body or the stop body")
+                raise FieldProblem(
+                    ("forces", "conic_bodies", name), name, "must be the centre, a third body or the stop body"
+                )
         for k, t in enumerate(self.output.times_days):
             if t > dur * (1 + 1e-12):
                 raise FieldProblem(("output", "times_days", k), t, f"must be <= the final time, {dur:g} days")
@@ -606,7 +623,7 @@ def _expected(err: dict) -> str:
     msg = err["msg"]
     for prefix in ("Value error, ", "Assertion failed, "):
         if msg.startswith(prefix):
-            msg = msg[len(prefix):]
+            msg = msg[len(prefix) :]
     return msg.replace("Input should be", "must be")
 
 
@@ -694,6 +711,10 @@ def trajectory_hash(deck) -> str:
     ``mode`` line does not count (it says what to do with the trajectory, not what it is).
     """
     body = json.dumps(
-        deck.model_dump(mode="json", exclude={"mode"}), sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False
+        deck.model_dump(mode="json", exclude={"mode"}),
+        sort_keys=True,
+        separators=(",", ":"),
+        ensure_ascii=True,
+        allow_nan=False,
     )
     return hashlib.sha256((_HASH_PREFIX + body).encode("utf-8")).hexdigest()

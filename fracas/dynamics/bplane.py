@@ -22,12 +22,12 @@ Conventions (standard, e.g. Kizner 1961; Vallado sec. 12.7):
 
 from __future__ import annotations
 
-from fracas import _jax  # noqa: F401  (float64 + compilation cache before any array)
-
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+
+from fracas import _jax  # noqa: F401  (float64 + compilation cache before any array)
 
 __all__ = ["BPlane", "b_plane"]
 

@@ -23,12 +23,13 @@ from __future__ import annotations
 
 import functools
 
-from fracas import _jax  # noqa: F401  (float64 + compilation cache before any array)
-
 import jax
 import jax.numpy as jnp
 
-from fracas import constants
+from fracas import (
+    _jax,  # noqa: F401  (float64 + compilation cache before any array)
+    constants,
+)
 
 __all__ = [
     "cartesian_to_elements",
@@ -106,9 +107,7 @@ def _kepler_elliptic_iterate(M, e):
     is the good one for small |M| at e near 1, where Danby's starter is poor.
     """
     Ma = jnp.abs(M)
-    E0 = jnp.minimum(
-        jnp.minimum(Ma + 0.85 * e, jnp.cbrt(6.0 * Ma / jnp.maximum(e, 1e-300))), jnp.pi
-    )
+    E0 = jnp.minimum(jnp.minimum(Ma + 0.85 * e, jnp.cbrt(6.0 * Ma / jnp.maximum(e, 1e-300))), jnp.pi)
 
     def body(_, E):
         s, c = e * jnp.sin(E), e * jnp.cos(E)
@@ -215,9 +214,7 @@ def mean_to_true_anomaly(M, e):
     X = solve_kepler(M, e)
     e_e = jnp.where(ell, e, 0.5)
     E = jnp.where(ell, X, 0.0)
-    nu_e = 2.0 * jnp.arctan2(
-        jnp.sqrt(1.0 + e_e) * jnp.sin(0.5 * E), jnp.sqrt(1.0 - e_e) * jnp.cos(0.5 * E)
-    )
+    nu_e = 2.0 * jnp.arctan2(jnp.sqrt(1.0 + e_e) * jnp.sin(0.5 * E), jnp.sqrt(1.0 - e_e) * jnp.cos(0.5 * E))
     e_h = jnp.where(ell, 2.0, e)
     H = jnp.where(ell, 0.0, X)
     nu_h = 2.0 * jnp.arctan2(jnp.sqrt(e_h + 1.0) * jnp.tanh(0.5 * H), jnp.sqrt(e_h - 1.0))
@@ -426,9 +423,7 @@ def cartesian_to_spherical(r, v):
     vmag = _safe_norm(v)
     gamma = jnp.arctan2(vu, vh)
     radial = vh == 0.0
-    sigma = jnp.where(
-        radial, 0.0, _wrap_2pi(jnp.arctan2(jnp.where(radial, 0.0, ve), jnp.where(radial, 1.0, vn)))
-    )
+    sigma = jnp.where(radial, 0.0, _wrap_2pi(jnp.arctan2(jnp.where(radial, 0.0, ve), jnp.where(radial, 1.0, vn))))
     return rmag, lat, lon, vmag, gamma, sigma
 
 

@@ -43,17 +43,20 @@ from __future__ import annotations
 import functools
 import math
 import os
+from collections.abc import Sequence
 from fractions import Fraction
-from typing import NamedTuple, Sequence
+from typing import NamedTuple
 
-import numpy as np
-
-from fracas import _jax  # noqa: F401  (float64, compilation cache)
-from fracas import constants
-from fracas.errors import ConfigError
-from fracas.timescales import calendar_to_et, et_to_calendar  # noqa: F401  (re-exported)
 import jax
 import jax.numpy as jnp
+import numpy as np
+
+from fracas import (
+    _jax,  # noqa: F401  (float64, compilation cache)
+    constants,
+)
+from fracas.errors import ConfigError
+from fracas.timescales import calendar_to_et, et_to_calendar  # noqa: F401  (re-exported)
 
 # --- coverage ------------------------------------------------------------------------
 # Published DE421 span (de421.bsp / JPL header): JD 2414864.5 .. 2471184.5 TDB
@@ -123,7 +126,7 @@ def _de421():
     return Ephemeris(de421)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _series(name: str) -> np.ndarray:
     """One raw DE421 series, memory-mapped (records, 3, n_coef); km, SSB (moon: geocentric)."""
     eph = _de421()
@@ -165,7 +168,7 @@ def _components(body: str) -> list[tuple[str, Fraction | float]]:
 
 
 # --- exact Chebyshev re-expansion on a sub-interval ---------------------------------
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _cheb_power(n: int) -> tuple[tuple[int, ...], ...]:
     """Power-basis coefficients of T_0 .. T_{n-1} (integers)."""
     t = [[1], [0, 1]]
@@ -179,7 +182,7 @@ def _cheb_power(n: int) -> tuple[tuple[int, ...], ...]:
     return tuple(tuple(p) for p in t[:n])
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _subinterval_matrix(n: int, ratio: int, sub: int) -> np.ndarray:
     """M (n, n) with T_k(a x + b) = sum_j M[j, k] T_j(x) for sub-interval ``sub`` of ``ratio``.
 
@@ -264,9 +267,7 @@ def build_ephemeris(
     names = [str(b).strip().lower() for b in bodies]
     for given, name in zip(bodies, names):
         if name not in BODY_NAMES:
-            raise ConfigError(
-                f"ephemeris: unknown body {given!r}; DE421 provides {', '.join(BODY_NAMES)}"
-            )
+            raise ConfigError(f"ephemeris: unknown body {given!r}; DE421 provides {', '.join(BODY_NAMES)}")
     if not names:
         raise ConfigError("ephemeris: no bodies requested")
     t0, t1, margin = float(et_start_s), float(et_end_s), float(margin_s)

@@ -5,10 +5,12 @@ Every function returns km/s^2 and is written for one position; batch with ``jax.
 
 from __future__ import annotations
 
-from fracas import _jax  # noqa: F401
 import jax.numpy as jnp
 
-from fracas import constants
+from fracas import (
+    _jax,  # noqa: F401
+    constants,
+)
 
 
 def potter_f(q):

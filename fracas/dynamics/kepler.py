@@ -21,9 +21,10 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from fracas import _jax  # noqa: F401  (float64, compilation cache)
 import jax
 import jax.numpy as jnp
+
+from fracas import _jax  # noqa: F401  (float64, compilation cache)
 
 _SERIES_XI = 0.1  # |xi| below which C, S come from their Taylor series (no cancellation)
 _MAX_ITER = 60
@@ -104,9 +105,7 @@ def initial_guess(r0, sigma0, alpha, sqrt_mu, tau):
     x_ell = sqrt_mu * tau * alpha
     a = 1.0 / jnp.where(alpha < 0, alpha, -1.0)  # negative semi-major axis (guarded)
     sgn = jnp.where(tau >= 0, 1.0, -1.0)
-    arg = (-2.0 * sqrt_mu**2 * alpha * tau) / (
-        sigma0 * sqrt_mu + sgn * jnp.sqrt(sqrt_mu**2 * -a) * (1.0 - r0 * alpha)
-    )
+    arg = (-2.0 * sqrt_mu**2 * alpha * tau) / (sigma0 * sqrt_mu + sgn * jnp.sqrt(sqrt_mu**2 * -a) * (1.0 - r0 * alpha))
     arg = jnp.where(arg > 1e-300, arg, 1.0)
     x_hyp = sgn * jnp.sqrt(-a) * jnp.log(arg)
     x_par = sqrt_mu * tau / r0
@@ -137,9 +136,7 @@ def solve_universal_x(r0, sigma0, alpha, sqrt_mu, tau, x_start, rtol=1e-15):
         dx = -n * fx / jnp.where(denom == 0.0, 1.0, denom)
         return x + dx, dx, k + 1
 
-    x, _, k = jax.lax.while_loop(
-        cond, body, (x_start, jnp.ones_like(x_start), jnp.zeros((), jnp.int32))
-    )
+    x, _, k = jax.lax.while_loop(cond, body, (x_start, jnp.ones_like(x_start), jnp.zeros((), jnp.int32)))
     return x, k
 
 
@@ -178,9 +175,7 @@ def kepler_fg(
         x_start = initial_guess(r0, sigma0, alpha, sqrt_mu, tau)
     sg = jax.lax.stop_gradient
     if n_newton is None:
-        x_star, _ = solve_universal_x(
-            sg(r0), sg(sigma0), sg(alpha), sg(sqrt_mu), sg(tau), sg(x_start)
-        )
+        x_star, _ = solve_universal_x(sg(r0), sg(sigma0), sg(alpha), sg(sqrt_mu), sg(tau), sg(x_start))
     else:
         x_star = sg(x_start)
         a_r0, a_s0, a_al, a_sm, a_tau = sg(r0), sg(sigma0), sg(alpha), sg(sqrt_mu), sg(tau)

@@ -144,42 +144,40 @@ def default_params(model: ForceModel, **overrides) -> Params:
     """Params with catalogue values for ``model.bodies`` and no thrust; keyword overrides."""
     nb, na, ni = len(model.bodies), model.n_arcs, model.n_impulses
     cat = [constants.BODIES[b] for b in model.bodies]
-    parent = [
-        float(model.bodies.index(b.parent)) if b.parent in model.bodies else -1.0 for b in cat
-    ]
+    parent = [float(model.bodies.index(b.parent)) if b.parent in model.bodies else -1.0 for b in cat]
     f = np.float64
-    p = dict(
-        mu=np.array([b.mu_km3_s2 for b in cat], f),
-        j2=np.array([b.j2 for b in cat], f),
-        radius=np.array([b.radius_km for b in cat], f),
-        pole=np.array([constants.pole_unit_vector(b.name) for b in cat], f).reshape(nb, 3),
-        soi_radius=np.array([constants.soi_radius_km(b.name) for b in cat], f),
-        parent=np.array(parent, f),
-        area_m2=f(0.0),
-        cr=f(1.0),
-        power_kw=f(0.0),
-        power_decay_s=f(np.inf),
-        efficiency=f(1.0),
-        exhaust_velocity_km_s=f(30.0),
-        thrust_scale=f(1.0),
-        bias_in_rad=f(0.0),
-        bias_out_rad=f(0.0),
-        arc_t_on=np.zeros(na, f),
-        arc_t_off=np.zeros(na, f),
-        arc_alpha=np.zeros(na, f),
-        arc_beta=np.zeros(na, f),
-        arc_throttle=np.ones(na, f),
-        arc_frame=np.zeros(na, f),
-        arc_thrust_scale=np.ones(na, f),
-        arc_bias_in_rad=np.zeros(na, f),
-        arc_bias_out_rad=np.zeros(na, f),
-        impulse_t=np.zeros(ni, f),
-        impulse_dv=np.zeros((ni, 3), f),
-        impulse_frame=np.zeros(ni, f),
-        impulse_isp_s=f(300.0),
-        body_elements=np.zeros((nb, 6), f),
-        body_elements_et=np.zeros(nb, f),
-    )
+    p = {
+        "mu": np.array([b.mu_km3_s2 for b in cat], f),
+        "j2": np.array([b.j2 for b in cat], f),
+        "radius": np.array([b.radius_km for b in cat], f),
+        "pole": np.array([constants.pole_unit_vector(b.name) for b in cat], f).reshape(nb, 3),
+        "soi_radius": np.array([constants.soi_radius_km(b.name) for b in cat], f),
+        "parent": np.array(parent, f),
+        "area_m2": f(0.0),
+        "cr": f(1.0),
+        "power_kw": f(0.0),
+        "power_decay_s": f(np.inf),
+        "efficiency": f(1.0),
+        "exhaust_velocity_km_s": f(30.0),
+        "thrust_scale": f(1.0),
+        "bias_in_rad": f(0.0),
+        "bias_out_rad": f(0.0),
+        "arc_t_on": np.zeros(na, f),
+        "arc_t_off": np.zeros(na, f),
+        "arc_alpha": np.zeros(na, f),
+        "arc_beta": np.zeros(na, f),
+        "arc_throttle": np.ones(na, f),
+        "arc_frame": np.zeros(na, f),
+        "arc_thrust_scale": np.ones(na, f),
+        "arc_bias_in_rad": np.zeros(na, f),
+        "arc_bias_out_rad": np.zeros(na, f),
+        "impulse_t": np.zeros(ni, f),
+        "impulse_dv": np.zeros((ni, 3), f),
+        "impulse_frame": np.zeros(ni, f),
+        "impulse_isp_s": f(300.0),
+        "body_elements": np.zeros((nb, 6), f),
+        "body_elements_et": np.zeros(nb, f),
+    }
     for k, v in overrides.items():
         if k not in p:
             raise KeyError(f"unknown parameter {k!r}; known: {sorted(p)}")

@@ -6,11 +6,11 @@ and replace the labelled entries of a ``Params`` pytree.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
-from fracas import _jax  # noqa: F401
 import jax.numpy as jnp
 
+from fracas import _jax  # noqa: F401
 from fracas.dynamics.model import ForceModel, Params
 from fracas.params import parse_label
 

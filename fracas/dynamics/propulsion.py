@@ -15,10 +15,12 @@ h.  Inertially fixed pointing uses alpha = right ascension, beta = declination (
 
 from __future__ import annotations
 
-from fracas import _jax  # noqa: F401
 import jax.numpy as jnp
 
-from fracas import constants
+from fracas import (
+    _jax,  # noqa: F401
+    constants,
+)
 
 
 def power_kw(p0_kw, r_from_sun_km, t_s, decay_s, solar: bool):

@@ -38,10 +38,11 @@ from __future__ import annotations
 from functools import partial
 from typing import NamedTuple
 
-from fracas import _jax  # noqa: F401  (float64 before any array exists)
 import jax
 import jax.numpy as jnp
 from jax.scipy.linalg import cho_factor, cho_solve
+
+from fracas import _jax  # noqa: F401  (float64 before any array exists)
 
 __all__ = [
     "Layout",
@@ -137,9 +138,7 @@ def augmented_transition(phi: jax.Array, theta: jax.Array, layout: Layout) -> ja
     v0, v1 = layout.v.start - nx, layout.v.stop - nx
     theta = theta.at[:, v0:v1].set(0.0)
     top = jnp.concatenate([jnp.asarray(phi, dtype=jnp.float64), theta], axis=1)
-    bottom = jnp.concatenate(
-        [jnp.zeros((n - nx, nx), dtype=jnp.float64), jnp.eye(n - nx, dtype=jnp.float64)], axis=1
-    )
+    bottom = jnp.concatenate([jnp.zeros((n - nx, nx), dtype=jnp.float64), jnp.eye(n - nx, dtype=jnp.float64)], axis=1)
     return jnp.concatenate([top, bottom], axis=0)
 
 
@@ -218,9 +217,7 @@ def wls_time_update(P_nc: jax.Array, phi_aug: jax.Array, layout: Layout) -> jax.
 
 
 @partial(jax.jit, static_argnames=("layout",))
-def wls_gain(
-    P_nc: jax.Array, H: jax.Array, R: jax.Array, layout: Layout
-) -> tuple[jax.Array, jax.Array]:
+def wls_gain(P_nc: jax.Array, H: jax.Array, R: jax.Array, layout: Layout) -> tuple[jax.Array, jax.Array]:
     """Sequential weighted-least-squares gain and non-consider update (FRACAS WLSGAN eqs. 4-11).
 
     A, B = P_nc [H_x H_s]ᵀ (eqs. 4-5), J = H_est A + R (eq. 6), K_x, K_s = A J⁻¹, B J⁻¹

@@ -39,9 +39,10 @@ h in xdot units per unit of eta).  Pure jnp; every function is jit-able.
 
 from __future__ import annotations
 
-from fracas import _jax  # noqa: F401
 import jax
 import jax.numpy as jnp
+
+from fracas import _jax  # noqa: F401
 
 __all__ = [
     "covariance_derivative",

@@ -23,12 +23,12 @@ from __future__ import annotations
 
 from functools import partial
 
-from fracas import _jax  # noqa: F401  (float64 before any array exists)
 import jax
 import jax.numpy as jnp
 from jax import lax
 from jax.scipy.linalg import solve_triangular
 
+from fracas import _jax  # noqa: F401  (float64 before any array exists)
 from fracas.filters.covariance import Layout
 
 __all__ = [

@@ -36,14 +36,15 @@ batch as their leading axis: a :class:`~fracas.integrate.propagate.Trajectory` (
 from __future__ import annotations
 
 import functools
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
-from fracas import _jax  # noqa: F401  (float64, compilation cache)
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.sharding import Mesh, PartitionSpec as P
+from jax.sharding import Mesh
+from jax.sharding import PartitionSpec as P
 
+from fracas import _jax  # noqa: F401  (float64, compilation cache)
 from fracas.dynamics.model import ForceModel, Params
 from fracas.integrate.propagate import Sensitivities, Trajectory, propagate, propagate_with_sensitivities
 

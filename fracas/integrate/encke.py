@@ -29,11 +29,13 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from fracas import _jax  # noqa: F401
 import jax
 import jax.numpy as jnp
 
-from fracas import constants
+from fracas import (
+    _jax,  # noqa: F401
+    constants,
+)
 from fracas.dynamics import forces, propulsion
 from fracas.dynamics.kepler import kepler_fg
 from fracas.dynamics.model import (
@@ -147,9 +149,7 @@ def perturbation(model: ForceModel, params: Params, t, r, v, primary, bodies_pos
     force = jnp.zeros(3)
     mdot = jnp.zeros(())
     if model.j2:
-        a = a + forces.j2_accel(
-            r, params.mu[primary], params.j2[primary], params.radius[primary], params.pole[primary]
-        )
+        a = a + forces.j2_accel(r, params.mu[primary], params.j2[primary], params.radius[primary], params.pole[primary])
     rp = bodies_pos[primary]
     for b in acting_third_bodies(model):
         rho = bodies_pos[b] - rp
@@ -171,9 +171,7 @@ def perturbation(model: ForceModel, params: Params, t, r, v, primary, bodies_pos
             params.power_decay_s,
             solar=model.power == "solar",
         )
-        tmag = ctl.thrust_factor * propulsion.thrust_magnitude(
-            p_kw, params.efficiency, params.exhaust_velocity_km_s
-        )
+        tmag = ctl.thrust_factor * propulsion.thrust_magnitude(p_kw, params.efficiency, params.exhaust_velocity_km_s)
         u = propulsion.thrust_direction(r, v, ctl.alpha, ctl.beta, ctl.inertial)
         force = force + tmag * u
         mdot = -tmag / params.exhaust_velocity_km_s
@@ -233,9 +231,7 @@ def event_functions(model: ForceModel, params: Params, r, v, primary, bodies_pos
             dist = jnp.linalg.norm(rb)
             soi = params.soi_radius[b]
             entry = jnp.where(params.parent[b] == primary.astype(jnp.float64), dist - soi, _INACTIVE)
-            exit_ = jnp.where(
-                (primary == b) & (params.parent[b] >= 0), soi - jnp.linalg.norm(r), _INACTIVE
-            )
+            exit_ = jnp.where((primary == b) & (params.parent[b] >= 0), soi - jnp.linalg.norm(r), _INACTIVE)
             g.append(jnp.where(primary == b, exit_, entry))
     return jnp.stack(g)
 
@@ -446,9 +442,7 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
     def take_step(c: Carry, dt):
         ctl = step_controls(model, params, c.t + 0.5 * dt)
         (t1, rc1, vc1, d1, n1, m1), body4 = _nystrom_step(model, params, ephem, epoch_et, c, dt, ctl)
-        new = c._replace(
-            t=t1, rc=rc1, vc=vc1, delta=d1, nu=n1, m=m1, n_steps=c.n_steps + 1
-        )
+        new = c._replace(t=t1, rc=rc1, vc=vc1, delta=d1, nu=n1, m=m1, n_steps=c.n_steps + 1)
         return _apply_impulses(model, params, new, c.t, direction, eps_t), body4
 
     def check_finite(c: Carry, new: Carry, stop_now):
@@ -510,9 +504,7 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
             parent = params.parent[jnp.maximum(b, 0)].astype(jnp.int32)
             new_p = jnp.where(is_exit, parent, b)
             switched = _switch_primary(model, params, c, new_p, pos, vel)
-            g_sw = event_functions(
-                model, params, switched.rc, switched.vc, switched.primary, pos, vel, radius_sign
-            )
+            g_sw = event_functions(model, params, switched.rc, switched.vc, switched.primary, pos, vel, radius_sign)
             switched = switched._replace(g_prev=g_sw, locating=jnp.asarray(-1, jnp.int32))
             do_switch = located & (c.locating > 0)
             new = jax.tree_util.tree_map(lambda a, b: jnp.where(do_switch, a, b), switched, new)

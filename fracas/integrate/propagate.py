@@ -16,14 +16,15 @@ propagation and every derivative (including d/dmu through the conic) is exact.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from functools import partial
-from typing import NamedTuple, Sequence
+from typing import NamedTuple
 
-from fracas import _jax  # noqa: F401
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from fracas import _jax  # noqa: F401
 from fracas.dynamics.model import ForceModel, IntegratorSettings, Params
 from fracas.dynamics.parameters import get_values, set_values
 from fracas.integrate import encke
@@ -81,6 +82,7 @@ def split_model(model: ForceModel):
     """(static model, dynamic integrator settings): c_nom, dt_max, the rectification ratio,
     eps_t and max_steps are traced values, so changing them does not recompile."""
     st = model.integrator
+
     # numpy scalars (creating jax scalars here costs ~0.2 ms each per call); traced values
     # (settings batched by propagate_batch) pass through as they are
     def scalar(v, dtype):
@@ -166,15 +168,11 @@ def _propagate_sens(static, dyn, params, ephem, epoch_et_s, x0, t_out, param_lab
         c, stm, par = state
         x = encke.state_of(c)
         cs = jax.lax.stop_gradient(c)
-        (jx, jp), c1 = jax.jacfwd(lambda xx, pp: seg(xx, pp, cs, t_end), argnums=(0, 1), has_aux=True)(
-            x, p_sel
-        )
+        (jx, jp), c1 = jax.jacfwd(lambda xx, pp: seg(xx, pp, cs, t_end), argnums=(0, 1), has_aux=True)(x, p_sel)
         x1 = encke.state_of(c1)
         stm1 = jx @ stm
         par1 = jx @ par + jp
-        valid = (~c1.done | (c1.status == encke.STATUS_OK)) & (
-            jnp.abs(c1.t - t_end) < model.integrator.eps_t_s
-        )
+        valid = (~c1.done | (c1.status == encke.STATUS_OK)) & (jnp.abs(c1.t - t_end) < model.integrator.eps_t_s)
         return (c1, stm1, par1), (x1, c1.t, c1.primary, valid, jx, stm1, jp, par1)
 
     init = (c0, jnp.eye(7), jnp.zeros((7, n_p)))

@@ -29,13 +29,13 @@ a proportionality error changes the mass flow too).  h is zero while coasting.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from functools import partial
-from typing import Sequence
 
-from fracas import _jax  # noqa: F401
 import jax
 import jax.numpy as jnp
 
+from fracas import _jax  # noqa: F401
 from fracas.dynamics import forces
 from fracas.dynamics.model import ForceModel, IntegratorSettings, Params
 from fracas.dynamics.parameters import get_values, set_values
@@ -74,9 +74,7 @@ def state_derivative(model: ForceModel, params: Params, ephem, epoch_et_s, t, x,
     return jnp.concatenate([v, acc, jnp.reshape(mdot, (1,))])
 
 
-def state_jacobians(
-    model: ForceModel, params: Params, ephem, epoch_et_s, t, x, primary, labels: Sequence[str]
-):
+def state_jacobians(model: ForceModel, params: Params, ephem, epoch_et_s, t, x, primary, labels: Sequence[str]):
     """(A (7, 7), B (7, len(labels))): A = d xdot/dx, B = d xdot/dp of eq. (1) at (t, x).
 
     Forward-mode AD; B's columns follow ``labels`` (``fracas.params`` labels, e.g.

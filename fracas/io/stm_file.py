@@ -34,31 +34,16 @@ Every refusal is a one-line :class:`fracas.errors.StmFileError` naming the file.
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import h5py
 import numpy as np
 
 from fracas.constants import DAY_S
 from fracas.errors import StmFileError
-from fracas.params import STATE_LABELS, STATE_UNITS  # noqa: F401  (re-exported)
-from fracas.products import (
-    SCHEMA_VERSION,
-    TIME_TOL_S,
-    ReferenceTrajectory,
-    _days,
-    _indices,
-    chain,
-    time_indices,
-)
-
-StmData = ReferenceTrajectory  # the STM file holds one reference-trajectory product
 from fracas.io.hdf5 import (
     atomic_h5,
     provenance,
@@ -69,11 +54,28 @@ from fracas.io.hdf5 import (
     write_provenance,
     write_strings,
 )
+from fracas.params import STATE_LABELS, STATE_UNITS  # noqa: F401  (re-exported)
+from fracas.products import (
+    SCHEMA_VERSION,
+    ReferenceTrajectory,
+    _indices,
+    chain,
+    time_indices,
+)
 
+StmData = ReferenceTrajectory  # the STM file holds one reference-trajectory product
 FILE_KIND = "fracas-stm"
 EVENT_TYPES = (
-    "initial", "measurement", "propagation", "eigenvector", "prediction",
-    "thrust_on", "thrust_off", "guidance", "final", "grid",
+    "initial",
+    "measurement",
+    "propagation",
+    "eigenvector",
+    "prediction",
+    "thrust_on",
+    "thrust_off",
+    "guidance",
+    "final",
+    "grid",
 )
 SENSITIVITY_METHODS = {
     "ad": "forward-mode automatic differentiation through the integrator (propagate_with_sensitivities)",
@@ -156,43 +158,87 @@ def write_stm_file(path: str | os.PathLike, data: StmData) -> None:
             g = f.create_group("stm")
             set_attr(g, "state_labels", list(STATE_LABELS))
             set_attr(g, "state_units", list(STATE_UNITS))
-            write(g, "epoch_et_s", np.float64(data.epoch_et_s), "s",
-                  meaning="epoch of t = 0, TDB seconds past J2000 (2000-01-01T12:00:00 TDB)")
-            write(g, "times_s", np.asarray(data.times_s, np.float64), "s",
-                  meaning="times on the file, s from the epoch, non-decreasing")
+            write(
+                g,
+                "epoch_et_s",
+                np.float64(data.epoch_et_s),
+                "s",
+                meaning="epoch of t = 0, TDB seconds past J2000 (2000-01-01T12:00:00 TDB)",
+            )
+            write(
+                g,
+                "times_s",
+                np.asarray(data.times_s, np.float64),
+                "s",
+                meaning="times on the file, s from the epoch, non-decreasing",
+            )
             write_strings(g, "event_types", data.event_types, meaning="event type(s) at each time ('+' joins several)")
-            write(g, "states", np.asarray(data.states, np.float64), "col_units[j]",
-                  col_labels=list(STATE_LABELS), col_units=list(STATE_UNITS),
-                  meaning="r km, v km/s, m kg relative to primary[i], ICRF")
+            write(
+                g,
+                "states",
+                np.asarray(data.states, np.float64),
+                "col_units[j]",
+                col_labels=list(STATE_LABELS),
+                col_units=list(STATE_UNITS),
+                meaning="r km, v km/s, m kg relative to primary[i], ICRF",
+            )
             write_strings(g, "primary", data.primary, meaning="centre body of states[i]")
-            write(g, "stm_step", np.asarray(data.stm_step, np.float64), "row_units[i]/col_units[j]",
-                  col_labels=list(STATE_LABELS), col_units=list(STATE_UNITS), **mat_attrs,
-                  meaning="Phi(t_i, t_{i-1}) = dx(t_i)/dx(t_{i-1}); i = 0: from t = 0 to times_s[0]",
-                  dims="(time, row, col)")
+            write(
+                g,
+                "stm_step",
+                np.asarray(data.stm_step, np.float64),
+                "row_units[i]/col_units[j]",
+                col_labels=list(STATE_LABELS),
+                col_units=list(STATE_UNITS),
+                **mat_attrs,
+                meaning="Phi(t_i, t_{i-1}) = dx(t_i)/dx(t_{i-1}); i = 0: from t = 0 to times_s[0]",
+                dims="(time, row, col)",
+            )
             par = np.ascontiguousarray(np.transpose(np.asarray(data.par_step, np.float64), (2, 0, 1)))
             chunks = (1, n, 7) if n_p else None
             ds = g.create_dataset("par_step", data=par, chunks=chunks)
             ds.attrs["units"] = "row_units[i]/col_units[p]"
-            for key, val in {"col_labels": list(data.param_labels), "col_units": list(data.param_units),
-                             **mat_attrs}.items():
+            for key, val in {
+                "col_labels": list(data.param_labels),
+                "col_units": list(data.param_units),
+                **mat_attrs,
+            }.items():
                 set_attr(ds, key, val)
-            ds.attrs["meaning"] = ("Theta(t_i, t_{i-1}) = dx(t_i)/dp holding x(t_{i-1}) fixed, stored as "
-                                   "par_step[p, i, row]; i = 0: from t = 0 to times_s[0]")
+            ds.attrs["meaning"] = (
+                "Theta(t_i, t_{i-1}) = dx(t_i)/dp holding x(t_{i-1}) fixed, stored as "
+                "par_step[p, i, row]; i = 0: from t = 0 to times_s[0]"
+            )
             ds.attrs["dims"] = "(parameter, time, row)"
 
             h = f.create_group("parameters")
             write_strings(h, "labels", data.param_labels, meaning="fracas.params labels: columns of par_step")
             write_strings(h, "units", data.param_units, meaning="unit of each parameter")
-            write(h, "values", np.asarray(data.param_values, np.float64).reshape(n_p), "units[p]",
-                  meaning="nominal values the trajectory was built with")
-            write(h, "steps", np.asarray(data.param_steps, np.float64).reshape(n_p), "units[p]",
-                  meaning="finite-difference perturbations (NaN: matrices by AD)")
+            write(
+                h,
+                "values",
+                np.asarray(data.param_values, np.float64).reshape(n_p),
+                "units[p]",
+                meaning="nominal values the trajectory was built with",
+            )
+            write(
+                h,
+                "steps",
+                np.asarray(data.param_steps, np.float64).reshape(n_p),
+                "units[p]",
+                meaning="finite-difference perturbations (NaN: matrices by AD)",
+            )
 
-            write(f, "trajectory_deck", str(data.deck_text or ""), "none",
-                  trajectory_hash=data.deck_hash, path=data.deck_path or "",
-                  text_sha256=hashlib.sha256(str(data.deck_text or "").encode("utf-8")).hexdigest(),
-                  meaning="the trajectory deck (TOML) the file was built from; trajectory_hash "
-                          "is fracas.io.stm_file.trajectory_hash of the validated deck")
+            write(
+                f,
+                "trajectory_deck",
+                str(data.deck_text or ""),
+                "none",
+                trajectory_hash=data.deck_hash,
+                path=data.deck_path or "",
+                text_sha256=hashlib.sha256(str(data.deck_text or "").encode("utf-8")).hexdigest(),
+                meaning="the trajectory deck (TOML) the file was built from; trajectory_hash "
+                "is fracas.io.stm_file.trajectory_hash of the validated deck",
+            )
             write_provenance(f, data.provenance or provenance(data.deck_text, data.deck_path))
     except OSError as exc:
         raise StmFileError(f"{dest}: cannot write the STM file: {exc.strerror or exc}") from None
@@ -315,8 +361,7 @@ def read_stm_file(
         raise
     except (OSError, KeyError, ValueError, IndexError, TypeError) as exc:
         raise StmFileError(f"{src}: unreadable or incomplete STM file: {exc}") from None
-    for name, shape in (("states", (n, 7)), ("stm_step", (n, 7, 7)),
-                        ("event_types", (n,)), ("primary", (n,))):
+    for name, shape in (("states", (n, 7)), ("stm_step", (n, 7, 7)), ("event_types", (n,)), ("primary", (n,))):
         got = np.shape(getattr(data, name)) if name in ("states", "stm_step") else (len(getattr(data, name)),)
         if tuple(got) != shape:
             raise StmFileError(f"{src}: inconsistent STM file: {name} has shape {tuple(got)}, expected {shape}")
@@ -366,21 +411,26 @@ def describe(path: str | os.PathLike) -> str:
             lines = [
                 f"STM file     {src}",
                 f"title        {_attr_str(f, 'title') or '-'}",
-                (f"trajectory   {_attr_str(deck, 'path') or '<unknown deck>'} "
-                 f"(hash {_attr_str(deck, 'trajectory_hash')[:16]})"),
+                (
+                    f"trajectory   {_attr_str(deck, 'path') or '<unknown deck>'} "
+                    f"(hash {_attr_str(deck, 'trajectory_hash')[:16]})"
+                ),
                 f"epoch        {et_to_calendar(epoch)} TDB ({epoch:.3f} s past J2000)",
-                (f"span         {t[0] / DAY_S:.6f} to {t[-1] / DAY_S:.6f} d ({(t[-1] - t[0]) / DAY_S:.6f} d), "
-                 f"centre {_attr_str(f, 'centre') or '-'}, frame {_attr_str(f, 'frame')}"),
+                (
+                    f"span         {t[0] / DAY_S:.6f} to {t[-1] / DAY_S:.6f} d ({(t[-1] - t[0]) / DAY_S:.6f} d), "
+                    f"centre {_attr_str(f, 'centre') or '-'}, frame {_attr_str(f, 'frame')}"
+                ),
                 f"primaries    {', '.join(dict.fromkeys(prim))}",
-                f"times        {t.shape[0]}: "
-                + ", ".join(f"{c} {e}" for e, c in sorted(Counter(events).items())),
+                f"times        {t.shape[0]}: " + ", ".join(f"{c} {e}" for e, c in sorted(Counter(events).items())),
                 f"parameters   {len(labels)} (matrices by {_attr_str(f, 'sensitivity_method')})",
             ]
             lines += [f"  {lab:<28s} {val: .10g} {u}" for lab, u, val in zip(labels, units, values)]
             lines += [
                 f"file size    {src.stat().st_size / 1024:.1f} KiB",
-                (f"written by   fracas {_attr_str(f, 'fracas_version')} at {prov.get('created_utc', '?')}, "
-                 f"schema_version {int(f.attrs['schema_version'])}"),
+                (
+                    f"written by   fracas {_attr_str(f, 'fracas_version')} at {prov.get('created_utc', '?')}, "
+                    f"schema_version {int(f.attrs['schema_version'])}"
+                ),
             ]
             return "\n".join(lines)
     except StmFileError:

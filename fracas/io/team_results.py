@@ -26,8 +26,13 @@ PUNCH_SCHEMA = 1
 def _write_history(h: h5py.Group, c: CovarianceHistory) -> None:
     write(h, "P_minus", c.P_minus, "labels/units x labels/units", description="covariance before the event")
     write(h, "P_plus", c.P_plus, "labels/units x labels/units", description="covariance after the event")
-    write(h, "process_noise", c.process_noise, "state units^2",
-          description="effective process noise over the interval ending here")
+    write(
+        h,
+        "process_noise",
+        c.process_noise,
+        "state units^2",
+        description="effective process noise over the interval ending here",
+    )
     write(h, "sigma", c.sigma, "labels/units", description="1-sigma after each event")
     write(h, "a_priori_sigma", c.a_priori_sigma, "labels/units", description="1-sigma of the a-priori covariance")
     e = c.eigen
@@ -48,9 +53,15 @@ def write_team_results(path: str | os.PathLike, res: TeamProduct) -> None:
         f.attrs["file_kind"] = "fracas-team-results"
         f.attrs["schema_version"] = RESULTS_SCHEMA
         g = f.create_group("team")
-        for k, v in (("title", res.title), ("filter", st["filter"]), ("propagation", st["propagation"]),
-                     ("square_root", int(st["square_root"])), ("generalized_covariance", int(st["generalized_covariance"])),
-                     ("reference", st["reference"]), ("trajectory_deck", st.get("trajectory_deck", ""))):
+        for k, v in (
+            ("title", res.title),
+            ("filter", st["filter"]),
+            ("propagation", st["propagation"]),
+            ("square_root", int(st["square_root"])),
+            ("generalized_covariance", int(st["generalized_covariance"])),
+            ("reference", st["reference"]),
+            ("trajectory_deck", st.get("trajectory_deck", "")),
+        ):
             g.attrs[k] = v
         g.attrs["epoch_et_s"] = res.epoch_et_s
         g.attrs["source"] = res.source
@@ -102,8 +113,9 @@ def write_team_results(path: str | os.PathLike, res: TeamProduct) -> None:
                 if p.true is not None:
                     write(q, "true", p.true, "labels/units x labels/units")
         if res.psd_problems:
-            write_strings(g, "psd_problems", [f"{res.times_s[k]:.3f} s {ev} {w} {e:.3g}"
-                                              for k, ev, w, e in res.psd_problems])
+            write_strings(
+                g, "psd_problems", [f"{res.times_s[k]:.3f} s {ev} {w} {e:.3g}" for k, ev, w, e in res.psd_problems]
+            )
             pp = g.create_group("psd_events")
             write(pp, "index", np.array([k for k, _, _, _ in res.psd_problems], dtype=np.int64), "1")
             write_strings(pp, "event", [e for _, e, _, _ in res.psd_problems])
@@ -129,16 +141,26 @@ def read_team_results(path: str | os.PathLike) -> dict[str, Any]:
     try:
         with h5py.File(p, "r") as f:
             if f.attrs.get("file_kind") != "fracas-team-results":
-                raise ResultsFileError(f"{p}: not a fracas TEAM results file (file_kind = {f.attrs.get('file_kind')!r})")
+                raise ResultsFileError(
+                    f"{p}: not a fracas TEAM results file (file_kind = {f.attrs.get('file_kind')!r})"
+                )
             g = f["team"]
-            out = {"path": str(p), "attrs": dict(g.attrs), "times_s": g["times_s"][()],
-                   "event_types": read_str(g["event_types"]), "labels": read_str(g["labels/names"]),
-                   "units": read_str(g["labels/units"]), "roles": read_str(g["labels/roles"]),
-                   "states": g["states"][()], "primary": read_str(g["primary"]),
-                   "print": dict(g["print"].attrs) if "print" in g else {},
-                   "timing": dict(g["timing"].attrs) if "timing" in g else {}}
-            out["tracking"] = (list(zip(read_str(g["tracking/type"]), read_str(g["tracking/stations"])))
-                               if "tracking" in g else [])
+            out = {
+                "path": str(p),
+                "attrs": dict(g.attrs),
+                "times_s": g["times_s"][()],
+                "event_types": read_str(g["event_types"]),
+                "labels": read_str(g["labels/names"]),
+                "units": read_str(g["labels/units"]),
+                "roles": read_str(g["labels/roles"]),
+                "states": g["states"][()],
+                "primary": read_str(g["primary"]),
+                "print": dict(g["print"].attrs) if "print" in g else {},
+                "timing": dict(g["timing"].attrs) if "timing" in g else {},
+            }
+            out["tracking"] = (
+                list(zip(read_str(g["tracking/type"]), read_str(g["tracking/stations"]))) if "tracking" in g else []
+            )
             for which in ("assumed", "true"):
                 if which in g:
                     out[which] = _history(g[which])
@@ -149,15 +171,28 @@ def read_team_results(path: str | os.PathLike) -> dict[str, Any]:
             if "predictions" in g:
                 for name in sorted(g["predictions"]):
                     q = g["predictions"][name]
-                    preds.append({"from_index": int(q.attrs["from_index"]), "status": int(q.attrs.get("status", 0)),
-                                  "time_from_s": float(q["time_from_s"][()]), "time_to_s": float(q["time_to_s"][()]),
-                                  "assumed": q["assumed"][()], "true": q["true"][()] if "true" in q else None})
+                    preds.append(
+                        {
+                            "from_index": int(q.attrs["from_index"]),
+                            "status": int(q.attrs.get("status", 0)),
+                            "time_from_s": float(q["time_from_s"][()]),
+                            "time_to_s": float(q["time_to_s"][()]),
+                            "assumed": q["assumed"][()],
+                            "true": q["true"][()] if "true" in q else None,
+                        }
+                    )
             out["predictions"] = preds
             psd = []
             if "psd_events" in g:
                 pp = g["psd_events"]
-                psd = list(zip(pp["index"][()].tolist(), read_str(pp["event"]), read_str(pp["which"]),
-                               pp["min_eigenvalue"][()].tolist()))
+                psd = list(
+                    zip(
+                        pp["index"][()].tolist(),
+                        read_str(pp["event"]),
+                        read_str(pp["which"]),
+                        pp["min_eigenvalue"][()].tolist(),
+                    )
+                )
             out["psd_problems"] = psd
         return out
     except ResultsFileError:
@@ -194,19 +229,23 @@ def read_punch(path: str | os.PathLike, source: str = "<deck>") -> dict[str, Any
     """The last punched covariance of a punch file (DeckError if missing or not a punch file)."""
     p = Path(path)
     if not p.exists():
-        raise DeckError(f"{source}: a_priori.from_punch = \"{path}\": no such file")
+        raise DeckError(f'{source}: a_priori.from_punch = "{path}": no such file')
     try:
         with h5py.File(p, "r") as f:
             if f.attrs.get("file_kind") != "fracas-punch":
-                raise DeckError(f"{source}: a_priori.from_punch = \"{path}\": not a fracas punch file")
+                raise DeckError(f'{source}: a_priori.from_punch = "{path}": not a fracas punch file')
             keys = sorted(k for k in f if k.startswith("punch_"))
             if not keys:
-                raise DeckError(f"{source}: a_priori.from_punch = \"{path}\": holds no punched covariance")
+                raise DeckError(f'{source}: a_priori.from_punch = "{path}": holds no punched covariance')
             g = f[keys[-1]]
-            out = {"time_s": float(g["time_s"][()]), "labels": read_str(g["labels"]), "assumed": g["assumed"][()],
-                   "trajectory_hash": f.attrs.get("trajectory_hash", "")}
+            out = {
+                "time_s": float(g["time_s"][()]),
+                "labels": read_str(g["labels"]),
+                "assumed": g["assumed"][()],
+                "trajectory_hash": f.attrs.get("trajectory_hash", ""),
+            }
             if "true" in g:
                 out["true"] = g["true"][()]
             return out
     except OSError as exc:
-        raise DeckError(f"{source}: a_priori.from_punch = \"{path}\": cannot read ({exc})") from None
+        raise DeckError(f'{source}: a_priori.from_punch = "{path}": cannot read ({exc})') from None

@@ -154,18 +154,35 @@ def write_trajectory_file(path: str | os.PathLike, data: TrajectoryData) -> Path
 
             g = f.create_group("trajectory")
             g.attrs["epoch_tdb"] = data.epoch_tdb
-            write(g, "epoch_et_s", np.float64(data.epoch_et_s), "s",
-                  meaning="epoch of t = 0, TDB seconds past J2000 (2000-01-01T12:00:00 TDB)")
-            write(g, "t_s", np.asarray(data.t_s, np.float64), "s",
-                  meaning="output times from the epoch (NaN after an early stop)")
+            write(
+                g,
+                "epoch_et_s",
+                np.float64(data.epoch_et_s),
+                "s",
+                meaning="epoch of t = 0, TDB seconds past J2000 (2000-01-01T12:00:00 TDB)",
+            )
+            write(
+                g,
+                "t_s",
+                np.asarray(data.t_s, np.float64),
+                "s",
+                meaning="output times from the epoch (NaN after an early stop)",
+            )
             write(g, "r_km", np.asarray(data.r_km, np.float64), "km", meaning="position relative to primary, ICRF")
-            write(g, "v_km_s", np.asarray(data.v_km_s, np.float64), "km/s", meaning="velocity relative to primary, ICRF")
+            write(
+                g, "v_km_s", np.asarray(data.v_km_s, np.float64), "km/s", meaning="velocity relative to primary, ICRF"
+            )
             write(g, "mass_kg", np.asarray(data.mass_kg, np.float64), "kg", meaning="spacecraft mass")
             write(g, "primary", list(data.primary) or [""], "none", meaning="name of the centre of r_km, v_km_s")
             idx = [data.bodies.index(p) if p in data.bodies else -1 for p in data.primary]
             write(g, "primary_index", np.asarray(idx, np.int32), "1", meaning="index into /@bodies (-1 undefined)")
-            write(g, "status", np.int32(data.status), "1",
-                  meaning="; ".join(f"{int(k)} {k.text}" for k in PROPAGATION_STATUSES))
+            write(
+                g,
+                "status",
+                np.int32(data.status),
+                "1",
+                meaning="; ".join(f"{int(k)} {k.text}" for k in PROPAGATION_STATUSES),
+            )
             write(g, "t_final_s", np.float64(data.t_final_s), "s", meaning="time where the propagation ended")
             write(g, "r_final_km", np.asarray(data.r_final_km, np.float64), "km")
             write(g, "v_final_km_s", np.asarray(data.v_final_km_s, np.float64), "km/s")
@@ -178,10 +195,17 @@ def write_trajectory_file(path: str | os.PathLike, data: TrajectoryData) -> Path
             if s is not None:
                 h = f.create_group("sensitivities")
                 set_attr(h, "state_labels", list(STATE_LABELS))
-                write(h, "t_s", np.asarray(data.t_s, np.float64), "s", meaning="times of the matrices (as /trajectory/t_s)")
+                write(
+                    h,
+                    "t_s",
+                    np.asarray(data.t_s, np.float64),
+                    "s",
+                    meaning="times of the matrices (as /trajectory/t_s)",
+                )
                 _write_matrix(h, "stm", s.stm, STATE_LABELS, STATE_UNITS, "Phi(t_k, t_0) = dx(t_k)/dx(t_0)")
-                _write_matrix(h, "stm_step", s.stm_step, STATE_LABELS, STATE_UNITS,
-                              "Phi(t_k, t_{k-1}) (identity at k = 0)")
+                _write_matrix(
+                    h, "stm_step", s.stm_step, STATE_LABELS, STATE_UNITS, "Phi(t_k, t_{k-1}) (identity at k = 0)"
+                )
                 pl, pu = tuple(s.param_labels), tuple(s.param_units)
                 _write_matrix(h, "par", s.par, pl, pu, "dx(t_k)/dp from t_0")
                 _write_matrix(h, "par_step", s.par_step, pl, pu, "dx(t_k)/dp holding x(t_{k-1}) fixed")
@@ -207,7 +231,9 @@ def read_trajectory_file(path: str | os.PathLike) -> TrajectoryData:
             if isinstance(fmt, bytes):
                 fmt = fmt.decode()
             if fmt != FORMAT or "trajectory" not in f:
-                raise StmFileError(f"{src}: not a fracas trajectory file (format attribute = {fmt!r}, expected {FORMAT!r})")
+                raise StmFileError(
+                    f"{src}: not a fracas trajectory file (format attribute = {fmt!r}, expected {FORMAT!r})"
+                )
             version = int(f.attrs.get("schema_version", -1))
             if version > SCHEMA_VERSION:
                 raise StmFileError(f"{src}: schema_version = {version}: this fracas reads up to {SCHEMA_VERSION}")

@@ -36,9 +36,9 @@ unit partial (TRAKM eq. 8 and the closing remark on angle biases), which
 
 from __future__ import annotations
 
-from fracas import _jax  # noqa: F401  (x64 first)
 import jax.numpy as jnp
 
+from fracas import _jax  # noqa: F401  (x64 first)
 from fracas.measurements import kinds
 
 __all__ = [
@@ -135,9 +135,7 @@ def doppler2_partials(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
 # --- 3-way (QVLBI) range and Doppler (TRAKM eqs. 9-10) -----------------------------
 def range3(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
     """3-way range rho_3 = rho_1 + rho_2 (km) (TRAKM eq. 9; c dt is a separate bias)."""
-    return range2(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v) + range2(
-        sc_r, sc_v, earth_r, earth_v, st2_r, st2_v
-    )
+    return range2(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v) + range2(sc_r, sc_v, earth_r, earth_v, st2_r, st2_v)
 
 
 def range3_partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
@@ -150,9 +148,7 @@ def range3_partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
 def doppler3(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
     """3-way Doppler rho_dot_3 = rho_dot_1 + rho_dot_2 (km/s) (TRAKM eq. 10, rebuilt: the
     scan prints ranges on the right-hand side; c df/f is a separate bias)."""
-    return doppler2(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v) + doppler2(
-        sc_r, sc_v, earth_r, earth_v, st2_r, st2_v
-    )
+    return doppler2(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v) + doppler2(sc_r, sc_v, earth_r, earth_v, st2_r, st2_v)
 
 
 def doppler3_partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
@@ -181,8 +177,20 @@ def _diff_terms(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
     du = (dr - drho * u2) / rho1
     # rho_dot_1 - rho_dot_2 = u1.w1 - u2.w2 = (u1 - u2).w1 + u2.(w1 - w2)
     drdot = jnp.dot(du, w1) + jnp.dot(u2, dv)
-    return {"rho1": rho1, "rho2": rho2, "u1": u1, "u2": u2, "w1": w1, "w2": w2,
-            "rdot1": rdot1, "rdot2": rdot2, "dv": dv, "drho": drho, "du": du, "drdot": drdot}
+    return {
+        "rho1": rho1,
+        "rho2": rho2,
+        "u1": u1,
+        "u2": u2,
+        "w1": w1,
+        "w2": w2,
+        "rdot1": rdot1,
+        "rdot2": rdot2,
+        "dv": dv,
+        "drho": drho,
+        "du": du,
+        "drdot": drdot,
+    }
 
 
 def diff_range(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
@@ -197,8 +205,7 @@ def diff_range_partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v
     d/d st2 = (u2, 0)."""
     t = _diff_terms(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v)
     z = _zeros3()
-    return (jnp.concatenate([t["du"], z]), jnp.concatenate([-t["u1"], z]),
-            jnp.concatenate([t["u2"], z]))
+    return (jnp.concatenate([t["du"], z]), jnp.concatenate([-t["u1"], z]), jnp.concatenate([t["u2"], z]))
 
 
 def diff_doppler(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
@@ -223,8 +230,7 @@ def diff_doppler_partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2
     g1 = (w1 - rdot1 * u1) / rho1
     g2 = (w2 - rdot2 * u2) / rho2
     dg = (t["dv"] - w2 * (drho / rho2) - drdot * u1 - rdot2 * du + (rdot2 * drho / rho2) * u2) / rho1
-    return (jnp.concatenate([dg, du]), jnp.concatenate([-g1, -u1]),
-            jnp.concatenate([g2, u2]))
+    return (jnp.concatenate([dg, du]), jnp.concatenate([-g1, -u1]), jnp.concatenate([g2, u2]))
 
 
 # --- azimuth and elevation (TRAKM eqs. 17-31, rebuilt topocentric) ------------------

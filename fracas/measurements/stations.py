@@ -33,10 +33,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from fracas import _jax  # noqa: F401  (x64 first)
-from fracas.constants import DAY_S
 import jax
 import jax.numpy as jnp
+
+from fracas import _jax  # noqa: F401  (x64 first)
+from fracas.constants import DAY_S
 
 __all__ = [
     "Station",

@@ -35,15 +35,14 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, field
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from fracas import _jax  # noqa: F401  (x64 first)
-import jax
-import jax.numpy as jnp
-
 from fracas.measurements import models
 from fracas.measurements.kinds import (
     GLOBAL_LABELS,
@@ -89,25 +88,18 @@ class Observation:
 
     def __post_init__(self):
         if self.kind not in models.KINDS:
-            raise ValueError(
-                f"measurement kind {self.kind!r} unknown: expected one of {', '.join(models.KINDS)}"
-            )
+            raise ValueError(f"measurement kind {self.kind!r} unknown: expected one of {', '.join(models.KINDS)}")
         if isinstance(self.stations, str):
-            raise ValueError(
-                f"{self.kind}: stations must be a tuple of names, got the string {self.stations!r}"
-            )
+            raise ValueError(f"{self.kind}: stations must be a tuple of names, got the string {self.stations!r}")
         object.__setattr__(self, "stations", tuple(self.stations))
         need = models.N_STATIONS[self.kind]
         if len(self.stations) != need:
-            raise ValueError(
-                f"{self.kind} needs {need} station(s), got {len(self.stations)}: {self.stations}"
-            )
+            raise ValueError(f"{self.kind} needs {need} station(s), got {len(self.stations)}: {self.stations}")
         if len(set(self.stations)) != len(self.stations):
             raise ValueError(f"{self.kind}: the two stations must differ, got {self.stations}")
         if not (math.isfinite(self.sigma) and self.sigma > 0.0):
             raise ValueError(
-                f"{self.kind}: sigma must be positive and finite ({_KIND_UNITS[self.kind]}),"
-                f" got {self.sigma!r}"
+                f"{self.kind}: sigma must be positive and finite ({_KIND_UNITS[self.kind]}), got {self.sigma!r}"
             )
 
 
@@ -177,12 +169,12 @@ def _kernel(kind: str):
 
     def kernel(x):
         et = x[_I_ET]
-        sc_r, sc_v = x[_I_SC:_I_SC + 3], x[_I_SC + 3:_I_SC + 6]
-        e_r, e_v = x[_I_E:_I_E + 3], x[_I_E + 3:_I_E + 6]
+        sc_r, sc_v = x[_I_SC : _I_SC + 3], x[_I_SC + 3 : _I_SC + 6]
+        e_r, e_v = x[_I_E : _I_E + 3], x[_I_E + 3 : _I_E + 6]
         z3 = jnp.zeros(3, dtype=jnp.float64)
         nan2 = jnp.full(2, jnp.nan, dtype=jnp.float64)
         if n_st == 0:
-            body_r, star = x[_I_BODY:_I_BODY + 3], x[_I_STAR:_I_STAR + 3]
+            body_r, star = x[_I_BODY : _I_BODY + 3], x[_I_STAR : _I_STAR + 3]
             third = star if kind == "star_planet_angle" else x[_I_RP]
             val = value_fn(sc_r, body_r, third)
             h_sc, h_body = partial_fn(sc_r, body_r, third)[:2]
@@ -277,16 +269,16 @@ def _pack(geometry: Geometry) -> np.ndarray:
     """Packed kernel input row of one geometry (stations filled in per observation)."""
     base = np.zeros(_N_IN, dtype=np.float64)
     base[_I_ET] = float(geometry.et_s)
-    base[_I_SC:_I_SC + 3] = _vec3("sc_r", geometry.sc_r)
-    base[_I_SC + 3:_I_SC + 6] = _vec3("sc_v", geometry.sc_v)
-    base[_I_E:_I_E + 3] = _vec3("earth_r", geometry.earth_r)
-    base[_I_E + 3:_I_E + 6] = _vec3("earth_v", geometry.earth_v)
+    base[_I_SC : _I_SC + 3] = _vec3("sc_r", geometry.sc_r)
+    base[_I_SC + 3 : _I_SC + 6] = _vec3("sc_v", geometry.sc_v)
+    base[_I_E : _I_E + 3] = _vec3("earth_r", geometry.earth_r)
+    base[_I_E + 3 : _I_E + 6] = _vec3("earth_v", geometry.earth_v)
     if geometry.body_r is not None:
-        base[_I_BODY:_I_BODY + 3] = _vec3("body_r", geometry.body_r)
+        base[_I_BODY : _I_BODY + 3] = _vec3("body_r", geometry.body_r)
     if geometry.body_radius_km is not None:
         base[_I_RP] = float(geometry.body_radius_km)
     if geometry.star_unit is not None:
-        base[_I_STAR:_I_STAR + 3] = _vec3("star_unit", geometry.star_unit)
+        base[_I_STAR : _I_STAR + 3] = _vec3("star_unit", geometry.star_unit)
     return base
 
 
@@ -346,11 +338,9 @@ def observation_matrix_many(
         for slot, name in enumerate(obs_st):
             st = stations.get(name)
             if st is None:
-                raise KeyError(
-                    f"observation {rows[0]} ({kind}): station {name!r} unknown; known: {', '.join(names)}"
-                )
+                raise KeyError(f"observation {rows[0]} ({kind}): station {name!r} unknown; known: {', '.join(names)}")
             i0 = _I_ST1 if slot == 0 else _I_ST2
-            x[rows, i0:i0 + 3] = (st.radius_km, st.latitude_rad, st.longitude_rad)
+            x[rows, i0 : i0 + 3] = (st.radius_km, st.latitude_rad, st.longitude_rad)
         if not obs_st:
             body_rows.extend(rows)
             for i in rows:
@@ -367,11 +357,11 @@ def observation_matrix_many(
         b = _bucket(len(rows))
         xk = np.empty((b, _N_IN))
         xk[: len(rows)] = x[rows]
-        xk[len(rows):] = x[rows[0]]  # padding: a copy of a valid row, discarded
+        xk[len(rows) :] = x[rows[0]]  # padding: a copy of a valid row, discarded
         out[rows, :_N_OUT] = np.asarray(_batch_kernel(kind)(xk))[: len(rows)]
 
     H = np.zeros((m, n))
-    H[:, :6] = out[:, _O_H:_O_H + 6]
+    H[:, :6] = out[:, _O_H : _O_H + 6]
     for (kind, obs_st), rows in sig_rows.items():  # one column map per signature
         src, col, coef = _columns(labels, names, kind, obs_st)
         if col.size:  # columns are distinct within one observation (distinct stations)
@@ -380,7 +370,7 @@ def observation_matrix_many(
     for i in body_rows:  # ephemeris parameters through the target body's position (eqs. 35, 39)
         partials = items[i][1].body_r_partials
         if partials:
-            h_body = out[i, _O_BODY:_O_BODY + 3]
+            h_body = out[i, _O_BODY : _O_BODY + 3]
             for j, lab in enumerate(labels):
                 if lab in partials:
                     H[i, nx + j] += h_body @ _vec3(f"body_r_partials[{lab!r}]", partials[lab])

@@ -26,16 +26,22 @@ def load(path) -> dict:
 
 def _rss(P: np.ndarray, blk: slice) -> float:
     s = np.sqrt(np.clip(np.diag(P)[blk], 0.0, None))
-    return float(np.sqrt(np.sum(s ** 2)))
+    return float(np.sqrt(np.sum(s**2)))
 
 
 def _eigen_at(h: dict, k: int):
     """(sigma, corr, pos axes, pos eigvec, vel axes, vel eigvec) of history ``h`` at event k."""
     eg = h["eigenvector_events"]
     i = int(np.nonzero(eg["index"] == k)[0][0])
-    return (h["sigma"][k], eg["correlations"][i], np.sqrt(np.clip(eg["position_eigenvalues"][i], 0.0, None)),
-            eg["position_eigenvectors"][i], np.sqrt(np.clip(eg["velocity_eigenvalues"][i], 0.0, None)),
-            eg["velocity_eigenvectors"][i])
+    return (
+        h["sigma"][k],
+        eg["correlations"][i],
+        np.sqrt(np.clip(eg["position_eigenvalues"][i], 0.0, None)),
+        eg["position_eigenvectors"][i],
+        np.sqrt(np.clip(eg["velocity_eigenvalues"][i], 0.0, None)),
+        eg["velocity_eigenvectors"][i],
+    )
+
 
 _EVENT_SHOW = ("thrust_on", "thrust_off", "propagation", "eigenvector", "prediction", "punch", "final", "initial")
 
@@ -64,8 +70,12 @@ def covariance_table(h: dict, k: int, labels: list[str], units: list[str], title
         if correlations:
             row += [f"{corr[i, j]:+.4f}" if (j <= i or i >= 6) else "" for j in range(6)]
         t.add_row(*row)
-    eig = Table(title="position / velocity 1σ semi-axes (eigenvalues^½) and eigenvectors", title_justify="left",
-                show_edge=False, pad_edge=False)
+    eig = Table(
+        title="position / velocity 1σ semi-axes (eigenvalues^½) and eigenvectors",
+        title_justify="left",
+        show_edge=False,
+        pad_edge=False,
+    )
     for c in ("block", "axis", "1σ", "unit", "x", "y", "z"):
         eig.add_column(c, justify="right")
     for name, ax, V, unit in (("position", pos_axes, pos_vec, "km"), ("velocity", vel_axes * 1e6, vel_vec, "mm/s")):
@@ -82,16 +92,25 @@ def summary_dict(r: dict) -> dict:
 
     def block(h):
         sig = np.asarray(h["sigma"][-1])
-        return {"position_rss_km": float(np.sqrt(np.sum(sig[:3] ** 2))),
-                "velocity_rss_km_s": float(np.sqrt(np.sum(sig[3:6] ** 2))),
-                "sigma": dict(zip(r["labels"], map(float, sig)))}
+        return {
+            "position_rss_km": float(np.sqrt(np.sum(sig[:3] ** 2))),
+            "velocity_rss_km_s": float(np.sqrt(np.sum(sig[3:6] ** 2))),
+            "sigma": dict(zip(r["labels"], map(float, sig))),
+        }
 
     out = {
-        "title": str(at["title"]), "filter": str(at["filter"]), "propagation": str(at["propagation"]),
-        "reference": str(at["reference"]), "events": int(len(r["times_s"])), "measurements_used": int(used.sum()),
-        "measurements_skipped": int((~used).sum()), "final_time_days": float(r["times_s"][-1] / DAY_S),
-        "assumed": block(r["assumed"]), "psd_problems": len(r["psd_problems"]),
-        "status": int(at.get("status", 0)), "status_text": str(at.get("status_text", "")),
+        "title": str(at["title"]),
+        "filter": str(at["filter"]),
+        "propagation": str(at["propagation"]),
+        "reference": str(at["reference"]),
+        "events": int(len(r["times_s"])),
+        "measurements_used": int(used.sum()),
+        "measurements_skipped": int((~used).sum()),
+        "final_time_days": float(r["times_s"][-1] / DAY_S),
+        "assumed": block(r["assumed"]),
+        "psd_problems": len(r["psd_problems"]),
+        "status": int(at.get("status", 0)),
+        "status_text": str(at.get("status_text", "")),
         "timing_s": {k: round(float(v), 4) for k, v in r["timing"].items()},
     }
     if "true" in r:
@@ -116,9 +135,13 @@ def print_team(r: dict, console=None) -> None:
     gencov = T is not None
     nx = int(at.get("n_state", 7))
     con.rule(f"[bold]TEAM[/bold] {escape(str(at['title']))}")
-    con.print(escape(f"filter {at['filter']}{' (square root)' if int(at['square_root']) else ''}, propagation "
-                     f"{at['propagation']}, generalized covariance {'on' if gencov else 'off'}; "
-                     f"reference: {at['reference']}"))
+    con.print(
+        escape(
+            f"filter {at['filter']}{' (square root)' if int(at['square_root']) else ''}, propagation "
+            f"{at['propagation']}, generalized covariance {'on' if gencov else 'off'}; "
+            f"reference: {at['reference']}"
+        )
+    )
     pt = Table(title="augmented parameters", title_justify="left", show_edge=False, pad_edge=False)
     for c in ("label", "role", "unit", "a-priori 1σ (assumed)", "a-priori 1σ (true)", "final 1σ (assumed)"):
         pt.add_column(c, justify="right" if "σ" in c else "left")
@@ -126,8 +149,14 @@ def print_team(r: dict, console=None) -> None:
         if roles[i] == "noise_state":
             continue
         true0 = T["a_priori_sigma"][i] if gencov else A["a_priori_sigma"][i]
-        pt.add_row(escape(labels[i]), roles[i], escape(units[i]), _fmt(A["a_priori_sigma"][i]), _fmt(true0),
-                   _fmt(np.sqrt(max(A["P_plus"][-1][i, i], 0.0))))
+        pt.add_row(
+            escape(labels[i]),
+            roles[i],
+            escape(units[i]),
+            _fmt(A["a_priori_sigma"][i]),
+            _fmt(true0),
+            _fmt(np.sqrt(max(A["P_plus"][-1][i, i], 0.0))),
+        )
     con.print(pt)
 
     ev = Table(title="event log (RSS 1σ after each event)", title_justify="left", show_edge=False, pad_edge=False)
@@ -152,18 +181,28 @@ def print_team(r: dict, console=None) -> None:
         if not show:
             continue
         P = A["P_plus"][k]
-        row = [f"{times[k] / DAY_S:.4f}", "+".join(evs), str(used_at.get(k, "")),
-               f"{np.sqrt(max(np.trace(P[:3, :3]), 0)):.5g}", f"{np.sqrt(max(np.trace(P[3:6, 3:6]), 0)) * 1e6:.5g}"]
+        row = [
+            f"{times[k] / DAY_S:.4f}",
+            "+".join(evs),
+            str(used_at.get(k, "")),
+            f"{np.sqrt(max(np.trace(P[:3, :3]), 0)):.5g}",
+            f"{np.sqrt(max(np.trace(P[3:6, 3:6]), 0)) * 1e6:.5g}",
+        ]
         if gencov:
             Pt = T["P_plus"][k]
-            row += [f"{np.sqrt(max(np.trace(Pt[:3, :3]), 0)):.5g}", f"{np.sqrt(max(np.trace(Pt[3:6, 3:6]), 0)) * 1e6:.5g}"]
+            row += [
+                f"{np.sqrt(max(np.trace(Pt[:3, :3]), 0)):.5g}",
+                f"{np.sqrt(max(np.trace(Pt[3:6, 3:6]), 0)) * 1e6:.5g}",
+            ]
         ev.add_row(*row)
     con.print(ev)
     if int(pr.get("process_noise", 0)):
         kq = [k for k in range(len(times)) if "propagation" in events[k]]
         if kq:
             q = np.array([np.sqrt(max(np.trace(A["process_noise"][k][3:6, 3:6]), 0)) * 1e6 for k in kq])
-            con.print(f"process noise at propagation events: RSS velocity 1σ {q.min():.3g}..{q.max():.3g} mm/s per interval")
+            con.print(
+                f"process noise at propagation events: RSS velocity 1σ {q.min():.3g}..{q.max():.3g} mm/s per interval"
+            )
 
     for k in range(len(times)):
         if not (set(_EIGEN_EVENTS) & set(events[k])):
@@ -171,13 +210,18 @@ def print_team(r: dict, console=None) -> None:
         for which, h in (("assumed", A), ("true", T)):
             if h is None:
                 continue
-            t, eig = covariance_table(h, k, labels, units,
-                                      escape(f"{which} knowledge at t = {times[k] / DAY_S:.4f} d ({'+'.join(events[k])})"),
-                                      bool(int(pr.get("correlations", 1))))
+            t, eig = covariance_table(
+                h,
+                k,
+                labels,
+                units,
+                escape(f"{which} knowledge at t = {times[k] / DAY_S:.4f} d ({'+'.join(events[k])})"),
+                bool(int(pr.get("correlations", 1))),
+            )
             con.print(t)
             con.print(eig)
     for p in r["predictions"]:
-        line = (f"prediction {p['time_from_s'] / DAY_S:.4f} d -> {p['time_to_s'] / DAY_S:.4f} d: ")
+        line = f"prediction {p['time_from_s'] / DAY_S:.4f} d -> {p['time_to_s'] / DAY_S:.4f} d: "
         if p["status"]:
             con.print(escape(line + "not computed: the trajectory ends before the target time"))
             continue
@@ -191,11 +235,15 @@ def print_team(r: dict, console=None) -> None:
         skipped[int(j)] = skipped.get(int(j), 0) + 1
     if skipped:
         parts = [f"{r['tracking'][j][0]} {r['tracking'][j][1]}: {c}" for j, c in sorted(skipped.items())]
-        con.print(f"[yellow]below {float(at.get('min_elevation_deg', 0.0)):g} deg elevation, skipped:[/yellow] "
-                  + escape("; ".join(parts)))
+        con.print(
+            f"[yellow]below {float(at.get('min_elevation_deg', 0.0)):g} deg elevation, skipped:[/yellow] "
+            + escape("; ".join(parts))
+        )
     for k, e, which, val in r["psd_problems"][:5]:
-        con.print(f"[red]warning:[/red] {which} covariance not positive semi-definite at t = "
-                  f"{times[k] / DAY_S:.6g} d ({e} event), smallest eigenvalue {val:.3g} (mixed units)")
+        con.print(
+            f"[red]warning:[/red] {which} covariance not positive semi-definite at t = "
+            f"{times[k] / DAY_S:.6g} d ({e} event), smallest eigenvalue {val:.3g} (mixed units)"
+        )
     con.print(escape(f"written: {r['path']}"))
 
 
@@ -204,10 +252,10 @@ def plot_team(r: dict, png: str | Path) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     import os
     import tempfile
+
+    import matplotlib.pyplot as plt
 
     nx = int(r["attrs"].get("n_state", 7))
     t = r["times_s"] / DAY_S

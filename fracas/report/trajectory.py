@@ -20,8 +20,12 @@ from fracas.status import RunStatus, status_text
 
 __all__ = ["print_summary", "summary_table", "plot_trajectory"]
 
-_STATUS_STYLE = {RunStatus.OK: "green", RunStatus.STOPPED: "cyan", RunStatus.MAX_STEPS: "yellow",
-                 RunStatus.NONFINITE: "red"}  # any other code: red
+_STATUS_STYLE = {
+    RunStatus.OK: "green",
+    RunStatus.STOPPED: "cyan",
+    RunStatus.MAX_STEPS: "yellow",
+    RunStatus.NONFINITE: "red",
+}  # any other code: red
 
 
 def _valid(data: TrajectoryData) -> np.ndarray:
@@ -76,8 +80,12 @@ def print_summary(data: TrajectoryData, path: str | Path | None = None, console=
         sd = data.sensitivities
         cols = ", ".join(sd.param_labels) if sd.param_labels else "none"
         n = sd.stm.shape[0]
-        console.print(f"sensitivities: STM (n={n}, 7x7) and parameter matrices, columns: {cols}",
-                      markup=False, highlight=False, soft_wrap=True)
+        console.print(
+            f"sensitivities: STM (n={n}, 7x7) and parameter matrices, columns: {cols}",
+            markup=False,
+            highlight=False,
+            soft_wrap=True,
+        )
     if path is not None:
         console.print(f"written: {path}", markup=False, highlight=False, soft_wrap=True)
 
@@ -91,7 +99,11 @@ def plot_trajectory(data: TrajectoryData, png: str | Path, dpi: int = 120) -> Pa
     t_day = np.asarray(data.t_s, dtype=np.float64)[ok] / DAY_S
     r = np.asarray(data.r_km, dtype=np.float64)[ok]
     m = np.asarray(data.mass_kg, dtype=np.float64)[ok]
-    prim = np.asarray(data.primary, dtype=object)[ok] if len(data.primary) == len(ok) else np.array([data.centre] * ok.sum(), dtype=object)
+    prim = (
+        np.asarray(data.primary, dtype=object)[ok]
+        if len(data.primary) == len(ok)
+        else np.array([data.centre] * ok.sum(), dtype=object)
+    )
     rmag = np.linalg.norm(r, axis=-1) if r.size else np.zeros(0)
     big = rmag.size and float(np.nanmax(rmag)) > 0.05 * AU_KM
     scale, unit = (AU_KM, "AU") if big else (1.0, "km")

@@ -30,8 +30,17 @@ from fracas.team.scan import run_filter
 from fracas.team.study import Study
 from fracas.team.transitions import EPS_T, augmented_transitions, interval_noise, process_noise, theta_columns
 
-__all__ = ["TeamResult", "run_study", "process_noise", "augmented_transitions", "interval_noise", "theta_columns",
-           "psd_problems", "run_filter", "EPS_T"]
+__all__ = [
+    "TeamResult",
+    "run_study",
+    "process_noise",
+    "augmented_transitions",
+    "interval_noise",
+    "theta_columns",
+    "psd_problems",
+    "run_filter",
+    "EPS_T",
+]
 
 
 def run_study(study: Study, ref: Reference, progress=None) -> TeamResult:
@@ -56,7 +65,8 @@ def run_study(study: Study, ref: Reference, progress=None) -> TeamResult:
     stage("filtering")
     Pa_m, Pa_p, Pt_m, Pt_p, sig = run_filter(study, phi_aug, Qa, Qt, meas)
     tm["filter_s"] = time.perf_counter() - t2
-    res = TeamResult(study, ref, meas, Pa_m, Pa_p, Pt_m if study.gencov else None, Pt_p if study.gencov else None,
-                     Qa, Qt, sig)
+    res = TeamResult(
+        study, ref, meas, Pa_m, Pa_p, Pt_m if study.gencov else None, Pt_p if study.gencov else None, Qa, Qt, sig
+    )
     finish(res, tm)
     return res

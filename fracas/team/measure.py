@@ -78,7 +78,7 @@ def assemble_measurements(study: Study, ref: Reference, m_pad: int = 4) -> Measu
         return MeasurementSet(np.zeros((K, m_pad, n)), eye.copy(), eye.copy(), [], {})
     ks = sorted({k for k, _ in pairs})
     body_names = sorted({t.body for t in study.tracking if t.body})
-    bodies = sorted(set(ref.primary[k] for k in ks) | {"earth"} | set(body_names))
+    bodies = sorted({ref.primary[k] for k in ks} | {"earth"} | set(body_names))
     pos, vel = _ephemeris_states(study, ref, ks, bodies)
     bi = {b: i for i, b in enumerate(bodies)}
     stars = {j: t.star_unit for j, t in enumerate(study.tracking) if t.star_unit is not None}
@@ -93,12 +93,16 @@ def assemble_measurements(study: Study, ref: Reference, m_pad: int = 4) -> Measu
             o_r, o_v = pos[a, p], vel[a, p]
             x = ref.states[k]
             geo = geos[key] = trakm.Geometry(
-                et_s=float(study.problem.epoch_et_s + ref.times_s[k]), sc_r=x[:3], sc_v=x[3:6],
-                earth_r=pos[a, bi["earth"]] - o_r, earth_v=vel[a, bi["earth"]] - o_v,
+                et_s=float(study.problem.epoch_et_s + ref.times_s[k]),
+                sc_r=x[:3],
+                sc_v=x[3:6],
+                earth_r=pos[a, bi["earth"]] - o_r,
+                earth_v=vel[a, bi["earth"]] - o_v,
                 body_r=None if t.body is None else pos[a, bi[t.body]] - o_r,
                 body_v=None if t.body is None else vel[a, bi[t.body]] - o_v,
                 body_radius_km=None if t.body is None else BODIES[t.body].radius_km,
-                star_unit=stars.get(j))
+                star_unit=stars.get(j),
+            )
         items.append((study.observations[j], geo))
     batch = trakm.observation_matrix_many(items, study.stations, study.labels, nx)
 
@@ -108,8 +112,16 @@ def assemble_measurements(study: Study, ref: Reference, m_pad: int = 4) -> Measu
     for i, (k, j) in enumerate(pairs):
         e = float(batch.elevation_deg[i])
         used = not (np.isfinite(e) and e < study.min_elevation_deg)
-        rec = MeasurementRecord(k, j, study.tracking[j].kind, study.observations[j].stations,
-                                float(batch.values[i]), e, used, float(batch.sigma[i]))
+        rec = MeasurementRecord(
+            k,
+            j,
+            study.tracking[j].kind,
+            study.observations[j].stations,
+            float(batch.values[i]),
+            e,
+            used,
+            float(batch.sigma[i]),
+        )
         if used:
             rec.row = per_k.get(k, 0)
             per_k[k] = rec.row + 1

@@ -15,18 +15,17 @@ covariance has them too).
 from __future__ import annotations
 
 import math
-from functools import lru_cache
+from functools import cache
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from fracas import _jax  # noqa: F401  (x64 before jax)
-import jax
-import jax.numpy as jnp
-
-from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at
 from fracas.filters.covariance import Layout
 from fracas.filters.process_noise import pdot_propagate
 from fracas.integrate.propagate import propagate
+from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at
 from fracas.team.result import NOISE_STATE_LABELS, TeamResult, finish
 from fracas.team.scan import _scan
 from fracas.team.study import Study
@@ -35,7 +34,7 @@ from fracas.team.transitions import EPS_T, bucket, primary_index
 __all__ = ["run_pdot", "NOISE_STATE_LABELS"]
 
 
-@lru_cache(maxsize=None)
+@cache
 def _pdot_fn():
     return jax.jit(pdot_propagate)
 
@@ -44,7 +43,7 @@ def _expand(P: np.ndarray, sig: np.ndarray) -> np.ndarray:
     n = P.shape[0]
     out = np.zeros((n + 3, n + 3))
     out[:n, :n] = P
-    out[n:, n:] = np.diag(sig ** 2)  # stationary Gauss-Markov start
+    out[n:, n:] = np.diag(sig**2)  # stationary Gauss-Markov start
     return out
 
 
@@ -87,8 +86,16 @@ def run_pdot(study: Study, ref, meas):
     kk = all_t.size
     kp = bucket(kk)
     pad = lambda a: np.concatenate([a, np.repeat(a[-1:], kp - kk, axis=0)]) if kp > kk else a  # noqa: E731
-    A, B = jacobians_at(pr.model, pr.params, pr.ephem, pr.epoch_et_s, pad(all_t), pad(xs),
-                        pad(primary_index(study, list(prim_names))), labels)
+    A, B = jacobians_at(
+        pr.model,
+        pr.params,
+        pr.ephem,
+        pr.epoch_et_s,
+        pad(all_t),
+        pad(xs),
+        pad(primary_index(study, list(prim_names))),
+        labels,
+    )
     A, B = np.asarray(A)[:kk, :nx, :nx], np.asarray(B)[:kk, :nx, :]
     B_dyn = B[:, :, [labels.index(lab) for lab in study.dynamic_labels]]
     h = B[:, :, [labels.index(lab) for lab in THRUST_NOISE_LABELS]]
@@ -99,11 +106,14 @@ def run_pdot(study: Study, ref, meas):
     F[:, :nx, dyn_cols] = B_dyn
     F[:, :nx, n:] = h
     Fs, Qcs = [], []
-    for sig, tau in ((study.noise_sigma_assumed, study.noise_tau_assumed), (study.noise_sigma_true, study.noise_tau_true)):
+    for sig, tau in (
+        (study.noise_sigma_assumed, study.noise_tau_assumed),
+        (study.noise_sigma_true, study.noise_tau_true),
+    ):
         Fx = F.copy()
         Fx[:, np.arange(n, n + 3), np.arange(n, n + 3)] = -1.0 / tau
         Qc = np.zeros((n + 3, n + 3))
-        Qc[np.arange(n, n + 3), np.arange(n, n + 3)] = 2.0 * sig ** 2 / tau
+        Qc[np.arange(n, n + 3), np.arange(n, n + 3)] = 2.0 * sig**2 / tau
         Fs.append(Fx)
         Qcs.append(Qc)
     t_nodes = time.perf_counter() - t0
@@ -125,16 +135,38 @@ def run_pdot(study: Study, ref, meas):
             Pa = pdot(Pa, jnp.asarray(Fs[0][seg]), jnp.asarray(Qcs[0]), dt)
             if study.gencov:
                 Pt = pdot(Pt, jnp.asarray(Fs[1][seg]), jnp.asarray(Qcs[1]), dt)
-        am, ap, tm, tp, sg = _scan(Pa, Pt, eye, zq, zq, jnp.asarray(H[k:k + 1]), jnp.asarray(meas.R_assumed[k:k + 1]),
-                                   jnp.asarray(meas.R_true[k:k + 1]), layout=lay, kind=study.filter_kind,
-                                   gencov=study.gencov, square_root=False, user_gain=study.user_gain)
+        am, ap, tm, tp, sg = _scan(
+            Pa,
+            Pt,
+            eye,
+            zq,
+            zq,
+            jnp.asarray(H[k : k + 1]),
+            jnp.asarray(meas.R_assumed[k : k + 1]),
+            jnp.asarray(meas.R_true[k : k + 1]),
+            layout=lay,
+            kind=study.filter_kind,
+            gencov=study.gencov,
+            square_root=False,
+            user_gain=study.user_gain,
+        )
         Pa, Pt = ap[0], tp[0]
         for key, v in (("am", am), ("ap", ap), ("tm", tm), ("tp", tp), ("sig", sg)):
             out[key].append(np.asarray(v[0]))
     zeros = np.zeros((K, nx, nx))
-    res = TeamResult(study, ref, meas, np.array(out["am"]), np.array(out["ap"]),
-                     np.array(out["tm"]) if study.gencov else None, np.array(out["tp"]) if study.gencov else None,
-                     zeros, zeros.copy(), np.array(out["sig"]), noise_states=True)
+    res = TeamResult(
+        study,
+        ref,
+        meas,
+        np.array(out["am"]),
+        np.array(out["ap"]),
+        np.array(out["tm"]) if study.gencov else None,
+        np.array(out["tp"]) if study.gencov else None,
+        zeros,
+        zeros.copy(),
+        np.array(out["sig"]),
+        noise_states=True,
+    )
     tm = {"pdot_nodes_s": t_nodes, "pdot_nodes": int(kk)}
     finish(res, tm)
     return res

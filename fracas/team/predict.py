@@ -44,8 +44,9 @@ def predict_from(res, k: int, t_to: float):
         sub = Reference(t_out, ref.states[on_ref], [ref.primary[j] for j in on_ref], phi, theta, labels, "reference")
         prim = sub.primary
     else:
-        traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, ref.states[k], t_out,
-                                                  labels)
+        traj, sens = propagate_with_sensitivities(
+            pr.model, pr.params, pr.ephem, pr.epoch_et_s, ref.states[k], t_out, labels
+        )
         phi = np.array(sens.stm_step)
         if not np.all(np.isfinite(phi)):
             n = study.layout.n

@@ -47,8 +47,9 @@ class Reference:
 
 def run_reference(problem, t_out: np.ndarray, labels: list[str]):
     """Propagate ``problem`` from its x0 with sensitivities over ``t_out``: (traj, sens, status, failed_at_s)."""
-    traj, sens = propagate_with_sensitivities(problem.model, problem.params, problem.ephem, problem.epoch_et_s,
-                                              problem.x0, t_out, labels)
+    traj, sens = propagate_with_sensitivities(
+        problem.model, problem.params, problem.ephem, problem.epoch_et_s, problem.x0, t_out, labels
+    )
     finite = np.all(np.isfinite(np.asarray(sens.stm_step)), axis=(1, 2))
     if np.all(finite):
         return traj, sens, RunStatus.OK, float("nan")
@@ -69,8 +70,18 @@ def integrate_reference(study: Study) -> Reference:
     theta[0] = 0.0
     bodies = study.problem.model.bodies
     prim = [bodies[int(i)] if 0 <= int(i) < len(bodies) else "" for i in np.asarray(traj.primary)[sl]]
-    return Reference(times, np.array(traj.x)[sl], prim, phi, theta, labels, "integrated", status=status,
-                     failed_at_s=failed_at, integrator_status=int(traj.status))
+    return Reference(
+        times,
+        np.array(traj.x)[sl],
+        prim,
+        phi,
+        theta,
+        labels,
+        "integrated",
+        status=status,
+        failed_at_s=failed_at,
+        integrator_status=int(traj.status),
+    )
 
 
 def reference_from_product(study: Study, data: ReferenceTrajectory, source: str) -> Reference:
@@ -85,5 +96,6 @@ def reference_from_product(study: Study, data: ReferenceTrajectory, source: str)
     theta[0] = 0.0
     idx = time_indices(data, times)
     prim = [data.primary[int(i)] for i in idx]
-    return Reference(times, np.asarray(data.states)[idx], prim, phi, theta, list(study.dynamic_labels), source,
-                     data.deck_text)
+    return Reference(
+        times, np.asarray(data.states)[idx], prim, phi, theta, list(study.dynamic_labels), source, data.deck_text
+    )

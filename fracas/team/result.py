@@ -12,12 +12,11 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from fracas import _jax  # noqa: F401
-import jax
-import jax.numpy as jnp
-
 from fracas.filters import covariance as cov
 from fracas.products import CovarianceHistory, EigenEvents, MeasurementLog, Prediction, TeamProduct
 from fracas.status import RunStatus
@@ -27,8 +26,15 @@ from fracas.team.predict import predictions
 from fracas.team.reference import Reference
 from fracas.team.study import Study
 
-__all__ = ["TeamResult", "NOISE_STATE_LABELS", "NOISE_STATE_UNITS", "EIGEN_EVENTS", "psd_problems", "finish",
-           "team_product"]
+__all__ = [
+    "TeamResult",
+    "NOISE_STATE_LABELS",
+    "NOISE_STATE_UNITS",
+    "EIGEN_EVENTS",
+    "psd_problems",
+    "finish",
+    "team_product",
+]
 
 NOISE_STATE_LABELS = ["eta_proportionality", "eta_in_plane_rad", "eta_out_of_plane_rad"]
 NOISE_STATE_UNITS = ["1", "rad", "rad"]
@@ -143,9 +149,14 @@ def _eigen_events(P: np.ndarray, events: list[list[str]]) -> EigenEvents:
     if not es:
         z3, z33 = np.zeros((0, 3)), np.zeros((0, 3, 3))
         return EigenEvents(np.array(ev, dtype=np.int64), z3, z33, z3.copy(), z33.copy(), np.zeros((0, n, n)))
-    return EigenEvents(np.array(ev, dtype=np.int64), np.array([e.pos_eigval for e in es]),
-                       np.array([e.pos_eigvec for e in es]), np.array([e.vel_eigval for e in es]),
-                       np.array([e.vel_eigvec for e in es]), np.array([e.corr for e in es]))
+    return EigenEvents(
+        np.array(ev, dtype=np.int64),
+        np.array([e.pos_eigval for e in es]),
+        np.array([e.pos_eigvec for e in es]),
+        np.array([e.vel_eigval for e in es]),
+        np.array([e.vel_eigvec for e in es]),
+        np.array([e.corr for e in es]),
+    )
 
 
 def _history(Pm, Pp, Q, P0, events) -> CovarianceHistory:
@@ -153,8 +164,9 @@ def _history(Pm, Pp, Q, P0, events) -> CovarianceHistory:
     return CovarianceHistory(Pm, Pp, Q, sig, np.sqrt(np.clip(np.diag(P0), 0, None)), _eigen_events(Pp, events))
 
 
-def team_product(res: TeamResult, *, reference_source: str, settings: dict | None = None,
-                 provenance: dict | None = None) -> TeamProduct:
+def team_product(
+    res: TeamResult, *, reference_source: str, settings: dict | None = None, provenance: dict | None = None
+) -> TeamProduct:
     """The frozen, labelled :class:`~fracas.products.TeamProduct` of a run.
 
     ``settings``: extra descriptive entries (the print options, the trajectory deck's path
@@ -170,7 +182,7 @@ def team_product(res: TeamResult, *, reference_source: str, settings: dict | Non
         out = np.zeros((n, n))  # PDOT: the noise states start stationary at their sigma
         out[: P0.shape[0], : P0.shape[0]] = P0
         sig = st.noise_sigma_assumed if P0 is st.P0_assumed else st.noise_sigma_true
-        out[P0.shape[0]:, P0.shape[0]:] = np.diag(sig ** 2)
+        out[P0.shape[0] :, P0.shape[0] :] = np.diag(sig**2)
         return out
 
     assumed = _history(res.Pa_minus, res.Pa_plus, res.Q_assumed, p0(st.P0_assumed), events)
@@ -179,29 +191,51 @@ def team_product(res: TeamResult, *, reference_source: str, settings: dict | Non
     log = MeasurementLog(
         index=np.array([r.k for r in recs], dtype=np.int64),
         tracking=np.array([r.tracking for r in recs], dtype=np.int64),
-        kind=[r.kind for r in recs], stations=["+".join(r.stations) for r in recs],
+        kind=[r.kind for r in recs],
+        stations=["+".join(r.stations) for r in recs],
         value=np.array([r.value for r in recs], dtype=np.float64),
         elevation_deg=np.array([r.elevation_deg for r in recs], dtype=np.float64),
         used=np.array([r.used for r in recs], dtype=bool),
         sigma=np.array([r.sigma for r in recs], dtype=np.float64),
-        innovation_sigma=np.array([res.innovation_sigma[r.k, r.row] if r.used else np.nan for r in recs],
-                                  dtype=np.float64),
+        innovation_sigma=np.array(
+            [res.innovation_sigma[r.k, r.row] if r.used else np.nan for r in recs], dtype=np.float64
+        ),
     )
     preds = []
     for k, lst in sorted(res.predictions.items()):
         stat = res.prediction_status.get(k, [0] * len(lst))
         for (t_to, Pa, Pt), s in zip(lst, stat):
             preds.append(Prediction(int(k), float(res.times_s[k]), float(t_to), Pa, Pt, int(s)))
-    sett = {"filter": st.filter_kind, "propagation": st.propagation, "square_root": bool(st.square_root),
-            "generalized_covariance": bool(st.gencov), "reference": reference_source,
-            "min_elevation_deg": float(st.min_elevation_deg)}
+    sett = {
+        "filter": st.filter_kind,
+        "propagation": st.propagation,
+        "square_root": bool(st.square_root),
+        "generalized_covariance": bool(st.gencov),
+        "reference": reference_source,
+        "min_elevation_deg": float(st.min_elevation_deg),
+    }
     sett.update(settings or {})
     return TeamProduct(
-        title=st.title, source=st.source, epoch_et_s=float(st.problem.epoch_et_s), times_s=res.times_s,
-        event_types=["+".join(e) for e in events], states=res.ref.states, primary=list(res.ref.primary),
-        labels=res.labels, units=res.units, roles=res.roles, n_state=st.nx, assumed=assumed, true=true,
-        measurements=log, tracking=[(t.kind, "+".join(t.stations)) for t in st.tracking], predictions=preds,
+        title=st.title,
+        source=st.source,
+        epoch_et_s=float(st.problem.epoch_et_s),
+        times_s=res.times_s,
+        event_types=["+".join(e) for e in events],
+        states=res.ref.states,
+        primary=list(res.ref.primary),
+        labels=res.labels,
+        units=res.units,
+        roles=res.roles,
+        n_state=st.nx,
+        assumed=assumed,
+        true=true,
+        measurements=log,
+        tracking=[(t.kind, "+".join(t.stations)) for t in st.tracking],
+        predictions=preds,
         psd_problems=list(res.psd_problems),
-        punch_indices=[k for k, e in enumerate(events) if "punch" in e], status=int(res.status), settings=sett,
-        timing=dict(res.timing), provenance=dict(provenance or {}),
+        punch_indices=[k for k, e in enumerate(events) if "punch" in e],
+        status=int(res.status),
+        settings=sett,
+        timing=dict(res.timing),
+        provenance=dict(provenance or {}),
     )

@@ -5,12 +5,11 @@ from __future__ import annotations
 
 from functools import partial
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from fracas import _jax  # noqa: F401
-import jax
-import jax.numpy as jnp
-
 from fracas.errors import ConfigError
 from fracas.filters import covariance as cov
 from fracas.filters import square_root as sqr
@@ -96,18 +95,32 @@ def run_filter(study: Study, phi_aug, Qa, Qt, meas):
     """Run the jitted scan over the schedule (padded to a bucket size); numpy outputs."""
     K = study.schedule.n
     Kp = bucket(K)
-    phi_aug, Qa, Qt, H, Ra, Rt = _pad_events(K, Kp, [("phi", phi_aug), ("Q", Qa), ("Q", Qt), ("H", meas.H),
-                                                    ("R", meas.R_assumed), ("R", meas.R_true)])
+    phi_aug, Qa, Qt, H, Ra, Rt = _pad_events(
+        K, Kp, [("phi", phi_aug), ("Q", Qa), ("Q", Qt), ("H", meas.H), ("R", meas.R_assumed), ("R", meas.R_true)]
+    )
     try:
-        outs = _scan(jnp.asarray(study.P0_assumed), jnp.asarray(study.P0_true), jnp.asarray(phi_aug), jnp.asarray(Qa),
-                     jnp.asarray(Qt), jnp.asarray(H), jnp.asarray(Ra), jnp.asarray(Rt), layout=study.layout,
-                     kind=study.filter_kind, gencov=study.gencov, square_root=study.square_root,
-                     user_gain=study.user_gain)
+        outs = _scan(
+            jnp.asarray(study.P0_assumed),
+            jnp.asarray(study.P0_true),
+            jnp.asarray(phi_aug),
+            jnp.asarray(Qa),
+            jnp.asarray(Qt),
+            jnp.asarray(H),
+            jnp.asarray(Ra),
+            jnp.asarray(Rt),
+            layout=study.layout,
+            kind=study.filter_kind,
+            gencov=study.gencov,
+            square_root=study.square_root,
+            user_gain=study.user_gain,
+        )
     except (TypeError, ValueError, jax.errors.JAXTypeError) as exc:
         if study.filter_kind == "user":
-            raise ConfigError(f"{study.source}: filter.user_gain = \"{study.user_gain_spec}\" failed: "
-                              f"{type(exc).__name__}: {str(exc).splitlines()[0]} (it is called as "
-                              "gain(P_assumed, H, R, layout) -> K (n_est, m) under jax tracing)") from None
+            raise ConfigError(
+                f'{study.source}: filter.user_gain = "{study.user_gain_spec}" failed: '
+                f"{type(exc).__name__}: {str(exc).splitlines()[0]} (it is called as "
+                "gain(P_assumed, H, R, layout) -> K (n_est, m) under jax tracing)"
+            ) from None
         raise
     Pa_m, Pa_p, Pt_m, Pt_p, sig = (np.asarray(o)[:K] for o in outs)
     return Pa_m, Pa_p, Pt_m, Pt_p, sig

@@ -16,8 +16,17 @@ from fracas.constants import DAY_S
 __all__ = ["Schedule", "build_schedule", "merge_times", "EVENT_ORDER", "TIME_RESOLUTION_S"]
 
 TIME_RESOLUTION_S = 1e-3
-EVENT_ORDER = ("initial", "thrust_on", "thrust_off", "propagation", "measurement", "eigenvector",
-               "prediction", "punch", "final")
+EVENT_ORDER = (
+    "initial",
+    "thrust_on",
+    "thrust_off",
+    "propagation",
+    "measurement",
+    "eigenvector",
+    "prediction",
+    "punch",
+    "final",
+)
 
 
 def _key(t_s: float) -> int:
@@ -65,8 +74,17 @@ class Schedule:
 
     def primary_type(self, k: int) -> str:
         """The main event type at index k (for the results file and printout)."""
-        for kind in ("measurement", "thrust_on", "thrust_off", "prediction", "eigenvector", "propagation",
-                     "punch", "final", "initial"):
+        for kind in (
+            "measurement",
+            "thrust_on",
+            "thrust_off",
+            "prediction",
+            "eigenvector",
+            "propagation",
+            "punch",
+            "final",
+            "initial",
+        ):
             if kind in self.events[k]:
                 return kind
         return "grid"
@@ -78,7 +96,7 @@ def build_schedule(
     tracking_times: list[np.ndarray],
     events: list[tuple[str, np.ndarray, float | None]],
     thrust_switches: list[tuple[float, str]],
-    punch_times: np.ndarray = np.zeros(0),
+    punch_times: np.ndarray | None = None,
 ) -> Schedule:
     """SCHED: merge tracking, user events, thrust switches and punch times inside [start, stop].
 
@@ -109,7 +127,7 @@ def build_schedule(
                 pred.setdefault(k, []).append(float(to))
     for t, kind in thrust_switches:
         add(float(t), kind)
-    for t in np.atleast_1d(punch_times):
+    for t in np.atleast_1d(np.zeros(0) if punch_times is None else punch_times):
         add(float(t), "punch")
     add(stop_s, "final")
     keys = sorted(per)

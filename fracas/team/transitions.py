@@ -7,18 +7,25 @@ per padded size (see :func:`bucket`).
 
 from __future__ import annotations
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from fracas import _jax  # noqa: F401
-import jax
-import jax.numpy as jnp
-
-from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at
 from fracas.filters.process_noise import dyno_q
+from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at
 from fracas.team.study import Study
 
-__all__ = ["theta_columns", "augmented_transitions", "bucket", "noise_partials", "primary_index", "interval_noise",
-           "process_noise", "EPS_T"]
+__all__ = [
+    "theta_columns",
+    "augmented_transitions",
+    "bucket",
+    "noise_partials",
+    "primary_index",
+    "interval_noise",
+    "process_noise",
+    "EPS_T",
+]
 
 EPS_T = 1e-3  # s: interval ends are evaluated this far inside the interval (one-sided at thrust switches)
 
@@ -58,8 +65,9 @@ def noise_partials(study: Study, t_nodes: np.ndarray, x_nodes: np.ndarray, prim_
     k = len(t_nodes)
     kp = bucket(k)
     pad = lambda a: np.concatenate([a, np.repeat(a[-1:], kp - k, axis=0)]) if kp > k else a  # noqa: E731
-    _, B = jacobians_at(pr.model, pr.params, pr.ephem, pr.epoch_et_s, pad(t_nodes), pad(x_nodes), pad(prim_nodes),
-                        THRUST_NOISE_LABELS)
+    _, B = jacobians_at(
+        pr.model, pr.params, pr.ephem, pr.epoch_et_s, pad(t_nodes), pad(x_nodes), pad(prim_nodes), THRUST_NOISE_LABELS
+    )
     return np.asarray(B)[:k, : study.nx, :]
 
 
@@ -90,13 +98,16 @@ def interval_noise(study: Study, t: np.ndarray, states: np.ndarray, primary: lis
     x_nodes = np.concatenate([states[:-1], states[1:]])
     p_nodes = np.concatenate([prim[:-1], prim[1:]])
     h = noise_partials(study, t_nodes, x_nodes, p_nodes)
-    h0, h1 = h[: K - 1], h[K - 1:]
+    h0, h1 = h[: K - 1], h[K - 1 :]
     ph = phi[1:, :nx, :nx]
     m, mp = K - 1, bucket(K - 1)  # pad to a bucket: schedules of similar length share one compile
     pad = lambda a: np.concatenate([a, np.zeros((mp - m,) + a.shape[1:])]) if mp > m else a  # noqa: E731
     args = (pad(ph), pad(h0), pad(h1))
     out = []
-    for sig, tau in ((study.noise_sigma_assumed, study.noise_tau_assumed), (study.noise_sigma_true, study.noise_tau_true)):
+    for sig, tau in (
+        (study.noise_sigma_assumed, study.noise_tau_assumed),
+        (study.noise_sigma_true, study.noise_tau_true),
+    ):
         q = np.asarray(_dyno_batch(*args, jnp.asarray(sig), jnp.asarray(tau), jnp.asarray(pad(dt))))[:m]
         out.append(np.concatenate([zeros[:1], q]))
     return out[0], out[1]

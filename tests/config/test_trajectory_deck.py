@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from pydantic import ValidationError
 
 from fracas import constants
 from fracas.config.trajectory import TrajectoryDeck, load_deck, parse_deck
@@ -57,7 +58,7 @@ def _error(tmp_path: Path, text: str) -> str:
     msg = str(info.value)
     assert "\n" not in msg, msg
     assert msg.startswith(f"{path}: "), msg
-    return msg[len(f"{path}: "):]
+    return msg[len(f"{path}: ") :]
 
 
 # --------------------------------------------------------------------------- good decks
@@ -85,7 +86,7 @@ def test_minimal_deck_defaults():
 
 def test_deck_is_frozen():
     deck = parse_deck(MINIMAL)
-    with pytest.raises(Exception):
+    with pytest.raises(ValidationError):
         deck.spacecraft.mass_kg = 3.0  # type: ignore[misc]
 
 
@@ -136,114 +137,145 @@ def test_toml_syntax_error_names_line(tmp_path):
 # (replacement in MINIMAL, appended text, expected message after "path: ")
 BAD = {
     "unknown field": (
-        ("mass_kg = 1000.0", "mass_kg = 1000.0\nmas_kg = 3"), "",
+        ("mass_kg = 1000.0", "mass_kg = 1000.0\nmas_kg = 3"),
+        "",
         "spacecraft.mas_kg = 3: unknown field (expected one of: mass_kg, area_m2, cr)",
     ),
     "unknown body": (
-        ('centre = "earth"', 'centre = "vulcan"'), "",
+        ('centre = "earth"', 'centre = "vulcan"'),
+        "",
         'initial_state.centre = "vulcan": must be a known body, one of ' + ", ".join(constants.BODIES),
     ),
     "bad frame": (
-        ('centre = "earth"', 'centre = "earth"\nframe = "J2000"'), "",
+        ('centre = "earth"', 'centre = "earth"\nframe = "J2000"'),
+        "",
         "initial_state.frame = \"J2000\": must be 'EME2000', 'ECLIPJ2000' or 'BODY_EQUATOR'",
     ),
     "short vector": (
-        ("r_km = [7000.0, 0.0, 0.0]", "r_km = [7000.0, 0.0]"), "",
+        ("r_km = [7000.0, 0.0, 0.0]", "r_km = [7000.0, 0.0]"),
+        "",
         "initial_state.cartesian.r_km = [7000.0, 0.0]: must be a list of 3 numbers",
     ),
     "string for number": (
-        ("mass_kg = 1000.0", 'mass_kg = "1000"'), "",
+        ("mass_kg = 1000.0", 'mass_kg = "1000"'),
+        "",
         'spacecraft.mass_kg = "1000": must be a number',
     ),
     "missing field": (
-        ("mass_kg = 1000.0", "cr = 1.2"), "",
+        ("mass_kg = 1000.0", "cr = 1.2"),
+        "",
         "spacecraft.mass_kg: required",
     ),
     "non-finite": (
-        ("mass_kg = 1000.0", "mass_kg = inf"), "",
+        ("mass_kg = 1000.0", "mass_kg = inf"),
+        "",
         "spacecraft.mass_kg = Infinity: must be a finite number",
     ),
     "two state forms": (
-        None, "\n[initial_state.elements]\na_km = 7000.0\ne = 0.0\ni_deg = 0.0\nmean_anomaly_deg = 0.0\n",
+        None,
+        "\n[initial_state.elements]\na_km = 7000.0\ne = 0.0\ni_deg = 0.0\nmean_anomaly_deg = 0.0\n",
         "initial_state = {cartesian, elements}: give exactly one of the tables cartesian, elements, spherical",
     ),
     "duration and final epoch": (
-        ("duration_days = 1.0", 'duration_days = 1.0\nfinal_epoch = "2030-01-02"'), "",
+        ("duration_days = 1.0", 'duration_days = 1.0\nfinal_epoch = "2030-01-02"'),
+        "",
         "stop = {duration_days, final_epoch}: give exactly one of duration_days, final_epoch",
     ),
     "bad date": (
-        ('iso = "2030-01-01T00:00:00"', 'iso = "2030-13-01"'), "",
+        ('iso = "2030-01-01T00:00:00"', 'iso = "2030-13-01"'),
+        "",
         'epoch.iso = "2030-13-01": must be an ISO calendar date such as "2030-01-01T00:00:00" (TDB)',
     ),
     "efficiency above one": (
-        None, PROPULSION.replace("efficiency = 0.65", "efficiency = 1.5"),
+        None,
+        PROPULSION.replace("efficiency = 0.65", "efficiency = 1.5"),
         "propulsion.efficiency = 1.5: must be <= 1",
     ),
     "both c and isp": (
-        None, PROPULSION + "isp_s = 3000.0\n",
+        None,
+        PROPULSION + "isp_s = 3000.0\n",
         "propulsion = {exhaust_velocity_km_s, isp_s}: give exactly one of exhaust_velocity_km_s, isp_s",
     ),
     "overlapping arcs": (
-        None, PROPULSION + "[[thrust_arc]]\nstart_days = 0.0\nstop_days = 0.5\n"
+        None,
+        PROPULSION + "[[thrust_arc]]\nstart_days = 0.0\nstop_days = 0.5\n"
         "[[thrust_arc]]\nstart_days = 0.4\nstop_days = 0.6\n",
         "thrust_arc[1].start_days = 0.4: must be >= thrust_arc[0].stop_days = 0.5 (arcs ordered, not overlapping)",
     ),
     "reversed arc": (
-        None, PROPULSION + "[[thrust_arc]]\nstart_days = 0.5\nstop_days = 0.2\n",
+        None,
+        PROPULSION + "[[thrust_arc]]\nstart_days = 0.5\nstop_days = 0.2\n",
         "thrust_arc[0].stop_days = 0.2: must be > start_days = 0.5",
     ),
     "arc past the end": (
-        None, PROPULSION + "[[thrust_arc]]\nstart_days = 0.5\nstop_days = 2.0\n",
+        None,
+        PROPULSION + "[[thrust_arc]]\nstart_days = 0.5\nstop_days = 2.0\n",
         "thrust_arc[0].stop_days = 2.0: must be <= the final time, 1 days",
     ),
     "arcs without propulsion": (
-        None, "[[thrust_arc]]\nstart_days = 0.0\nstop_days = 0.5\n",
+        None,
+        "[[thrust_arc]]\nstart_days = 0.0\nstop_days = 0.5\n",
         "propulsion: a [propulsion] section is required when thrust arcs are given",
     ),
     "primary as third body": (
-        None, '[forces]\nthird_bodies = ["moon", "earth"]\n',
-        'forces.third_bodies[1] = "earth": is the primary (initial_state.centre = "earth"); it cannot also be a third body',
+        None,
+        '[forces]\nthird_bodies = ["moon", "earth"]\n',
+        'forces.third_bodies[1] = "earth": is the primary (initial_state.centre = "earth"); it cannot also be a third body',  # noqa: E501
     ),
     "override of unknown body": (
-        None, "[forces.overrides.vulcan]\nmu_km3_s2 = 1.0\n",
+        None,
+        "[forces.overrides.vulcan]\nmu_km3_s2 = 1.0\n",
         'forces.overrides.vulcan = "vulcan": must be a known body, one of ' + ", ".join(constants.BODIES),
     ),
     "negative eccentricity": (
-        ("[initial_state.cartesian]\nr_km = [7000.0, 0.0, 0.0]\nv_km_s = [0.0, 7.5, 1.0]",
-         "[initial_state.elements]\na_km = 7000.0\ne = -0.1\ni_deg = 0.0\nmean_anomaly_deg = 0.0"), "",
+        (
+            "[initial_state.cartesian]\nr_km = [7000.0, 0.0, 0.0]\nv_km_s = [0.0, 7.5, 1.0]",
+            "[initial_state.elements]\na_km = 7000.0\ne = -0.1\ni_deg = 0.0\nmean_anomaly_deg = 0.0",
+        ),
+        "",
         "initial_state.elements.e = -0.1: must be >= 0",
     ),
     "hyperbola with positive a": (
-        ("[initial_state.cartesian]\nr_km = [7000.0, 0.0, 0.0]\nv_km_s = [0.0, 7.5, 1.0]",
-         "[initial_state.elements]\na_km = 7000.0\ne = 1.5\ni_deg = 0.0\nmean_anomaly_deg = 0.0"), "",
+        (
+            "[initial_state.cartesian]\nr_km = [7000.0, 0.0, 0.0]\nv_km_s = [0.0, 7.5, 1.0]",
+            "[initial_state.elements]\na_km = 7000.0\ne = 1.5\ni_deg = 0.0\nmean_anomaly_deg = 0.0",
+        ),
+        "",
         "initial_state.elements.a_km = 7000.0: must be < 0 for a hyperbola (e > 1)",
     ),
     "radius stop without radius": (
-        ("duration_days = 1.0", 'duration_days = 1.0\ncondition = "radius"'), "",
+        ("duration_days = 1.0", 'duration_days = 1.0\ncondition = "radius"'),
+        "",
         'stop.radius_km: required for condition = "radius"',
     ),
     "integer field": (
-        None, "[integrator]\nmax_steps = 1.5\n",
+        None,
+        "[integrator]\nmax_steps = 1.5\n",
         "integrator.max_steps = 1.5: must be an integer",
     ),
     "boolean field": (
-        None, "[forces]\nj2 = 1\n",
+        None,
+        "[forces]\nj2 = 1\n",
         "forces.j2 = 1: must be true or false",
     ),
     "output after the end": (
-        None, "[output]\ntimes_days = [0.5, 2.0]\n",
+        None,
+        "[output]\ntimes_days = [0.5, 2.0]\n",
         "output.times_days[1] = 2.0: must be <= the final time, 1 days",
     ),
     "malformed label": (
-        None, '[output]\nsensitivities = ["mu sun"]\n',
-        'output.sensitivities[0] = "mu sun": must be a parameter label such as "mu[sun]", "thrust_scale" or "arc_thrust_scale[0]"',
+        None,
+        '[output]\nsensitivities = ["mu sun"]\n',
+        'output.sensitivities[0] = "mu sun": must be a parameter label such as "mu[sun]", "thrust_scale" or "arc_thrust_scale[0]"',  # noqa: E501
     ),
     "srp without area": (
-        None, "[forces]\nsrp = true\n",
+        None,
+        "[forces]\nsrp = true\n",
         "spacecraft.area_m2 = 0.0: must be > 0 when forces.srp = true",
     ),
     "repeated third body": (
-        None, '[forces]\nthird_bodies = ["moon", "moon"]\n',
+        None,
+        '[forces]\nthird_bodies = ["moon", "moon"]\n',
         'forces.third_bodies[1] = "moon": listed twice',
     ),
 }
@@ -368,7 +400,7 @@ def test_spherical_state():
     from fracas.build import build_propagation
 
     cart = "[initial_state.cartesian]\nr_km = [7000.0, 0.0, 0.0]\nv_km_s = [0.0, 7.5, 1.0]"
-    sph = "[initial_state.spherical]\nr_km = 7000.0\nlat_deg = 0.0\nlon_deg = 0.0\nv_km_s = 7.5\ngamma_deg = 0.0\nsigma_deg = 90.0"
+    sph = "[initial_state.spherical]\nr_km = 7000.0\nlat_deg = 0.0\nlon_deg = 0.0\nv_km_s = 7.5\ngamma_deg = 0.0\nsigma_deg = 90.0"  # noqa: E501
     p = build_propagation(parse_deck(MINIMAL.replace(cart, sph)))
     np.testing.assert_allclose(p.x0[:6], [7000.0, 0, 0, 0, 7.5, 0], atol=1e-12)
 

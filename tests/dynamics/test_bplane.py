@@ -16,8 +16,6 @@ Independent references:
 
 from __future__ import annotations
 
-from fracas import _jax  # noqa: F401
-
 import math
 
 import jax
@@ -28,7 +26,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-from fracas import constants
+from fracas import (
+    _jax,  # noqa: F401
+    constants,
+)
 from fracas.dynamics.bplane import b_plane
 
 MU_MARS = constants.BODIES["mars"].mu_km3_s2
@@ -64,9 +65,7 @@ def _oriented_flyby(a, e, H, s_dir, theta0, mu, pole=POLE):
     T = _unit(np.cross(S, pole))
     R = np.cross(S, T)
     bh = math.cos(theta0) * T + math.sin(theta0) * R
-    Q = np.column_stack([S, bh, np.cross(S, bh)]) @ np.column_stack(
-        [s_pf, bh_pf, np.cross(s_pf, bh_pf)]
-    ).T
+    Q = np.column_stack([S, bh, np.cross(S, bh)]) @ np.column_stack([s_pf, bh_pf, np.cross(s_pf, bh_pf)]).T
     r_pf, v_pf = _planar_hyperbola(a, e, H, mu)
     return Q @ r_pf, Q @ v_pf, S, T, R, b
 
@@ -122,8 +121,7 @@ def test_custom_reference_pole():
     and B.T, B.R follow the construction made with that pole."""
     eps = constants.OBLIQUITY_J2000_RAD
     pole = (0.0, -math.sin(eps), math.cos(eps))
-    r, v, S, T, R, b = _oriented_flyby(-9000.0, 2.5, -2.0, [1.0, 2.0, -0.5], -2.0,
-                                       MU_MARS, pole)
+    r, v, S, T, R, b = _oriented_flyby(-9000.0, 2.5, -2.0, [1.0, 2.0, -0.5], -2.0, MU_MARS, pole)
     out = b_plane(jnp.asarray(r), jnp.asarray(v), MU_MARS, pole)
     assert abs(float(jnp.dot(out.t_hat, jnp.asarray(pole)))) < 1e-15
     assert float(out.b_dot_t) == pytest.approx(b * math.cos(-2.0), rel=1e-12)
@@ -162,16 +160,23 @@ def test_closest_approach_vs_dop853(a, e, H, mu):
     out = b_plane(jnp.asarray(r), jnp.asarray(v), mu, POLE)
     t_ca = float(out.t_closest_approach)
     assert t_ca > 0
-    sol = solve_ivp(_two_body, (0.0, 3 * t_ca), np.concatenate([r, v]), method="DOP853",
-                    rtol=1e-13, atol=1e-12, events=_periapsis_event, args=(mu,))
+    sol = solve_ivp(
+        _two_body,
+        (0.0, 3 * t_ca),
+        np.concatenate([r, v]),
+        method="DOP853",
+        rtol=1e-13,
+        atol=1e-12,
+        events=_periapsis_event,
+        args=(mu,),
+    )
     t_ev = sol.t_events[0][0]
     r_ev = np.linalg.norm(sol.y_events[0][0][:3])
     assert t_ca == pytest.approx(t_ev, rel=1e-9)
     assert float(out.r_closest_approach) == pytest.approx(r_ev, rel=1e-10)
     # after periapsis the time is negative (periapsis behind)
     y_after = sol.y_events[0][0]
-    sol2 = solve_ivp(_two_body, (0.0, 0.5 * t_ca), y_after, method="DOP853", rtol=1e-13,
-                     atol=1e-12, args=(mu,))
+    sol2 = solve_ivp(_two_body, (0.0, 0.5 * t_ca), y_after, method="DOP853", rtol=1e-13, atol=1e-12, args=(mu,))
     out2 = b_plane(jnp.asarray(sol2.y[:3, -1]), jnp.asarray(sol2.y[3:, -1]), mu, POLE)
     assert float(out2.t_closest_approach) == pytest.approx(-0.5 * t_ca, rel=1e-9)
     # B.T, B.R are constants of the motion

@@ -13,8 +13,6 @@ Independent references used here:
 
 from __future__ import annotations
 
-from fracas import _jax  # noqa: F401
-
 import math
 
 import jax
@@ -25,7 +23,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-from fracas import constants
+from fracas import (
+    _jax,  # noqa: F401
+    constants,
+)
 from fracas.dynamics import elements as el
 
 MU = constants.MU_EARTH_EGM96_KM3_S2
@@ -37,9 +38,11 @@ e2c = jax.jit(el.elements_to_cartesian)
 kepler = jax.jit(jax.vmap(el.solve_kepler))
 # forward and reverse derivatives of Kepler's equation in one compiled program
 kepler_derivs = jax.jit(
-    lambda M, e: (el.solve_kepler(M, e),
-                  jax.grad(el.solve_kepler, argnums=(0, 1))(M, e),
-                  jax.jacfwd(el.solve_kepler, argnums=(0, 1))(M, e))
+    lambda M, e: (
+        el.solve_kepler(M, e),
+        jax.grad(el.solve_kepler, argnums=(0, 1))(M, e),
+        jax.jacfwd(el.solve_kepler, argnums=(0, 1))(M, e),
+    )
 )
 
 
@@ -103,12 +106,10 @@ def test_kepler_root_backward_error():
     M = np.concatenate([np.linspace(-np.pi, np.pi, 121), np.logspace(-14, 0, 15)])
     Ee, Me = (x.ravel() for x in np.meshgrid(e, M))
     e = np.concatenate([np.linspace(1.001, 10.0, 40), 1 + np.logspace(-4, -3, 5), [1e2, 1e3]])
-    M = np.concatenate([np.linspace(-30, 30, 61), np.logspace(-14, 8, 23),
-                        -np.logspace(-14, 8, 23)])
+    M = np.concatenate([np.linspace(-30, 30, 61), np.logspace(-14, 8, 23), -np.logspace(-14, 8, 23)])
     Eh, Mh = (x.ravel() for x in np.meshgrid(e, M))
-    X = np.asarray(kepler(jnp.asarray(np.concatenate([Me, Mh])),
-                          jnp.asarray(np.concatenate([Ee, Eh]))))
-    E, H = X[: Me.size], X[Me.size:]
+    X = np.asarray(kepler(jnp.asarray(np.concatenate([Me, Mh])), jnp.asarray(np.concatenate([Ee, Eh]))))
+    E, H = X[: Me.size], X[Me.size :]
 
     res = np.abs(E - Ee * np.sin(E) - Me)
     scale = np.abs(E) + Ee * np.abs(np.sin(E)) + np.abs(Me) + 1e-300
@@ -277,8 +278,11 @@ def test_gradients_finite_at_degenerate_states():
     """Exactly circular equatorial (pro- and retrograde) and equatorial hyperbolic states:
     forward and reverse derivatives of both conversions contain no NaN (double-where
     guards)."""
-    for elems in ([7000.0, 0.0, 0.0, 0.0, 0.0, 1.0], [7000.0, 0.0, np.pi, 0.0, 0.0, 1.0],
-                  [-9000.0, 1.7, 0.0, 0.0, 0.3, -2.0]):
+    for elems in (
+        [7000.0, 0.0, 0.0, 0.0, 0.0, 1.0],
+        [7000.0, 0.0, np.pi, 0.0, 0.0, 1.0],
+        [-9000.0, 1.7, 0.0, 0.0, 0.3, -2.0],
+    ):
         x = jnp.asarray(elems)
         y = e2c_flat(x)
         # a NaN anywhere in a Jacobian column would poison the all-ones JVP
@@ -322,8 +326,7 @@ def test_conic_body_state_vs_dop853(elems, dt):
     if elems[0] > 0:
         dt = dt * 2 * np.pi * math.sqrt(elems[0] ** 3 / MU)
     r0, v0 = _state(elems)
-    sol = solve_ivp(_two_body, (0.0, dt), np.concatenate([r0, v0]), method="DOP853",
-                    rtol=1e-13, atol=1e-12, args=(MU,))
+    sol = solve_ivp(_two_body, (0.0, dt), np.concatenate([r0, v0]), method="DOP853", rtol=1e-13, atol=1e-12, args=(MU,))
     r1, v1 = el.conic_body_state(jnp.asarray(elems), MU, dt)
     _assert_state_close(np.asarray(r1), np.asarray(v1), sol.y[:3, -1], sol.y[3:, -1], 1e-9)
 
@@ -348,7 +351,7 @@ def _assert_columns_close(J, Jfd, frac):
     """|J - Jfd| <= frac * (largest |entry| of the same column of Jfd), per column."""
     scale = np.abs(Jfd).max(axis=0)
     err = np.abs(J - Jfd).max(axis=0)
-    assert np.all(err <= frac * scale), (err / scale)
+    assert np.all(err <= frac * scale), err / scale
 
 
 def _fd_jacobian(f, x, steps):
@@ -395,8 +398,9 @@ def test_jacobians_vs_central_differences(elems):
     _assert_columns_close(Ji, Jfd, 2e-6)
     # forward mode of the same map, along a generic direction
     w = np.array([0.3, -1.2, 0.7, 1e-3, 2e-3, -1.5e-3])
-    np.testing.assert_allclose(c2e_jvp(jnp.asarray(y0), jnp.asarray(w)), Ji @ w, rtol=1e-11,
-                               atol=1e-12 * np.abs(Ji @ w).max())
+    np.testing.assert_allclose(
+        c2e_jvp(jnp.asarray(y0), jnp.asarray(w)), Ji @ w, rtol=1e-11, atol=1e-12 * np.abs(Ji @ w).max()
+    )
     # the two Jacobians are inverses of each other (exact AD identity)
     np.testing.assert_allclose(Ji @ Jf, np.eye(6), atol=1e-9)
 
@@ -445,6 +449,7 @@ def test_spherical_round_trip(r, lat, lon, v, gamma, sigma):
 def test_spherical_polar_and_radial_finite_gradients():
     """On the polar axis (lon undefined) and for radial velocity (sigma undefined) the
     inverse returns 0 for the undefined angle and finite gradients."""
+
     def f(y):
         return jnp.stack(el.cartesian_to_spherical(y[:3], y[3:]))
 
@@ -477,8 +482,9 @@ def test_euler_hand_cases():
     P = np.asarray(el.euler_matrix(jnp.array([np.pi / 2, np.pi / 2, 0.0]), (3, 1, 3)))
     np.testing.assert_allclose(P, [[0, 1, 0], [0, 0, 1], [1, 0, 0]], atol=1e-15)
     c, s = math.cos(0.3), math.sin(0.3)
-    np.testing.assert_allclose(el.euler_matrix(jnp.array([0.3, 0.0, 0.0]), (2, 1, 1)),
-                               [[c, 0, -s], [0, 1, 0], [s, 0, c]], atol=1e-16)
+    np.testing.assert_allclose(
+        el.euler_matrix(jnp.array([0.3, 0.0, 0.0]), (2, 1, 1)), [[c, 0, -s], [0, 1, 0], [s, 0, c]], atol=1e-16
+    )
     raan, i, argp = 0.4, 1.1, 2.3
     A = np.asarray(el.euler_matrix(jnp.array([raan, i, argp]), (3, 1, 3))).T
     Pv, Qv = el.perifocal_basis(i, raan, argp)
@@ -494,9 +500,9 @@ def test_ecliptic_matrix():
     A = np.asarray(el.ecliptic_to_equatorial_matrix())
     eps = math.radians(23.4392794444)
     ra, dec = math.radians(270.0), math.pi / 2 - eps
-    np.testing.assert_allclose(A @ [0, 0, 1], [math.cos(ra) * math.cos(dec),
-                                               math.sin(ra) * math.cos(dec), math.sin(dec)],
-                               atol=1e-15)
+    np.testing.assert_allclose(
+        A @ [0, 0, 1], [math.cos(ra) * math.cos(dec), math.sin(ra) * math.cos(dec), math.sin(dec)], atol=1e-15
+    )
     np.testing.assert_allclose(A @ [1, 0, 0], [1, 0, 0], atol=0)
     np.testing.assert_allclose(A @ A.T, np.eye(3), atol=1e-15)
 
@@ -508,12 +514,13 @@ def test_peceq_report_pole_formula_matches():
     body = constants.BODIES["mars"]
     a, d = math.radians(body.pole_ra_deg), math.radians(body.pole_dec_deg)
     eps = constants.OBLIQUITY_J2000_RAD
-    report = [math.cos(a) * math.cos(d),
-              math.cos(eps) * math.sin(a) * math.cos(d) + math.sin(eps) * math.sin(d),
-              -math.sin(eps) * math.sin(a) * math.cos(d) + math.cos(eps) * math.sin(d)]
+    report = [
+        math.cos(a) * math.cos(d),
+        math.cos(eps) * math.sin(a) * math.cos(d) + math.sin(eps) * math.sin(d),
+        -math.sin(eps) * math.sin(a) * math.cos(d) + math.cos(eps) * math.sin(d),
+    ]
     pole = np.array(constants.pole_unit_vector("mars"))
-    np.testing.assert_allclose(np.asarray(el.ecliptic_to_equatorial_matrix()).T @ pole,
-                               report, atol=1e-15)
+    np.testing.assert_allclose(np.asarray(el.ecliptic_to_equatorial_matrix()).T @ pole, report, atol=1e-15)
 
 
 def test_planet_equatorial_matrix():

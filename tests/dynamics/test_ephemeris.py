@@ -10,18 +10,17 @@ from __future__ import annotations
 
 import datetime as dt
 
+import de421
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-import de421
 from jplephem.ephem import Ephemeris
 
-from fracas.errors import ConfigError
 from fracas.dynamics import ephemeris as E
-import jax
-import jax.numpy as jnp
+from fracas.errors import ConfigError
 
 NAMES = E.BODY_NAMES
 T0 = E.calendar_to_et("2025-01-01T00:00:00")
@@ -84,7 +83,8 @@ def test_matches_jplephem_at_random_times(table, jpl):
     # roundings of the largest term.  Measured (2025-2027): max |dr| 2.2e-8 km (Mercury),
     # 8.9e-8 km (Earth), 6.0e-8 km (Moon), 2.4e-7 km (Jupiter), 1.9e-6 km (Neptune) =
     # 4.3e-16 |r|; max |dv| 2.1e-14 km/s.  (Against an 80-bit re-evaluation of the raw
-    # series fracas is off by <= 1.2e-6 km for Neptune, jplephem-style float64 by 1.6e-6.)  1e-6 km is below one ulp of Neptune's/Pluto's coordinates
+    # series fracas is off by <= 1.2e-6 km for Neptune, jplephem-style float64 by 1.6e-6.)
+    # 1e-6 km is below one ulp of Neptune's/Pluto's coordinates
     # (ulp(4.5e9 km) = 9.5e-7 km), so the bound is 1e-6 km plus 8 ulp of |r|.
     r = np.linalg.norm(ref_pos, axis=-1, keepdims=True)
     assert np.all(np.abs(pos - ref_pos) <= 1e-6 + 8 * EPS * r)
@@ -146,9 +146,7 @@ def test_usable_inside_while_loop(table):
         p, _ = E.body_states(table, t)
         return i + 1, t + 86400.0, acc + jnp.linalg.norm(p[3])
 
-    n, _, acc = jax.jit(
-        lambda t: jax.lax.while_loop(lambda c: c[0] < 10, body, (0, t, 0.0))
-    )(jnp.float64(T0))
+    n, _, acc = jax.jit(lambda t: jax.lax.while_loop(lambda c: c[0] < 10, body, (0, t, 0.0)))(jnp.float64(T0))
     assert int(n) == 10 and 0.98 < float(acc) / 10 / 149_597_870.7 < 1.02
 
 

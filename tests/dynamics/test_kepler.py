@@ -4,13 +4,14 @@ Lagrange identity f gdot - fdot g = 1, and central finite differences for the AD
 
 from __future__ import annotations
 
+import jax
 import numpy as np
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-import jax
-
-from fracas.dynamics.kepler import kepler, kepler_fg as _kepler_fg, stumpff
+from fracas.dynamics.kepler import kepler, stumpff
+from fracas.dynamics.kepler import kepler_fg as _kepler_fg
 
 kepler_fg = jax.jit(_kepler_fg)
 

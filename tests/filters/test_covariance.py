@@ -20,7 +20,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.filters.helpers import f64, random_cov, scaled_err
 from fracas.filters.covariance import (
     PSD_TOLERANCE,
     Layout,
@@ -34,6 +33,7 @@ from fracas.filters.covariance import (
     wls_gain,
     wls_time_update,
 )
+from tests.filters.helpers import f64, random_cov, scaled_err
 
 ROLES = ("x", "s", "u", "v", "w")
 
@@ -102,13 +102,7 @@ def filter_residuals(P, H, R, L):
     B = b["ss"] @ Hs.T + T(b["xs"]) @ Hx.T + b["su"] @ Hu.T + b["sv"] @ Hv.T + b["sw"] @ Hw.T
     D = T(b["xu"]) @ Hx.T + T(b["su"]) @ Hs.T + b["uu"] @ Hu.T + b["uv"] @ Hv.T + b["uw"] @ Hw.T
     E = T(b["xv"]) @ Hx.T + T(b["sv"]) @ Hs.T + T(b["uv"]) @ Hu.T + b["vv"] @ Hv.T + b["vw"] @ Hw.T
-    F = (
-        T(b["xw"]) @ Hx.T
-        + T(b["sw"]) @ Hs.T
-        + T(b["uw"]) @ Hu.T
-        + T(b["vw"]) @ Hv.T
-        + b["ww"] @ Hw.T
-    )
+    F = T(b["xw"]) @ Hx.T + T(b["sw"]) @ Hs.T + T(b["uw"]) @ Hu.T + T(b["vw"]) @ Hv.T + b["ww"] @ Hw.T
     J = Hx @ A + Hs @ B + Hu @ D + Hv @ E + Hw @ F + R
     return A, B, D, E, F, J
 
@@ -197,9 +191,7 @@ def test_time_update_equals_prop_eqs_5_16(L, m):
         P, phi, theta, Q, H, R = random_problem(rng, L, m)
         F = augmented_transition(f64(phi), f64(theta), L)
         got = np.asarray(time_update(f64(P), F, f64(Q)))
-        Ts, Tu, Tw = (
-            theta[:, getattr(L, r).start - L.nx : getattr(L, r).stop - L.nx] for r in "suw"
-        )
+        Ts, Tu, Tw = (theta[:, getattr(L, r).start - L.nx : getattr(L, r).stop - L.nx] for r in "suw")
         ref = prop_literal(P, phi, Ts, Tu, Tw, Q, L)
         assert scaled_err(got, ref, ref) < TOL
         assert np.array_equal(got, got.T)

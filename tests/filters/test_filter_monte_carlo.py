@@ -21,12 +21,11 @@ about ±7%, so a covariance that is 10% off anywhere is rejected, as the negativ
 
 from __future__ import annotations
 
-import numpy as np
 import jax.numpy as jnp
+import numpy as np
 from scipy.linalg import expm
 from scipy.stats import chi2
 
-from tests.filters.helpers import f64, random_cov
 from fracas.filters.covariance import (
     Layout,
     augmented_transition,
@@ -36,6 +35,7 @@ from fracas.filters.covariance import (
     wls_gain,
     wls_time_update,
 )
+from tests.filters.helpers import f64, random_cov
 
 N_RUNS = 4000
 N_EPOCHS = 20

@@ -166,7 +166,9 @@ def test_pdot_noise_state_relaxes_with_gm_decay():
     Qc = np.asarray(gm_Qc(np.array([SIG]), np.array([TAU]), 0, 0))
     nodes = 2 * N_STEPS + 1
     P = np.asarray(
-        pdot_propagate(np.zeros((1, 1)), np.broadcast_to(F, (nodes, 1, 1)), np.broadcast_to(Qc, (nodes, 1, 1)), t / N_STEPS)
+        pdot_propagate(
+            np.zeros((1, 1)), np.broadcast_to(F, (nodes, 1, 1)), np.broadcast_to(Qc, (nodes, 1, 1)), t / N_STEPS
+        )
     )
     g = float(gm_decay(TAU, t))
     assert g == pytest.approx(np.exp(-3.0), rel=1e-15)

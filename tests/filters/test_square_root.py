@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from tests.filters.helpers import f64, random_cov, scaled_err
 from fracas.filters.covariance import (
     Layout,
     augmented_transition,
@@ -29,6 +28,7 @@ from fracas.filters.square_root import (
     sqrt_kalman_schmidt_gain,
     sqrt_time_update,
 )
+from tests.filters.helpers import f64, random_cov, scaled_err
 
 TOL = 1e-10
 

@@ -76,8 +76,17 @@ def test_chunking_with_padding_gives_the_same_results():
     whole = propagate_batch(MODEL, PARAMS, None, 0.0, x0s, T_OUT, devices=host_devices()[:1])
     # chunks of 2 rows: (0,1) (2,3) (4, pad); the padded row must not leak into the outputs
     seen = []
-    chunked = propagate_batch(MODEL, PARAMS, None, 0.0, x0s, T_OUT, chunk_size=2, devices=host_devices()[:1],
-                              progress=lambda done, total: seen.append((done, total)))
+    chunked = propagate_batch(
+        MODEL,
+        PARAMS,
+        None,
+        0.0,
+        x0s,
+        T_OUT,
+        chunk_size=2,
+        devices=host_devices()[:1],
+        progress=lambda done, total: seen.append((done, total)),
+    )
     assert seen == [(2, 5), (4, 5), (5, 5)]  # one progress report per chunk, padding not counted
     assert chunked.x.shape == whole.x.shape
     _close_states(chunked.x, whole.x)
@@ -89,8 +98,9 @@ def test_batched_params_match_single_propagations():
     x0s = _states(3, seed=2)
     mus = np.array([[398600.4418], [398600.0], [398601.0]])
     p = PARAMS._replace(mu=mus)
-    tr = propagate_batch(MODEL, p, None, 0.0, x0s, T_OUT, chunk_size=2, params_axes={"mu": 0},
-                         devices=host_devices()[:1])
+    tr = propagate_batch(
+        MODEL, p, None, 0.0, x0s, T_OUT, chunk_size=2, params_axes={"mu": 0}, devices=host_devices()[:1]
+    )
     for i in range(3):
         one = propagate(MODEL, PARAMS._replace(mu=mus[i]), None, 0.0, x0s[i], T_OUT)
         _check_traj(tr, i, one)
@@ -104,8 +114,18 @@ def test_batched_sensitivities_match_single():
     x0s = _states(3, seed=3)
     t_out = np.array([0.0, 3000.0])
     labels = ("mu[earth]",)
-    tr, sens = propagate_batch(MODEL, PARAMS, None, 0.0, x0s, t_out, chunk_size=2, with_sensitivities=True,
-                               param_labels=labels, devices=host_devices()[:1])
+    tr, sens = propagate_batch(
+        MODEL,
+        PARAMS,
+        None,
+        0.0,
+        x0s,
+        t_out,
+        chunk_size=2,
+        with_sensitivities=True,
+        param_labels=labels,
+        devices=host_devices()[:1],
+    )
     assert sens.stm.shape == (3, 2, 7, 7) and sens.par.shape == (3, 2, 7, 1)
     for i in range(3):
         tr1, s1 = propagate_with_sensitivities(MODEL, PARAMS, None, 0.0, x0s[i], t_out, labels)
@@ -139,6 +159,5 @@ def test_sharded_over_two_host_devices_matches_one_device():
     env["XLA_FLAGS"] = " ".join(flags)
     env["FRACAS_HOST_DEVICES"] = "2"
     env["JAX_PLATFORMS"] = "cpu"
-    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True,
-                         timeout=600)
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0 and "OK" in out.stdout, out.stdout + out.stderr

@@ -67,8 +67,18 @@ def _batch_states():
 
 
 def _run(x0s, sens: bool):
-    return propagate_batch(MODEL_CAPPED, PARAMS, None, 0.0, x0s, T_OUT, chunk_size=4, with_sensitivities=sens,
-                           param_labels=LABELS if sens else (), devices=host_devices()[:1])
+    return propagate_batch(
+        MODEL_CAPPED,
+        PARAMS,
+        None,
+        0.0,
+        x0s,
+        T_OUT,
+        chunk_size=4,
+        with_sensitivities=sens,
+        param_labels=LABELS if sens else (),
+        devices=host_devices()[:1],
+    )
 
 
 def _check_statuses(tr, singles):
@@ -119,8 +129,9 @@ def test_failed_members_do_not_touch_the_others_with_sensitivities():
     singles = {}
     single_sens = {}
     for i in range(len(x0s)):
-        singles[i], single_sens[i] = propagate_with_sensitivities(MODEL_CAPPED, PARAMS, None, 0.0, x0s[i], T_OUT,
-                                                                  LABELS)
+        singles[i], single_sens[i] = propagate_with_sensitivities(
+            MODEL_CAPPED, PARAMS, None, 0.0, x0s[i], T_OUT, LABELS
+        )
     _check_statuses(tr, singles)
     _check_healthy_against_single(tr, singles)
     for i in HEALTHY:
@@ -148,8 +159,13 @@ def test_a_failed_last_row_padding_the_chunk():
 def test_run_status_codes_and_texts():
     assert [int(s) for s in PROPAGATION_STATUSES] == [0, 1, 2, 3]
     assert {s.name: int(s) for s in RunStatus} == {
-        "OK": 0, "STOPPED": 1, "MAX_STEPS": 2, "NONFINITE": 3,
-        "OUTSIDE_TRAJECTORY": 5, "NOT_POSITIVE_DEFINITE": 6, "NONFINITE_COVARIANCE": 7,
+        "OK": 0,
+        "STOPPED": 1,
+        "MAX_STEPS": 2,
+        "NONFINITE": 3,
+        "OUTSIDE_TRAJECTORY": 5,
+        "NOT_POSITIVE_DEFINITE": 6,
+        "NONFINITE_COVARIANCE": 7,
     }
     # the texts trajectory files have always carried
     assert STATUS_TEXT[0] == "reached the final time"
@@ -183,5 +199,6 @@ def test_run_status_texts_are_what_the_trajectory_file_writes(tmp_path, code):
     meaning = meaning.decode() if isinstance(meaning, bytes) else str(meaning)
     # "0 reached the final time; 1 stop condition met; ..." : the propagation codes, unchanged
     assert meaning == "; ".join(f"{int(s)} {s.text}" for s in PROPAGATION_STATUSES)
-    assert meaning == ("0 reached the final time; 1 stop condition met; 2 maximum number of steps reached; "
-                       "3 non-finite state")
+    assert meaning == (
+        "0 reached the final time; 1 stop condition met; 2 maximum number of steps reached; 3 non-finite state"
+    )

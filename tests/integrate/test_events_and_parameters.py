@@ -30,7 +30,11 @@ def test_impulses_in_both_frames():
     dv_vel = np.array([0.05, 0.01, -0.02])
     dv_in = np.array([-0.01, 0.03, 0.02])
     p = default_params(
-        m, mu=[MU], impulse_t=[2000.0, 4000.0], impulse_dv=[dv_vel, dv_in], impulse_frame=[0.0, 1.0],
+        m,
+        mu=[MU],
+        impulse_t=[2000.0, 4000.0],
+        impulse_dv=[dv_vel, dv_in],
+        impulse_frame=[0.0, 1.0],
         impulse_isp_s=320.0,
     )
     tr = propagate(m, p, None, 0.0, X0, np.array([0.0, 6000.0]))
@@ -60,13 +64,23 @@ def test_radius_stop_during_a_thrust_arc():
     the radius (1e-6 km) at the DOP853 event time (0.01 s: the event tolerance is 1e-6 s and
     the integration error ~1e-4 km at 7 km/s)."""
     m = ForceModel(
-        bodies=("earth",), thrust=True, velocity_dependent=True, power="nuclear", n_arcs=1,
+        bodies=("earth",),
+        thrust=True,
+        velocity_dependent=True,
+        power="nuclear",
+        n_arcs=1,
         stop=StopCondition(kind="radius", body=0, radius_km=7400.0),
         integrator=IntegratorSettings(c_nom=0.02),
     )
     p = default_params(
-        m, mu=[MU], power_kw=200.0, power_decay_s=1.0e6, efficiency=0.7, exhaust_velocity_km_s=20.0,
-        arc_t_on=[0.0], arc_t_off=[10 * DAY],
+        m,
+        mu=[MU],
+        power_kw=200.0,
+        power_decay_s=1.0e6,
+        efficiency=0.7,
+        exhaust_velocity_km_s=20.0,
+        arc_t_on=[0.0],
+        arc_t_off=[10 * DAY],
     )
     tr = propagate(m, p, None, 0.0, X0, np.array([0.0, 10 * DAY]))
     assert int(tr.status) == 1
@@ -92,7 +106,10 @@ def test_leaving_earth_sphere_of_influence():
     body) to 0.01 km."""
     bodies = ("sun", "earth")
     m = ForceModel(
-        bodies=bodies, primary=1, third_bodies=(0,), change_primary_at_soi=True,
+        bodies=bodies,
+        primary=1,
+        third_bodies=(0,),
+        change_primary_at_soi=True,
         integrator=IntegratorSettings(c_nom=0.02, dt_max_s=3600.0),
     )
     p = default_params(m)
@@ -121,14 +138,27 @@ def _helio_model():
     (fixed conic elements), 60 days."""
     bodies = ("sun", "mars", "jupiter")
     m = ForceModel(
-        bodies=bodies, primary=0, third_bodies=(1, 2), srp=True, conic_bodies=(1,),
+        bodies=bodies,
+        primary=0,
+        third_bodies=(1, 2),
+        srp=True,
+        conic_bodies=(1,),
         integrator=IntegratorSettings(c_nom=0.05, dt_max_s=DAY, rect_ratio=10.0),
     )
     el_mars = np.array([2.2794e8, 0.0934, np.radians(24.7), np.radians(3.4), np.radians(332.0), np.radians(20.0)])
-    p = default_params(m, area_m2=40.0, cr=1.4, body_elements=np.stack([np.zeros(6), el_mars, np.zeros(6)]),
-                       body_elements_et=[0.0, ET0, 0.0])
+    p = default_params(
+        m,
+        area_m2=40.0,
+        cr=1.4,
+        body_elements=np.stack([np.zeros(6), el_mars, np.zeros(6)]),
+        body_elements_et=[0.0, ET0, 0.0],
+    )
     eph = build_ephemeris(bodies, ET0, ET0 + 61 * DAY)
-    rm = np.asarray(__import__("fracas.dynamics.elements", fromlist=["x"]).conic_body_state(el_mars, C.BODIES["sun"].mu_km3_s2 + C.BODIES["mars"].mu_km3_s2, 30 * DAY)[0])
+    rm = np.asarray(
+        __import__("fracas.dynamics.elements", fromlist=["x"]).conic_body_state(
+            el_mars, C.BODIES["sun"].mu_km3_s2 + C.BODIES["mars"].mu_km3_s2, 30 * DAY
+        )[0]
+    )
     r0 = rm * (1 - 3.0e6 / np.linalg.norm(rm))  # 3e6 km sunward of where Mars will be in 30 days
     v0 = np.cross([0.0, 0.0, 1.0], r0)
     v0 = v0 / np.linalg.norm(v0) * np.sqrt(C.BODIES["sun"].mu_km3_s2 / np.linalg.norm(r0))
@@ -146,8 +176,15 @@ def test_ephemeris_and_element_parameters_match_finite_differences():
     spacecraft ~0.05 km (truncation ~(1e3/3e6)^2 ~ 1e-7, roundoff ~6e-7).  Rectification is off so the FD
     quotient has no step-sequence jumps."""
     m, p, eph, x0 = _helio_model()
-    labels = ("cr", "mu[sun]", "mu[mars]", "mu[jupiter]", "body_elements[mars,a]", "body_elements[mars,e]",
-              "body_elements[mars,M]")
+    labels = (
+        "cr",
+        "mu[sun]",
+        "mu[mars]",
+        "mu[jupiter]",
+        "body_elements[mars,a]",
+        "body_elements[mars,e]",
+        "body_elements[mars,M]",
+    )
     t_out = np.array([0.0, 60 * DAY])
     _, s = propagate_with_sensitivities(m, p, eph, ET0, x0, t_out, labels)
     par = np.asarray(s.par[-1])
@@ -171,10 +208,25 @@ def test_inertial_thrust_three_evaluation_step_matches_dop853():
     LEO truncation level); the 4-evaluation step gives the same answer to 1 m."""
     ra, dec = np.radians(30.0), np.radians(10.0)
     u = np.array([np.cos(dec) * np.cos(ra), np.cos(dec) * np.sin(ra), np.sin(dec)])
-    common = dict(bodies=("earth",), thrust=True, power="nuclear", n_arcs=1,
-                  integrator=IntegratorSettings(c_nom=0.02))
-    pars = dict(mu=[MU], power_kw=100.0, power_decay_s=1.0e6, efficiency=0.7, exhaust_velocity_km_s=15.0,
-                arc_t_on=[600.0], arc_t_off=[15000.0], arc_alpha=[ra], arc_beta=[dec], arc_frame=[1.0])
+    common = {
+        "bodies": ("earth",),
+        "thrust": True,
+        "power": "nuclear",
+        "n_arcs": 1,
+        "integrator": IntegratorSettings(c_nom=0.02),
+    }  # noqa: E501
+    pars = {
+        "mu": [MU],
+        "power_kw": 100.0,
+        "power_decay_s": 1.0e6,
+        "efficiency": 0.7,
+        "exhaust_velocity_km_s": 15.0,
+        "arc_t_on": [600.0],
+        "arc_t_off": [15000.0],
+        "arc_alpha": [ra],
+        "arc_beta": [dec],
+        "arc_frame": [1.0],
+    }
     t_f = 18000.0
     finals = []
     for vdep in (False, True):

@@ -34,22 +34,35 @@ def test_300_day_solar_electric_cruise():
     perturbing: final position within 1 km and mass within 1 g of DOP853."""
     x0 = _earth_departure()
     m = ForceModel(
-        bodies=BODIES, primary=0, third_bodies=(1, 2, 3, 4), thrust=True, velocity_dependent=True, n_arcs=2,
+        bodies=BODIES,
+        primary=0,
+        third_bodies=(1, 2, 3, 4),
+        thrust=True,
+        velocity_dependent=True,
+        n_arcs=2,
         integrator=IntegratorSettings(c_nom=0.05, dt_max_s=0.5 * DAY),
     )
     p = default_params(
-        m, power_kw=10.0, efficiency=0.65, exhaust_velocity_km_s=30.0, arc_t_on=[0.0, 150 * DAY],
-        arc_t_off=[100 * DAY, 300 * DAY], arc_alpha=[0.0, np.radians(10.0)], arc_beta=[0.0, np.radians(5.0)],
+        m,
+        power_kw=10.0,
+        efficiency=0.65,
+        exhaust_velocity_km_s=30.0,
+        arc_t_on=[0.0, 150 * DAY],
+        arc_t_off=[100 * DAY, 300 * DAY],
+        arc_alpha=[0.0, np.radians(10.0)],
+        arc_beta=[0.0, np.radians(5.0)],
     )
     eph = build_ephemeris(BODIES, ET0, ET0 + 300 * DAY)
     tr = propagate(m, p, eph, ET0, x0, np.array([0.0, 300 * DAY]))
     assert int(tr.status) == 0
-    thrust = dict(
-        p0_kw=10.0, eta=0.65, c=30.0,
-        factor=lambda t: 1.0 if (t < 100 * DAY or t >= 150 * DAY) else 0.0,
-        alpha=lambda t: 0.0 if t < 100 * DAY else np.radians(10.0),
-        beta=lambda t: 0.0 if t < 100 * DAY else np.radians(5.0),
-    )
+    thrust = {
+        "p0_kw": 10.0,
+        "eta": 0.65,
+        "c": 30.0,
+        "factor": lambda t: 1.0 if (t < 100 * DAY or t >= 150 * DAY) else 0.0,
+        "alpha": lambda t: 0.0 if t < 100 * DAY else np.radians(10.0),
+        "beta": lambda t: 0.0 if t < 100 * DAY else np.radians(5.0),
+    }
     rhs = cowell_rhs_factory(MUS["sun"], "sun", BODIES[1:], MUS, thrust=thrust, epoch_et=ET0)
     ref = integrate_piecewise(rhs, x0, [0.0, 100 * DAY, 150 * DAY, 300 * DAY])
     assert np.linalg.norm(np.asarray(tr.x_final[:3]) - ref[:3]) < 1.0
@@ -70,8 +83,11 @@ def _mars_approach(stop, change_primary=False):
     u = (aim - r_rel) / np.linalg.norm(aim - r_rel)
     x0 = np.concatenate([rm + r_rel, vm + 3.0 * u, [500.0]])
     m = ForceModel(
-        bodies=bodies, primary=0, third_bodies=(1,),  # with primary changes the Sun acts too
-        change_primary_at_soi=change_primary, stop=stop,
+        bodies=bodies,
+        primary=0,
+        third_bodies=(1,),  # with primary changes the Sun acts too
+        change_primary_at_soi=change_primary,
+        stop=stop,
         integrator=IntegratorSettings(c_nom=0.02, dt_max_s=3600.0),
     )
     p = default_params(m)
@@ -82,8 +98,7 @@ def _mars_approach(stop, change_primary=False):
 def _reference_event(x0, event, t_max=30 * DAY):
     rhs = cowell_rhs_factory(MUS["sun"], "sun", ("mars",), {"mars": MUS["mars"]}, epoch_et=ET0)
     event.terminal = True
-    sol = solve_ivp(lambda t, y: rhs(t, y), (0.0, t_max), x0, method="DOP853", rtol=1e-13, atol=1e-9,
-                    events=event)
+    sol = solve_ivp(lambda t, y: rhs(t, y), (0.0, t_max), x0, method="DOP853", rtol=1e-13, atol=1e-9, events=event)
     assert sol.t_events[0].size == 1
     return sol.t_events[0][0], sol.y_events[0][0]
 
@@ -124,7 +139,9 @@ def test_closest_approach_after_change_of_primary():
     soi = C.soi_radius_km("mars")
     t_soi, y_soi = _reference_event(x0, lambda t, y: np.linalg.norm(y[:3] - helio_position("mars", ET0 + t)) - soi)
     et = ET0 + t_soi
-    y_mars = np.concatenate([y_soi[:3] - helio_position("mars", et), y_soi[3:6] - helio_velocity("mars", et), y_soi[6:]])
+    y_mars = np.concatenate(
+        [y_soi[:3] - helio_position("mars", et), y_soi[3:6] - helio_velocity("mars", et), y_soi[6:]]
+    )
     rhs = cowell_rhs_factory(MUS["mars"], "mars", ("sun",), {"sun": MUS["sun"]}, epoch_et=ET0)
     peri = lambda t, y: np.dot(y[:3], y[3:6])  # noqa: E731
     peri.terminal = True

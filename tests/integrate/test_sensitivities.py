@@ -13,7 +13,8 @@ the derivative.
 from __future__ import annotations
 
 import numpy as np
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fracas.dynamics.model import ForceModel, IntegratorSettings, default_params
 from fracas.integrate.propagate import finite_difference_sensitivities, propagate_with_sensitivities
@@ -36,13 +37,27 @@ def spiral():
     """Near-Earth spiral: J2, two thrust arcs (velocity frame, nuclear power so the thrust does
     not need an ephemeris), mass flow: every thrust parameter has a non-zero column."""
     m = ForceModel(
-        bodies=("earth",), j2=True, thrust=True, velocity_dependent=True, power="nuclear", n_arcs=2,
+        bodies=("earth",),
+        j2=True,
+        thrust=True,
+        velocity_dependent=True,
+        power="nuclear",
+        n_arcs=2,
         integrator=IntegratorSettings(c_nom=0.02, rect_ratio=10.0),
     )
     p = default_params(
-        m, mu=[MU], pole=[[0.0, 0.0, 1.0]], power_kw=5.0, power_decay_s=3.0e7, efficiency=0.6,
-        exhaust_velocity_km_s=25.0, arc_t_on=[0.0, 3000.0], arc_t_off=[2500.0, 5500.0],
-        arc_alpha=[0.1, -0.2], arc_beta=[0.05, 0.3], arc_throttle=[1.0, 0.8],
+        m,
+        mu=[MU],
+        pole=[[0.0, 0.0, 1.0]],
+        power_kw=5.0,
+        power_decay_s=3.0e7,
+        efficiency=0.6,
+        exhaust_velocity_km_s=25.0,
+        arc_t_on=[0.0, 3000.0],
+        arc_t_off=[2500.0, 5500.0],
+        arc_alpha=[0.1, -0.2],
+        arc_beta=[0.05, 0.3],
+        arc_throttle=[1.0, 0.8],
     )
     return m, p
 
@@ -66,8 +81,17 @@ def test_thrust_parameters_match_finite_differences():
     m, p = spiral()
     t_out = np.array([0.0, 6000.0])
     labels = (
-        "thrust_scale", "bias_in_rad", "bias_out_rad", "exhaust_velocity_km_s", "power_kw", "efficiency",
-        "arc_thrust_scale[1]", "arc_bias_in_rad[0]", "arc_bias_out_rad[1]", "arc_t_off[0]", "arc_t_on[1]",
+        "thrust_scale",
+        "bias_in_rad",
+        "bias_out_rad",
+        "exhaust_velocity_km_s",
+        "power_kw",
+        "efficiency",
+        "arc_thrust_scale[1]",
+        "arc_bias_in_rad[0]",
+        "arc_bias_out_rad[1]",
+        "arc_t_off[0]",
+        "arc_t_on[1]",
         "mu[earth]",
     )
     _, s = propagate_with_sensitivities(m, p, None, 0.0, X0, t_out, labels)

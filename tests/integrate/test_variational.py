@@ -24,11 +24,11 @@ import pytest
 
 from fracas.build import build_propagation
 from fracas.config.trajectory import load_deck
-from fracas.integrate import variational
 from fracas.dynamics.parameters import get_values, set_values
-from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at, state_derivative, state_jacobians
 from fracas.filters.process_noise import gm_augmented_F, pdot_propagate
+from fracas.integrate import variational
 from fracas.integrate.propagate import propagate, propagate_with_sensitivities
+from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at, state_derivative, state_jacobians
 
 DAY = 86400.0
 DECK = Path(__file__).resolve().parents[2] / "namelists" / "earth_mars_sep.toml"
@@ -74,9 +74,12 @@ def test_jacobians_match_central_differences(prob):
     t = 0.5 * DAY
     x = np.asarray(pb.x0, float)
     p0 = np.asarray(get_values(pb.params, LABELS, pb.model), float)
-    A, B = (np.asarray(a) for a in jacobians_at(
-        pb.model, pb.params, pb.ephem, pb.epoch_et_s, np.array([t]), x[None], np.array([0]), LABELS
-    ))
+    A, B = (
+        np.asarray(a)
+        for a in jacobians_at(
+            pb.model, pb.params, pb.ephem, pb.epoch_et_s, np.array([t]), x[None], np.array([0]), LABELS
+        )
+    )
     A, B = A[0], B[0]
     a_fd = np.zeros((7, 7))
     for j, h in enumerate([10.0] * 3 + [1e-3] * 3 + [1e-2]):
@@ -106,6 +109,7 @@ def test_thrust_noise_h_is_zero_while_coasting(prob):
     non-zero on the arc; d xdot/d mu[sun] is non-zero in both (exact zeros: no tolerance)."""
     pb = prob
     x = np.asarray(pb.x0, float)
+
     def jac(t):
         return _state_jacobians(pb.model, pb.params, pb.ephem, pb.epoch_et_s, np.float64(t), x, np.int32(0), LABELS)
 

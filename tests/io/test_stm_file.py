@@ -76,9 +76,23 @@ def _data(n: int = 6, n_par: int = 3, seed: int = 0, t0: float = 0.0) -> StmData
 def _assert_same(a: StmData, b: StmData) -> None:
     for name in ("times_s", "states", "stm_step", "par_step", "param_values", "param_steps"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)  # bit-exact, NaN == NaN
-    for name in ("epoch_et_s", "event_types", "primary", "param_labels", "param_units", "deck_text", "deck_hash",
-                 "deck_path", "title", "centre", "frame", "fracas_version", "schema_version",
-                 "sensitivity_method", "provenance"):
+    for name in (
+        "epoch_et_s",
+        "event_types",
+        "primary",
+        "param_labels",
+        "param_units",
+        "deck_text",
+        "deck_hash",
+        "deck_path",
+        "title",
+        "centre",
+        "frame",
+        "fracas_version",
+        "schema_version",
+        "sensitivity_method",
+        "provenance",
+    ):
         assert getattr(a, name) == getattr(b, name), name
 
 
@@ -103,8 +117,11 @@ def test_every_dataset_has_units_and_columns_are_chunks(tmp_path):
     with h5py.File(path, "r") as f:
         assert f.attrs["file_kind"] == FILE_KIND and int(f.attrs["schema_version"]) == SCHEMA_VERSION
         assert f.attrs["sensitivity_method"] == "ad"
-        f.visititems(lambda name, obj: missing.append(name)
-                     if isinstance(obj, h5py.Dataset) and "units" not in obj.attrs else None)
+        f.visititems(
+            lambda name, obj: (
+                missing.append(name) if isinstance(obj, h5py.Dataset) and "units" not in obj.attrs else None
+            )
+        )
         par = f["stm/par_step"]
         assert par.shape == (3, 5, 7) and par.chunks == (1, 5, 7)  # one parameter = one chunk
         assert list(par.attrs["col_labels"]) == LABELS[:3]
@@ -176,10 +193,13 @@ def test_chain_element_zero_starts_at_the_epoch():
         chain(d, [d.times_s[2], d.times_s[1]])
 
 
-DECK_SHORT = (ROOT / "namelists" / "leo_j2.toml").read_text().replace(
-    "duration_days = 1.0", "duration_days = 0.05").replace(
-    "step_days = 0.01 ", "step_days = 0.005").replace(
-    "c_nom = 0.03 ", "c_nom = 1.0\ndt_max_s = 13.5 ")
+DECK_SHORT = (
+    (ROOT / "namelists" / "leo_j2.toml")
+    .read_text()
+    .replace("duration_days = 1.0", "duration_days = 0.05")
+    .replace("step_days = 0.01 ", "step_days = 0.005")
+    .replace("c_nom = 0.03 ", "c_nom = 1.0\ndt_max_s = 13.5 ")
+)
 
 
 @pytest.fixture(scope="module")
@@ -192,7 +212,8 @@ def leo_run(tmp_path_factory):
     prob = dataclasses.replace(build_propagation(deck), param_labels=("mu[earth]", "j2[earth]"))
     assert prob.t_out.shape == (11,)
     traj, sens = propagate_with_sensitivities(
-        prob.model, prob.params, prob.ephem, prob.epoch_et_s, prob.x0, prob.t_out, prob.param_labels)
+        prob.model, prob.params, prob.ephem, prob.epoch_et_s, prob.x0, prob.t_out, prob.param_labels
+    )
     events = ["initial"] + ["grid"] * 9 + ["final"]
     data = stm_data_from_run(prob, traj, sens, events, DECK_SHORT, trajectory_hash(deck), "tests/leo_short.toml")
     path = tmp_path_factory.mktemp("leo") / "leo.h5"
@@ -241,7 +262,8 @@ def test_chain_matches_real_propagation(leo_run):
     # same t_out length (repeating the last time: zero-length segments) -> no recompilation
     t_ref = np.concatenate([[0.0], req, np.full(prob.t_out.shape[0] - 4, req[-1])])
     traj2, sens2 = propagate_with_sensitivities(
-        prob.model, prob.params, prob.ephem, prob.epoch_et_s, prob.x0, t_ref, prob.param_labels)
+        prob.model, prob.params, prob.ephem, prob.epoch_et_s, prob.x0, t_ref, prob.param_labels
+    )
     ref_phi, ref_th = np.asarray(sens2.stm_step)[1:4], np.asarray(sens2.par_step)[1:4]
     for j in range(3):
         assert _col_rel(phi[j][:, :6], ref_phi[j][:, :6]) < 5e-9, j
@@ -251,9 +273,20 @@ def test_chain_matches_real_propagation(leo_run):
 
 def test_describe(leo_run):
     text = describe(leo_run[4])
-    for part in ("LEO, Earth point mass + J2", "tests/leo_short.toml", "2030-01-01T00:00:00.000 TDB",
-                 "0.050000 d", "9 grid", "1 initial", "1 final", "mu[earth]", "km^3/s^2", "j2[earth]",
-                 "schema_version 1", "KiB"):
+    for part in (
+        "LEO, Earth point mass + J2",
+        "tests/leo_short.toml",
+        "2030-01-01T00:00:00.000 TDB",
+        "0.050000 d",
+        "9 grid",
+        "1 initial",
+        "1 final",
+        "mu[earth]",
+        "km^3/s^2",
+        "j2[earth]",
+        "schema_version 1",
+        "KiB",
+    ):
         assert part in text, part
 
 
@@ -262,8 +295,17 @@ def test_stm_data_from_run_refuses_an_early_stop():
     t = prob.t_out.copy()
     t[6:] = np.nan
     nan = np.full((11, 7), np.nan)
-    traj = Trajectory(t=t, x=nan, primary=np.zeros(11, np.int32), t_final=np.float64(t[5] + 1.0),
-                      x_final=nan[0], primary_final=0, status=np.int32(1), n_steps=1, n_rect=0)
+    traj = Trajectory(
+        t=t,
+        x=nan,
+        primary=np.zeros(11, np.int32),
+        t_final=np.float64(t[5] + 1.0),
+        x_final=nan[0],
+        primary_final=0,
+        status=np.int32(1),
+        n_steps=1,
+        n_rect=0,
+    )
     sens = Sensitivities(*(np.full((11, 7, 7), np.nan),) * 2, *(np.zeros((11, 7, 0)),) * 2)
     with pytest.raises(StmFileError, match=r"^x\.toml: .*stop condition met.*scheduled time 6 at 0\.030000 d"):
         stm_data_from_run(prob, traj, sens, ["grid"] * 11, DECK_SHORT, "h", "x.toml")
@@ -277,8 +319,7 @@ def test_trajectory_hash_ignores_form_but_not_values(tmp_path):
     assert re.fullmatch(r"[0-9a-f]{64}", base)
     # comments dropped, spacing changed, 7000.0 written 7000, a default (cr = 1) written out
     reformatted = "\n\n".join(
-        line.split("#")[0].strip().replace(" = ", "=").replace("7000.0", "7000")
-        for line in DECK_SHORT.splitlines()
+        line.split("#")[0].strip().replace(" = ", "=").replace("7000.0", "7000") for line in DECK_SHORT.splitlines()
     ).replace("[spacecraft]", "[spacecraft]\ncr=1.0")
     assert "cr=1.0" in reformatted  # an explicit default
     moved = tmp_path / "elsewhere" / "renamed.toml"
@@ -287,8 +328,12 @@ def test_trajectory_hash_ignores_form_but_not_values(tmp_path):
     from fracas.config.trajectory import load_deck
 
     assert trajectory_hash(load_deck(moved)) == base
-    for old, new in (("7000.0", "7000.001"), ("duration_days = 0.05", "duration_days = 0.06"),
-                     ("LEO, Earth", "LEO: Earth"), ("c_nom = 1.0", "c_nom = 0.9")):
+    for old, new in (
+        ("7000.0", "7000.001"),
+        ("duration_days = 0.05", "duration_days = 0.06"),
+        ("LEO, Earth", "LEO: Earth"),
+        ("c_nom = 1.0", "c_nom = 0.9"),
+    ):
         assert old in DECK_SHORT
         assert trajectory_hash(parse_deck(DECK_SHORT.replace(old, new, 1))) != base, old
 
@@ -323,9 +368,15 @@ def test_refusals_name_the_file_and_the_problem(tmp_path):
     _refuses(tmp_path / "text.h5", r"not an HDF5 file")
     with h5py.File(tmp_path / "traj.h5", "w") as f:
         f.attrs["format"] = "fracas-trajectory"
-    _refuses(tmp_path / "traj.h5", r"not a fracas STM file \(a 'fracas-trajectory' file, expected file_kind = 'fracas-stm'\)")
-    _refuses(good, r"thrust_scale not on the STM file; it has mu\[earth\], j2\[earth\]", labels=["mu[earth]", "thrust_scale"])
-    msg = _refuses(good, r"requested time 1000\.000000 s \(0\.011574 d\) is not on the STM file", times_s=[600.0, 1000.0])
+    _refuses(
+        tmp_path / "traj.h5", r"not a fracas STM file \(a 'fracas-trajectory' file, expected file_kind = 'fracas-stm'\)"
+    )
+    _refuses(
+        good, r"thrust_scale not on the STM file; it has mu\[earth\], j2\[earth\]", labels=["mu[earth]", "thrust_scale"]
+    )
+    msg = _refuses(
+        good, r"requested time 1000\.000000 s \(0\.011574 d\) is not on the STM file", times_s=[600.0, 1000.0]
+    )
     assert "nearest file time is 1200.000000 s (0.013889 d" in msg
     read_stm_file(good, times_s=[600.0 + 9e-7])  # within the 1e-6 s tolerance
 

@@ -72,8 +72,20 @@ def _data(n: int = 5, n_par: int = 2, seed: int = 1, sens: bool = True, early_st
 def _assert_same(a: TrajectoryData, b: TrajectoryData) -> None:
     for name in ("t_s", "r_km", "v_km_s", "mass_kg", "r_final_km", "v_final_km_s"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))  # bit-exact float64
-    for name in ("epoch_et_s", "t_final_s", "mass_final_kg", "primary", "bodies", "primary_final",
-                 "status", "n_steps", "n_rect", "centre", "title", "epoch_tdb"):
+    for name in (
+        "epoch_et_s",
+        "t_final_s",
+        "mass_final_kg",
+        "primary",
+        "bodies",
+        "primary_final",
+        "status",
+        "n_steps",
+        "n_rect",
+        "centre",
+        "title",
+        "epoch_tdb",
+    ):
         assert getattr(a, name) == getattr(b, name), name
     assert (a.sensitivities is None) == (b.sensitivities is None)
     if a.sensitivities is not None:
@@ -92,8 +104,13 @@ def test_round_trip(tmp_path):
 
 
 @settings(max_examples=15, deadline=None)
-@given(n=st.integers(1, 30), n_par=st.integers(0, 3), seed=st.integers(0, 2**32 - 1),
-       sens=st.booleans(), early=st.booleans())
+@given(
+    n=st.integers(1, 30),
+    n_par=st.integers(0, 3),
+    seed=st.integers(0, 2**32 - 1),
+    sens=st.booleans(),
+    early=st.booleans(),
+)
 def test_round_trip_is_identity(tmp_path_factory, n, n_par, seed, sens, early):
     d = _data(n, n_par, seed, sens, early)
     path = write_trajectory_file(tmp_path_factory.mktemp("rt") / "t.h5", d)

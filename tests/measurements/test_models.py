@@ -9,16 +9,15 @@ eq. 37 (d delta / d x = 2 R_p u^T / (rho sqrt(rho^2 - R_p^2))), and the topocent
 and elevation partials that replace eqs. 18-31.
 """
 
-from decimal import Decimal, getcontext
 import math
+from decimal import Decimal, getcontext
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from fracas import _jax  # noqa: F401
-import jax
-import jax.numpy as jnp
-
 from fracas.measurements import models as M
 from fracas.measurements.stations import DSN_STATIONS, station_state
 
@@ -135,12 +134,14 @@ def test_three_way_is_sum_of_two_way():
 
 @pytest.mark.parametrize(
     "offset, az, el",
-    [((0.0, 0.0, 1000.0), 0.0, 0.0),                       # due north on the horizon
-     ((0.0, 1000.0, 0.0), math.pi / 2, 0.0),               # due east
-     ((0.0, -1000.0, 0.0), 3 * math.pi / 2, 0.0),          # due west
-     ((0.0, 0.0, -1000.0), math.pi, 0.0),                  # due south
-     ((1000.0, 1000.0, 0.0), math.pi / 2, math.pi / 4),    # east, 45 deg up
-     ((-1000.0, 0.0, 1000.0), 0.0, -math.pi / 4)],         # north, 45 deg below horizon
+    [
+        ((0.0, 0.0, 1000.0), 0.0, 0.0),  # due north on the horizon
+        ((0.0, 1000.0, 0.0), math.pi / 2, 0.0),  # due east
+        ((0.0, -1000.0, 0.0), 3 * math.pi / 2, 0.0),  # due west
+        ((0.0, 0.0, -1000.0), math.pi, 0.0),  # due south
+        ((1000.0, 1000.0, 0.0), math.pi / 2, math.pi / 4),  # east, 45 deg up
+        ((-1000.0, 0.0, 1000.0), 0.0, -math.pi / 4),
+    ],  # north, 45 deg below horizon
 )
 def test_azimuth_elevation_conventions(offset, az, el):
     # Station on the equator at the ICRF x axis: up = x, east = y, north = z.  Azimuth from
@@ -168,9 +169,13 @@ def test_elevation_matches_trakm_eq17_and_rotated_frame():
     assert abs(float(M.elevation(sc_r, z, earth_r, z, s1, z)) - beta) < 1e-13
     lam = math.atan2(s1[1], s1[0])
     phi = math.atan2(s1[2], math.hypot(s1[0], s1[1]))
-    enu = np.array([[-math.sin(lam), math.cos(lam), 0.0],
-                    [-math.sin(phi) * math.cos(lam), -math.sin(phi) * math.sin(lam), math.cos(phi)],
-                    [math.cos(phi) * math.cos(lam), math.cos(phi) * math.sin(lam), math.sin(phi)]])
+    enu = np.array(
+        [
+            [-math.sin(lam), math.cos(lam), 0.0],
+            [-math.sin(phi) * math.cos(lam), -math.sin(phi) * math.sin(lam), math.cos(phi)],
+            [math.cos(phi) * math.cos(lam), math.cos(phi) * math.sin(lam), math.sin(phi)],
+        ]
+    )
     e_, n_, _ = enu @ p
     alpha = math.atan2(e_, n_) % (2 * math.pi)
     assert abs(float(M.azimuth(sc_r, z, earth_r, z, s1, z)) - alpha) < 1e-13
@@ -186,7 +191,7 @@ def test_star_planet_angle_and_diameter_definitions():
     u = (body_r - sc_r) / 5.0e4
     assert abs(float(M.star_planet_angle(sc_r, body_r, d)) - math.acos(d @ u)) < 1e-14
     rp = 1737.4
-    delta = 2.0 * math.atan(rp / math.sqrt(5.0e4 ** 2 - rp ** 2))
+    delta = 2.0 * math.atan(rp / math.sqrt(5.0e4**2 - rp**2))
     assert abs(float(M.planet_diameter(sc_r, body_r, rp)) - delta) < 1e-15
 
 

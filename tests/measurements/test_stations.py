@@ -6,16 +6,15 @@ velocity, and central finite differences for the STAPRL partials (which FRACAS g
 ecliptic frame, garbled by the scan; they were rebuilt for the equatorial frame).
 """
 
-from fractions import Fraction
 import math
+from fractions import Fraction
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from fracas import _jax  # noqa: F401
-import jax
-import jax.numpy as jnp
-
 from fracas.measurements.stations import (
     DSN_STATIONS,
     ERA_RATE_RAD_S,
@@ -37,15 +36,20 @@ _E2 = _F * (2.0 - _F)
 def _geodetic_to_xyz(lat_deg, lon_deg, h_km):
     lat, lon = math.radians(lat_deg), math.radians(lon_deg)
     n = _A_KM / math.sqrt(1.0 - _E2 * math.sin(lat) ** 2)
-    return np.array([(n + h_km) * math.cos(lat) * math.cos(lon),
-                     (n + h_km) * math.cos(lat) * math.sin(lon),
-                     (n * (1.0 - _E2) + h_km) * math.sin(lat)])
+    return np.array(
+        [
+            (n + h_km) * math.cos(lat) * math.cos(lon),
+            (n + h_km) * math.cos(lat) * math.sin(lon),
+            (n * (1.0 - _E2) + h_km) * math.sin(lat),
+        ]
+    )
 
 
 def _fixed_xyz(st):
     c = math.cos(st.latitude_rad)
-    return st.radius_km * np.array([c * math.cos(st.longitude_rad), c * math.sin(st.longitude_rad),
-                                    math.sin(st.latitude_rad)])
+    return st.radius_km * np.array(
+        [c * math.cos(st.longitude_rad), c * math.sin(st.longitude_rad), math.sin(st.latitude_rad)]
+    )
 
 
 def test_goldstone_matches_published_geodetic_coordinates():
@@ -101,9 +105,11 @@ def test_station_state_is_rotated_published_itrf_vector():
     # station_state built from (R, phi, lambda): catches any slip in the spherical
     # conversion or the rotation sense.  Agreement is limited by float64 rounding of a
     # 6400 km vector (~1e-12 km): 1e-9 km tolerance.
-    itrf_m = {"goldstone": (-2_353_621.420, -4_641_341.472, 3_677_052.318),
-              "madrid": (4_849_092.518, -360_180.348, 4_115_109.251),
-              "canberra": (-4_460_894.917, 2_682_361.507, -3_674_748.152)}
+    itrf_m = {
+        "goldstone": (-2_353_621.420, -4_641_341.472, 3_677_052.318),
+        "madrid": (4_849_092.518, -360_180.348, 4_115_109.251),
+        "canberra": (-4_460_894.917, 2_682_361.507, -3_674_748.152),
+    }
     et = 6.5e8 + 321.0
     th = float(_era(et))
     rot = np.array([[math.cos(th), -math.sin(th), 0.0], [math.sin(th), math.cos(th), 0.0], [0.0, 0.0, 1.0]])

@@ -6,8 +6,8 @@ clear errors for bad input.  (The analytic partials themselves are checked again
 1e-12 in test_models.py; here the question is the wiring: chains, signs, scatter.)"""
 
 import dataclasses
-from fractions import Fraction
 import math
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -27,11 +27,23 @@ from fracas.measurements.trakm import (
 NX = 7  # r, v, mass
 EPS = np.finfo(np.float64).eps
 NAMES = ("goldstone", "madrid", "canberra")
-STATION_KINDS = ("station_radius_km", "station_lat_rad", "station_lon_rad", "range_bias_km",
-                 "doppler_bias_km_s", "azimuth_bias_rad", "elevation_bias_rad")
+STATION_KINDS = (
+    "station_radius_km",
+    "station_lat_rad",
+    "station_lon_rad",
+    "range_bias_km",
+    "doppler_bias_km_s",
+    "azimuth_bias_rad",
+    "elevation_bias_rad",
+)
 LABELS = tuple(f"{k}[{n}]" for k in STATION_KINDS for n in NAMES) + (
-    "qvlbi_timing_km", "qvlbi_frequency_km_s", "star_planet_bias_rad", "diameter_bias_rad",
-    "mu[sun]", "ephem[moon,x]")
+    "qvlbi_timing_km",
+    "qvlbi_frequency_km_s",
+    "star_planet_bias_rad",
+    "diameter_bias_rad",
+    "mu[sun]",
+    "ephem[moon,x]",
+)
 OBS = (
     Observation("range2", ("goldstone",), 1e-3),
     Observation("range2", ("madrid",), 2e-3),
@@ -57,10 +69,18 @@ def _geometry():
     sc_r = earth_r + 1.5e5 * d / np.linalg.norm(d)
     sc_v = earth_v + rng.normal(size=3)
     s = rng.normal(size=3)
-    return Geometry(et_s=ET, sc_r=sc_r, sc_v=sc_v, earth_r=earth_r, earth_v=earth_v,
-                    body_r=sc_r + np.array([3.0e4, -2.0e4, 1.0e4]), body_v=earth_v,
-                    body_radius_km=1737.4, star_unit=s / np.linalg.norm(s),
-                    body_r_partials={"ephem[moon,x]": D_BODY})
+    return Geometry(
+        et_s=ET,
+        sc_r=sc_r,
+        sc_v=sc_v,
+        earth_r=earth_r,
+        earth_v=earth_v,
+        body_r=sc_r + np.array([3.0e4, -2.0e4, 1.0e4]),
+        body_v=earth_v,
+        body_radius_km=1737.4,
+        star_unit=s / np.linalg.norm(s),
+        body_r_partials={"ephem[moon,x]": D_BODY},
+    )
 
 
 # Bias rules, written out from the label catalogue (not from trakm): kind -> list of
@@ -69,11 +89,9 @@ BIAS_RULES = {
     "range2": [("range_bias_km[{0}]", 1.0)],
     "doppler2": [("doppler_bias_km_s[{0}]", 1.0)],
     "range3": [("range_bias_km[{0}]", 1.0), ("range_bias_km[{1}]", 1.0), ("qvlbi_timing_km", 1.0)],
-    "doppler3": [("doppler_bias_km_s[{0}]", 1.0), ("doppler_bias_km_s[{1}]", 1.0),
-                 ("qvlbi_frequency_km_s", 1.0)],
+    "doppler3": [("doppler_bias_km_s[{0}]", 1.0), ("doppler_bias_km_s[{1}]", 1.0), ("qvlbi_frequency_km_s", 1.0)],
     "diff_range": [("range_bias_km[{0}]", 1.0), ("range_bias_km[{1}]", -1.0), ("qvlbi_timing_km", -1.0)],
-    "diff_doppler": [("doppler_bias_km_s[{0}]", 1.0), ("doppler_bias_km_s[{1}]", -1.0),
-                     ("qvlbi_frequency_km_s", -1.0)],
+    "diff_doppler": [("doppler_bias_km_s[{0}]", 1.0), ("doppler_bias_km_s[{1}]", -1.0), ("qvlbi_frequency_km_s", -1.0)],
     "azimuth": [("azimuth_bias_rad[{0}]", 1.0)],
     "elevation": [("elevation_bias_rad[{0}]", 1.0)],
     "star_planet_angle": [("star_planet_bias_rad", 1.0)],
@@ -115,9 +133,13 @@ def _np_values(geo):
             rho.append(np.linalg.norm(p))
             rdot.append(p @ w / rho[-1])
             lam, phi = math.atan2(r[1], r[0]), math.atan2(r[2], math.hypot(r[0], r[1]))
-            enu = np.array([[-math.sin(lam), math.cos(lam), 0.0],
-                            [-math.sin(phi) * math.cos(lam), -math.sin(phi) * math.sin(lam), math.cos(phi)],
-                            [math.cos(phi) * math.cos(lam), math.cos(phi) * math.sin(lam), math.sin(phi)]])
+            enu = np.array(
+                [
+                    [-math.sin(lam), math.cos(lam), 0.0],
+                    [-math.sin(phi) * math.cos(lam), -math.sin(phi) * math.sin(lam), math.cos(phi)],
+                    [math.cos(phi) * math.cos(lam), math.cos(phi) * math.sin(lam), math.sin(phi)],
+                ]
+            )
             e, nn, u = enu @ p
             az.append(math.atan2(e, nn) % (2 * math.pi))
             el.append(math.asin(u / rho[-1]))
@@ -127,9 +149,18 @@ def _np_values(geo):
         elif ob.kind == "planet_diameter":
             vals.append(2 * math.asin(geo.body_radius_km / np.linalg.norm(q)))
         else:
-            vals.append({"range2": rho[0], "doppler2": rdot[0], "azimuth": az[0], "elevation": el[0],
-                         "range3": sum(rho), "doppler3": sum(rdot),
-                         "diff_range": rho[0] - rho[-1], "diff_doppler": rdot[0] - rdot[-1]}[ob.kind])
+            vals.append(
+                {
+                    "range2": rho[0],
+                    "doppler2": rdot[0],
+                    "azimuth": az[0],
+                    "elevation": el[0],
+                    "range3": sum(rho),
+                    "doppler3": sum(rdot),
+                    "diff_range": rho[0] - rho[-1],
+                    "diff_doppler": rdot[0] - rdot[-1],
+                }[ob.kind]
+            )
         elevs.append(math.degrees(min(el)) if el else math.nan)
     return np.array(vals), np.array(elevs)
 
@@ -158,8 +189,15 @@ def test_bias_and_parameter_columns_follow_the_label_rules(setup):
     assert np.array_equal(H[:, [col[lab] for lab in BIAS_LABELS]], expected)
     assert np.all(H[:, 6] == 0.0) and np.all(H[:, col["mu[sun]"]] == 0.0)
     for i, ob in enumerate(OBS):
-        if ob.kind in ("range2", "range3", "diff_range", "azimuth", "elevation",
-                       "star_planet_angle", "planet_diameter"):
+        if ob.kind in (
+            "range2",
+            "range3",
+            "diff_range",
+            "azimuth",
+            "elevation",
+            "star_planet_angle",
+            "planet_diameter",
+        ):
             assert np.all(H[i, 3:6] == 0.0), ob
         if ob.stations:
             assert H[i, col["ephem[moon,x]"]] == 0.0, ob
@@ -191,9 +229,11 @@ def test_H_matches_central_differences_of_values(setup):
             tol = 1e-6 * np.max(np.abs(b[i])) + 100 * EPS * abs(batch.values[i]) / h
             assert np.max(np.abs(a[i] - b[i])) <= tol, (OBS[i], a[i], b[i])
 
-    for field, label, h in (("radius_km", "station_radius_km", 1e-2),
-                            ("latitude_rad", "station_lat_rad", 1e-6),
-                            ("longitude_rad", "station_lon_rad", 1e-6)):
+    for field, label, h in (
+        ("radius_km", "station_radius_km", 1e-2),
+        ("latitude_rad", "station_lat_rad", 1e-6),
+        ("longitude_rad", "station_lon_rad", 1e-6),
+    ):
         fd = []
         for n in NAMES:
             s0 = DSN_STATIONS[n]
@@ -222,7 +262,7 @@ def test_noise_covariance_and_elevations(setup):
     # (degrees; numpy reference), nan for spacecraft-based kinds.
     geo, batch = setup
     sig = np.array([ob.sigma for ob in OBS])
-    assert np.array_equal(batch.R, np.diag(sig ** 2))
+    assert np.array_equal(batch.R, np.diag(sig**2))
     _, ref = _np_values(geo)
     assert np.array_equal(np.isnan(batch.elevation_deg), [not ob.stations for ob in OBS])
     ok = ~np.isnan(ref)
@@ -241,8 +281,9 @@ def test_padding_and_grouping_do_not_change_rows(setup):
     rev = observation_matrix(OBS[::-1], geo, DSN_STATIONS, LABELS, NX)
     assert np.array_equal(rev.H, batch.H[::-1]) and np.array_equal(rev.values, batch.values[::-1])
     # many epochs in one call: interleaved rows equal the per-epoch calls
-    geo2 = dataclasses.replace(geo, et_s=geo.et_s + 3600.0, sc_r=geo.sc_r + 500.0,
-                               body_r_partials={"ephem[moon,x]": 2.0 * D_BODY})
+    geo2 = dataclasses.replace(
+        geo, et_s=geo.et_s + 3600.0, sc_r=geo.sc_r + 500.0, body_r_partials={"ephem[moon,x]": 2.0 * D_BODY}
+    )
     one2 = observation_matrix(OBS, geo2, DSN_STATIONS, LABELS, NX)
     both = observation_matrix_many([(ob, g) for ob in OBS for g in (geo, geo2)], DSN_STATIONS, LABELS, NX)
     assert np.array_equal(both.H[0::2], batch.H) and np.array_equal(both.H[1::2], one2.H)
@@ -257,10 +298,19 @@ def test_label_helpers():
     assert not is_measurement_label("mu[sun]")
     assert not is_measurement_label("range_bias_km")  # needs a station
     assert not is_measurement_label("qvlbi_timing_km[goldstone]")  # takes none
-    units = {"station_radius_km[x]": "km", "station_lat_rad[x]": "rad", "station_lon_rad[x]": "rad",
-             "range_bias_km[x]": "km", "doppler_bias_km_s[x]": "km/s", "azimuth_bias_rad[x]": "rad",
-             "elevation_bias_rad[x]": "rad", "qvlbi_timing_km": "km", "qvlbi_frequency_km_s": "km/s",
-             "star_planet_bias_rad": "rad", "diameter_bias_rad": "rad"}
+    units = {
+        "station_radius_km[x]": "km",
+        "station_lat_rad[x]": "rad",
+        "station_lon_rad[x]": "rad",
+        "range_bias_km[x]": "km",
+        "doppler_bias_km_s[x]": "km/s",
+        "azimuth_bias_rad[x]": "rad",
+        "elevation_bias_rad[x]": "rad",
+        "qvlbi_timing_km": "km",
+        "qvlbi_frequency_km_s": "km/s",
+        "star_planet_bias_rad": "rad",
+        "diameter_bias_rad": "rad",
+    }
     for lab, unit in units.items():
         assert measurement_label_unit(lab) == unit
     with pytest.raises(KeyError, match="valid forms"):

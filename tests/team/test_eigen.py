@@ -20,8 +20,10 @@ def test_eigen_summary_reconstructs_blocks():
     s = np.sqrt(np.diag(P))
     np.testing.assert_allclose(e.sigma, s, rtol=1e-14)
     np.testing.assert_allclose(e.corr, P / np.outer(s, s), rtol=0, atol=1e-13)
-    for blk, w, ax, V in ((slice(0, 3), e.pos_eigval, e.pos_axes, e.pos_eigvec),
-                          (slice(3, 6), e.vel_eigval, e.vel_axes, e.vel_eigvec)):
+    for blk, w, ax, V in (
+        (slice(0, 3), e.pos_eigval, e.pos_axes, e.pos_eigvec),
+        (slice(3, 6), e.vel_eigval, e.vel_axes, e.vel_eigvec),
+    ):
         B = P[blk, blk]
         assert np.all(np.diff(w) >= 0)  # ascending
         np.testing.assert_allclose(V @ np.diag(w) @ V.T, B, rtol=0, atol=1e-12 * np.linalg.norm(B))

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fracas.build.team import build_case, build_study, stm_file_times
 from fracas.config.team import load_team_deck, parse_team_deck
 from fracas.team.schedule import build_schedule, merge_times, range_times
-from fracas.build.team import build_case, build_study, stm_file_times
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 SMALL = DATA / "team_small.toml"
@@ -25,13 +25,16 @@ DAY = 86400.0
 
 
 # ----------------------------------------------------------------------------- range_times
-@pytest.mark.parametrize("start, stop, step, expected", [
-    (0.0, DAY, 4 * H, [k * 4 * H for k in range(7)]),        # the stop point is on the grid: kept
-    (0.0, 0.3, 0.1, [0.0, 0.1, 0.2, 0.3]),                     # 0.3 / 0.1 = 2.9999999999999996: kept
-    (0.0, 1.0, 0.3, [0.0, 0.3, 0.6, 0.9]),                     # off the grid: not reached
-    (2 * H, 2 * H, H, [2 * H]),                                # a single point
-    (0.0, 3 * DAY, DAY, [0.0, DAY, 2 * DAY, 3 * DAY]),
-])
+@pytest.mark.parametrize(
+    "start, stop, step, expected",
+    [
+        (0.0, DAY, 4 * H, [k * 4 * H for k in range(7)]),  # the stop point is on the grid: kept
+        (0.0, 0.3, 0.1, [0.0, 0.1, 0.2, 0.3]),  # 0.3 / 0.1 = 2.9999999999999996: kept
+        (0.0, 1.0, 0.3, [0.0, 0.3, 0.6, 0.9]),  # off the grid: not reached
+        (2 * H, 2 * H, H, [2 * H]),  # a single point
+        (0.0, 3 * DAY, DAY, [0.0, DAY, 2 * DAY, 3 * DAY]),
+    ],
+)
 def test_range_times(start, stop, step, expected):
     # reference: the hand list; equal to rounding of start + k step (1 ulp of the largest)
     np.testing.assert_allclose(range_times(start, stop, step), expected, rtol=0, atol=1e-9 * max(1.0, stop))
@@ -53,7 +56,8 @@ def test_merge_times_on_one_millisecond_grid():
 def test_build_schedule_merges_every_source():
     """Two tracking entries, an eigenvector event, a thrust switch and a punch time over 10 h."""
     sched = build_schedule(
-        0.0, 10 * H,
+        0.0,
+        10 * H,
         [np.array([0.0, 4 * H, 8 * H]), np.array([0.0, 8 * H])],
         [("eigenvector", np.array([4 * H]), None), ("prediction", np.array([9 * H]), 20 * H)],
         [(6 * H, "thrust_off")],
@@ -78,15 +82,26 @@ def test_order_of_events_at_one_time():
     """Every kind at t = 5 h (the stop too): processed in the documented order."""
     t = 5 * H
     sched = build_schedule(
-        0.0, t,
+        0.0,
+        t,
         [np.array([t])],
-        [("prediction", np.array([t]), 9 * H), ("eigenvector", np.array([t]), None),
-         ("propagation", np.array([t]), None)],
+        [
+            ("prediction", np.array([t]), 9 * H),
+            ("eigenvector", np.array([t]), None),
+            ("propagation", np.array([t]), None),
+        ],
         [(t, "thrust_on")],
         np.array([t]),
     )
-    assert sched.events[-1] == ["thrust_on", "propagation", "measurement", "eigenvector", "prediction", "punch",
-                                "final"]
+    assert sched.events[-1] == [
+        "thrust_on",
+        "propagation",
+        "measurement",
+        "eigenvector",
+        "prediction",
+        "punch",
+        "final",
+    ]
     assert sched.events[0] == ["initial"] and sched.n == 2
 
 
@@ -99,7 +114,8 @@ def test_start_stop_clipping():
     """Only [start, stop] counts: earlier and later tracking, events, switches, punches and
     predictions are dropped; the start is 'initial', the stop 'final' even where nothing else is."""
     sched = build_schedule(
-        2 * H, 7 * H,
+        2 * H,
+        7 * H,
         [range_times(0.0, 10 * H, H)],
         [("eigenvector", np.array([H, 3 * H, 8 * H]), None), ("prediction", np.array([H, 6 * H]), 12 * H)],
         [(0.0, "thrust_on"), (5 * H, "thrust_off"), (9 * H, "thrust_on")],
@@ -136,10 +152,13 @@ def test_small_study_counts(small):
     assert sum(len(tr) for tr in sched.tracking) == 2 * 19 + 4
     assert [sum(j in tr for tr in sched.tracking) for j in range(3)] == [19, 19, 4]
     assert sched.count("measurement") == 19 and sched.n == 21
-    np.testing.assert_allclose(sched.times_s, list(range_times(0.0, 3 * DAY, 4 * H)) + [3.5 * DAY, 4 * DAY],
-                               rtol=0, atol=1e-6)
-    k = {e: [i for i, ev in enumerate(sched.events) if e in ev] for e in
-         ("thrust_on", "thrust_off", "eigenvector", "prediction", "final")}
+    np.testing.assert_allclose(
+        sched.times_s, list(range_times(0.0, 3 * DAY, 4 * H)) + [3.5 * DAY, 4 * DAY], rtol=0, atol=1e-6
+    )
+    k = {
+        e: [i for i, ev in enumerate(sched.events) if e in ev]
+        for e in ("thrust_on", "thrust_off", "eigenvector", "prediction", "final")
+    }
     assert [sched.times_s[i] / DAY for i in k["thrust_on"]] == [0.0, 3.5]
     assert [sched.times_s[i] / DAY for i in k["thrust_off"]] == [2.5]
     assert sched.events[k["thrust_off"][0]] == ["thrust_off", "measurement"]

@@ -147,7 +147,9 @@ def test_run_with_stm(json_run, stm_file, tmp_mod):
 
 
 def _variant(tmp: Path, name: str, old: str, new: str, traj: Path = TRAJ) -> Path:
-    text = SMALL.read_text(encoding="utf-8").replace(old, new, 1).replace('"team_small_traj.toml"', json.dumps(str(traj)))
+    text = (
+        SMALL.read_text(encoding="utf-8").replace(old, new, 1).replace('"team_small_traj.toml"', json.dumps(str(traj)))
+    )
     p = tmp / name
     p.write_text(text, encoding="utf-8")
     return p
@@ -155,14 +157,20 @@ def _variant(tmp: Path, name: str, old: str, new: str, traj: Path = TRAJ) -> Pat
 
 def test_run_with_stm_refuses_time_not_on_file(stm_file, tmp_path):
     deck = _variant(tmp_path, "three_hours.toml", "interval_hours = 4.0", "interval_hours = 3.0")
-    refused(fracas("run", deck, "--stm", stm_file[0], "--quiet"), f"{stm_file[0]}: requested time 10800.000000 s",
-            "is not on the STM file")
+    refused(
+        fracas("run", deck, "--stm", stm_file[0], "--quiet"),
+        f"{stm_file[0]}: requested time 10800.000000 s",
+        "is not on the STM file",
+    )
 
 
 def test_run_with_stm_refuses_parameter_not_on_file(stm_file, tmp_path):
     deck = _variant(tmp_path, "mu_earth.toml", 'label = "mu[sun]"', 'label = "mu[earth]"')
-    refused(fracas("run", deck, "--stm", stm_file[0], "--quiet"), "parameter mu[earth] not on the STM file",
-            "it has thrust_scale, bias_in_rad, mu[sun], cr, bias_out_rad")
+    refused(
+        fracas("run", deck, "--stm", stm_file[0], "--quiet"),
+        "parameter mu[earth] not on the STM file",
+        "it has thrust_scale, bias_in_rad, mu[sun], cr, bias_out_rad",
+    )
 
 
 def test_run_with_stm_refuses_other_trajectory(stm_file, tmp_path):

@@ -15,10 +15,10 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
+from fracas.build.team import build_study
 from fracas.cli import main
 from fracas.config.team import load_team_deck, parse_team_deck
 from fracas.errors import DeckError
-from fracas.build.team import build_study
 
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO / "tests" / "data"
@@ -89,7 +89,9 @@ def test_missing_a_priori():
 
 def test_a_priori_not_needed_without_analysis():
     """The rule behind the refusal above: a deck that only builds an STM file needs no a priori."""
-    text = re.sub(r"\[a_priori\]\n(.+\n)+", "", small_text()).replace("[ertraj]", "[errcon]\nanalysis = false\n\n[ertraj]")
+    text = re.sub(r"\[a_priori\]\n(.+\n)+", "", small_text()).replace(
+        "[ertraj]", "[errcon]\nanalysis = false\n\n[ertraj]"
+    )
     parse_team_deck(text, SRC)
 
 
@@ -98,14 +100,17 @@ def test_a_priori_exactly_one_of_sigma_and_rss():
     assert "give exactly one of position_sigma_km, position_rss_km" in msg
 
 
-@pytest.mark.parametrize("label, expected", [
-    # an unknown body: the message lists the bodies of this trajectory's force model
-    ("mu[pluto]", "body 'pluto' is not in the force model ('sun', 'earth')"),
-    # an unknown name: the message lists the catalogue
-    ("frobnicate", "unknown parameter 'frobnicate'; known: ['area_m2', 'bias_in_rad'"),
-    # an unknown station in a measurement label: the stations that exist
-    ("station_radius_km[parkes]", "station 'parkes' is not one of canberra, goldstone, madrid"),
-])
+@pytest.mark.parametrize(
+    "label, expected",
+    [
+        # an unknown body: the message lists the bodies of this trajectory's force model
+        ("mu[pluto]", "body 'pluto' is not in the force model ('sun', 'earth')"),
+        # an unknown name: the message lists the catalogue
+        ("frobnicate", "unknown parameter 'frobnicate'; known: ['area_m2', 'bias_in_rad'"),
+        # an unknown station in a measurement label: the stations that exist
+        ("station_radius_km[parkes]", "station 'parkes' is not one of canberra, goldstone, madrid"),
+    ],
+)
 def test_unknown_parameter_label(label, expected):
     msg = refusal(small_text().replace('label = "mu[sun]"', f'label = "{label}"'), build=True)
     assert f'parameter[2].label = "{label}"' in msg and expected in msg
@@ -121,13 +126,18 @@ def test_repeated_label():
     assert 'parameter[1].label = "thrust_scale": repeats parameter[0]' in msg
 
 
-@pytest.mark.parametrize("kind, stations, expected", [
-    ("range3", '["goldstone"]', 'tracking[0].stations = ["goldstone"]: type "range3" needs 2 stations'),
-    ("doppler2", '["goldstone", "madrid"]', 'type "doppler2" needs 1 station'),
-    ("doppler3", '["madrid", "madrid"]', "the two stations must differ"),
-])
+@pytest.mark.parametrize(
+    "kind, stations, expected",
+    [
+        ("range3", '["goldstone"]', 'tracking[0].stations = ["goldstone"]: type "range3" needs 2 stations'),
+        ("doppler2", '["goldstone", "madrid"]', 'type "doppler2" needs 1 station'),
+        ("doppler3", '["madrid", "madrid"]', "the two stations must differ"),
+    ],
+)
 def test_station_count_for_tracking_type(kind, stations, expected):
-    text = small_text().replace('type = "doppler2"\nstations = ["goldstone"]', f"type = \"{kind}\"\nstations = {stations}", 1)
+    text = small_text().replace(
+        'type = "doppler2"\nstations = ["goldstone"]', f'type = "{kind}"\nstations = {stations}', 1
+    )
     assert kind in text
     assert expected in refusal(text)
 
@@ -140,15 +150,17 @@ def test_unknown_station():
 def test_added_station_is_known():
     """A [[station]] table makes a name known (the reference of the refusal above)."""
     text = small_text().replace('stations = ["madrid"]', 'stations = ["parkes"]') + (
-        '\n[[station]]\nname = "parkes"\nradius_km = 6372.0\nlatitude_deg = -33.0\nlongitude_deg = 148.3\n')
+        '\n[[station]]\nname = "parkes"\nradius_km = 6372.0\nlatitude_deg = -33.0\nlongitude_deg = 148.3\n'
+    )
     study = build_study(parse_team_deck(text, SRC))
     assert "parkes" in study.stations and study.observations[1].stations == ("parkes",)
 
 
 def test_gencov_parameter_not_in_study():
     msg = refusal(small_text().replace('role = "ignore"', ""))
-    assert ('gencov.parameter[0].label = "cr": is not a study parameter; add role = "ignore" to make it an '
-            "ignore parameter") in msg
+    assert (
+        'gencov.parameter[0].label = "cr": is not a study parameter; add role = "ignore" to make it an ignore parameter'
+    ) in msg
 
 
 def test_gencov_ignore_of_a_study_parameter():
@@ -178,12 +190,23 @@ def test_missing_file():
 
 
 # ----------------------------------------------------------------------------- through the CLI
-@pytest.mark.parametrize("name, expected", [
-    ("team_bad_station.toml", ('tracking[0].stations[0] = "parkes": unknown station (expected one of: canberra, '
-                               "goldstone, madrid)")),
-    ("team_bad_label.toml", ("parameter[1].label = \"mu[pluto]\": unknown parameter: parameter 'mu[pluto]': "
-                             "body 'pluto' is not in the force model ('sun', 'earth')")),
-], ids=["station", "label"])
+@pytest.mark.parametrize(
+    "name, expected",
+    [
+        (
+            "team_bad_station.toml",
+            ('tracking[0].stations[0] = "parkes": unknown station (expected one of: canberra, goldstone, madrid)'),
+        ),
+        (
+            "team_bad_label.toml",
+            (
+                "parameter[1].label = \"mu[pluto]\": unknown parameter: parameter 'mu[pluto]': "
+                "body 'pluto' is not in the force model ('sun', 'earth')"
+            ),
+        ),
+    ],
+    ids=["station", "label"],
+)
 def test_cli_refuses_bad_deck(name, expected):
     path = DATA / name
     res = CliRunner().invoke(main, ["run", str(path), "--quiet"])
@@ -195,10 +218,13 @@ def test_cli_refuses_bad_deck(name, expected):
     assert isinstance(res.exception, SystemExit)  # the CLI's own exit, not an escaped exception
 
 
-@pytest.mark.parametrize("predict_to, expected", [
-    (99.0, "event[1].predict_to_days = 99.0: must be within the trajectory (<= 6 d"),
-    (2.0, "event[1].predict_to_days = 2.0: must be after every time of the prediction event"),
-])
+@pytest.mark.parametrize(
+    "predict_to, expected",
+    [
+        (99.0, "event[1].predict_to_days = 99.0: must be within the trajectory (<= 6 d"),
+        (2.0, "event[1].predict_to_days = 2.0: must be after every time of the prediction event"),
+    ],
+)
 def test_prediction_target_checked(predict_to, expected):
     """A prediction beyond the trajectory (no ephemeris or thrust plan there) or before its
     own event time is refused in one line naming the field."""

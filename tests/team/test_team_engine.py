@@ -21,14 +21,13 @@ import numpy as np
 import pytest
 import tomllib
 
+from fracas.build.team import build_study
 from fracas.config.team import parse_team_deck
 from fracas.errors import StmFileError
-from fracas.pipeline import build_stm, run_team
+from fracas.pipeline import build_stm, reference_from_stm, run_team
 from fracas.team.engine import augmented_transitions, process_noise, run_study
 from fracas.team.measure import assemble_measurements
-from fracas.pipeline import reference_from_stm
 from fracas.team.reference import integrate_reference
-from fracas.build.team import build_study
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 SMALL = DATA / "team_small.toml"
@@ -178,8 +177,11 @@ def test_changed_schedule_through_the_same_file(base, stm_path):
 def test_refusals_parameter_missing(stm_path):
     d = small_dict()
     d["parameter"].append({"label": "mu[earth]", "sigma": 1.0, "role": "consider"})
-    with pytest.raises(StmFileError, match=r"mu\[earth\] not on the STM file; it has thrust_scale, "
-                                           r"bias_in_rad, mu\[sun\], cr") as e:
+    with pytest.raises(
+        StmFileError,
+        match=r"mu\[earth\] not on the STM file; it has thrust_scale, "
+        r"bias_in_rad, mu\[sun\], cr",
+    ) as e:
         reference_from_stm(study_of(d), stm_path)
     assert str(stm_path) in str(e.value) and "\n" not in str(e.value)
 
@@ -188,8 +190,11 @@ def test_refusals_time_missing(stm_path):
     """Doppler every 3 h: 3 h is not on the 2 h file grid."""
     d = small_dict()
     d["tracking"][0]["interval_hours"] = 3.0
-    with pytest.raises(StmFileError, match=r"requested time 10800\.000000 s .* is not on the STM file.*"
-                                           r"regenerate it") as e:
+    with pytest.raises(
+        StmFileError,
+        match=r"requested time 10800\.000000 s .* is not on the STM file.*"
+        r"regenerate it",
+    ) as e:
         reference_from_stm(study_of(d), stm_path)
     assert "\n" not in str(e.value)
 
@@ -269,8 +274,8 @@ def test_monte_carlo_closed_loop(base):
         w, V = np.linalg.eigh(0.5 * (C + C.T))
         return rng.standard_normal((size, len(w))) @ (V * np.sqrt(np.clip(w, 0.0, None))).T
 
-    e = draw(study.P0_true, N)       # true errors (state) and true parameter values
-    xh = np.zeros((N, n))            # the estimate (consider/ignore rows stay zero)
+    e = draw(study.P0_true, N)  # true errors (state) and true parameter values
+    xh = np.zeros((N, n))  # the estimate (consider/ignore rows stay zero)
     checked = {5: None, 14: None, study.schedule.n - 1: None}
     for k in range(study.schedule.n):
         e = e @ phi[k].T
@@ -284,9 +289,12 @@ def test_monte_carlo_closed_loop(base):
         xh = xh + (z - xh @ H.T) @ K.T
         if k in checked:
             err = e - xh
-            checked[k] = (np.mean(err**2, axis=0), np.einsum("ii->i", res.Pt_plus[k]),
-                          np.einsum("ii->i", res.Pa_plus[k]))
-    for k, (mc, true, assumed) in checked.items():
+            checked[k] = (
+                np.mean(err**2, axis=0),
+                np.einsum("ii->i", res.Pt_plus[k]),
+                np.einsum("ii->i", res.Pa_plus[k]),
+            )
+    for k, (mc, true, _assumed) in checked.items():
         live = true > 0
         np.testing.assert_allclose(mc[live] / true[live], 1.0, rtol=0, atol=0.11, err_msg=f"event {k}")
     # not vacuous: the closed loop tells the true from the assumed covariance (2 mm/s Doppler
@@ -370,8 +378,11 @@ def test_pdot_and_phi_position_sigmas(base):
     del d["event"][1]
     phi, pdot = _pdot_pair(ref, d)
     n = phi.study.layout.n
-    assert pdot.Pa_plus.shape[-1] == n + 3 and pdot.labels[n:] == ["eta_proportionality", "eta_in_plane_rad",
-                                                                   "eta_out_of_plane_rad"]
+    assert pdot.Pa_plus.shape[-1] == n + 3 and pdot.labels[n:] == [
+        "eta_proportionality",
+        "eta_in_plane_rad",
+        "eta_out_of_plane_rad",
+    ]
     ratio = pos_rss(pdot.Pa_plus[:, :n, :n]) / pos_rss(phi.Pa_plus)
     print(f"PDOT/PHI position RSS: final {ratio[-1]:.4f}, range {ratio.min():.3f}-{ratio.max():.3f}")
     assert 0.8 < ratio[-1] < 1.25
@@ -443,7 +454,7 @@ def test_restart_from_punch_reproduces_the_run(punched):
     assert t2[0] == 1.25 * DAY and "punch" in res1.event_types[np.searchsorted(t1, 1.25 * DAY)].split("+")
     k0 = int(np.searchsorted(t1, t2[0]))
     np.testing.assert_array_equal(t1[k0:], t2)
-    assert [e for e in res2.event_types[1:]] == res1.event_types[k0 + 1:]
+    assert list(res2.event_types[1:]) == res1.event_types[k0 + 1 :]
     assert scaled_diff(res2.assumed.P_plus, res1.assumed.P_plus[k0:]) < 1e-10
     assert scaled_diff(res2.true.P_plus, res1.true.P_plus[k0:]) < 1e-10
 
@@ -503,15 +514,19 @@ def test_results_file_reads_back(punched):
 def _datasets(path: Path) -> dict[str, h5py.Dataset]:
     out = {}
     with h5py.File(path, "r") as f:
-        f.visititems(lambda name, obj: out.__setitem__(name, dict(obj.attrs)) if isinstance(obj, h5py.Dataset)
-                     else None)
+        f.visititems(
+            lambda name, obj: out.__setitem__(name, dict(obj.attrs)) if isinstance(obj, h5py.Dataset) else None
+        )
     return out
 
 
 def test_results_file_numeric_datasets_have_units(punched):
     found = _datasets(punched[1])
-    numeric = {k: a for k, a in found.items() if not k.endswith(("names", "units", "roles", "event_types",
-                                                                 "primary", "type", "stations", "psd_problems"))}
+    numeric = {
+        k: a
+        for k, a in found.items()
+        if not k.endswith(("names", "units", "roles", "event_types", "primary", "type", "stations", "psd_problems"))
+    }
     assert len(numeric) > 10
     assert [k for k, a in numeric.items() if "units" not in a] == []
 
@@ -542,8 +557,8 @@ def test_prediction_equals_the_propagated_covariance(base):
     k5 = int(np.argmin(np.abs(on.times_s - 5.0 * 86400.0)))
     assert abs(on.times_s[k5] - 5.0 * 86400.0) < 1e-6
     for res, tol in ((on, 1e-10), (off, 1e-7)):
-        (k, lst), = res.predictions.items()
-        (t_to, Pa, Pt), = lst
+        ((k, lst),) = res.predictions.items()
+        ((t_to, Pa, Pt),) = lst
         assert t_to == 5.0 * 86400.0
         print(f"prediction vs run ({tol:g} branch): {scaled_diff(Pa, on.Pa_plus[k5]):.2e}")
         assert scaled_diff(Pa, on.Pa_plus[k5]) < tol

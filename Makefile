@@ -22,6 +22,7 @@ demo: $(STAMP)
 	$(BIN)/fracas stm build namelists/mercury_approach_team.toml -o stm_files/mercury_approach.h5
 	$(BIN)/fracas stm info stm_files/mercury_approach.h5
 	$(BIN)/fracas run namelists/mercury_approach_team.toml --stm stm_files/mercury_approach.h5
+	$(BIN)/fracas report out/earth_mars_team.h5 --quiet
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

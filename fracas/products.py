@@ -9,6 +9,8 @@ pydantic), so every layer may import it.
   with Phi and Theta between consecutive times (the STM file's contents, FRACAS STMGEN).
   :func:`chain` multiplies its step matrices over skipped times (STMRDR, section 3.2).
 * :class:`TeamProduct` -- the covariance history of one TEAM run (``fracas.team.result``).
+* :class:`TrajectoryData` -- one propagation with its optional :class:`SensitivityData`
+  (``fracas.pipeline.trajectory_data``; the trajectory file's contents).
 """
 
 from __future__ import annotations
@@ -21,8 +23,18 @@ import numpy as np
 
 from fracas.constants import DAY_S
 from fracas.errors import StmFileError
+from fracas.status import status_text
 
-__all__ = ["ReferenceTrajectory", "TeamProduct", "chain", "time_indices", "SCHEMA_VERSION", "TIME_TOL_S"]
+__all__ = [
+    "ReferenceTrajectory",
+    "TeamProduct",
+    "TrajectoryData",
+    "SensitivityData",
+    "chain",
+    "time_indices",
+    "SCHEMA_VERSION",
+    "TIME_TOL_S",
+]
 
 SCHEMA_VERSION = 1  # of the STM file that stores a ReferenceTrajectory
 TIME_TOL_S = 1e-6  # a requested time matches a file time within this (s); the deck's eps_t
@@ -292,3 +304,74 @@ class TeamProduct:
     @property
     def n_events(self) -> int:
         return int(np.shape(self.times_s)[0])
+
+
+# --------------------------------------------------------------------------- propagation
+
+
+@dataclass
+class SensitivityData:
+    """Labelled sensitivity matrices at the output times (state order x y z vx vy vz mass).
+
+    stm_step (n,7,7) Phi(t_k, t_{k-1}); stm (n,7,7) Phi(t_k, t_0); par_step (n,7,np)
+    dx(t_k)/dp with x(t_{k-1}) fixed; par (n,7,np) dx(t_k)/dp from t_0.  Element (i, j) has
+    units ``STATE_UNITS[i] / col_units[j]``.
+    """
+
+    stm: np.ndarray
+    stm_step: np.ndarray
+    par: np.ndarray
+    par_step: np.ndarray
+    param_labels: tuple[str, ...] = ()
+    param_units: tuple[str, ...] = ()
+
+
+@dataclass
+class TrajectoryData:
+    """One propagation as stored in a trajectory file (numpy; canonical units; ICRF).
+
+    t_s (n,) s from the epoch (NaN after an early stop); r_km (n,3), v_km_s (n,3),
+    mass_kg (n,) relative to ``primary[k]`` (a body name, "" where undefined); status
+    0 final time / 1 stop condition / 2 max steps / 3 non-finite (:class:`fracas.status.RunStatus`).
+    """
+
+    epoch_et_s: float
+    t_s: np.ndarray
+    r_km: np.ndarray
+    v_km_s: np.ndarray
+    mass_kg: np.ndarray
+    primary: tuple[str, ...]
+    bodies: tuple[str, ...]
+    t_final_s: float
+    r_final_km: np.ndarray
+    v_final_km_s: np.ndarray
+    mass_final_kg: float
+    primary_final: str
+    status: int
+    n_steps: int
+    n_rect: int
+    centre: str = ""
+    title: str = ""
+    epoch_tdb: str = ""
+    sensitivities: SensitivityData | None = None
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def status_text(self) -> str:
+        return status_text(self.status)
+
+    def summary_dict(self) -> dict[str, Any]:
+        """Plain-JSON summary of the end of the propagation."""
+        return {
+            "title": self.title,
+            "epoch_et_s": float(self.epoch_et_s),
+            "t_final_s": float(self.t_final_s),
+            "r_km": [float(x) for x in self.r_final_km],
+            "v_km_s": [float(x) for x in self.v_final_km_s],
+            "mass_kg": float(self.mass_final_kg),
+            "primary": self.primary_final,
+            "status": int(self.status),
+            "status_text": self.status_text,
+            "n_steps": int(self.n_steps),
+            "n_rect": int(self.n_rect),
+        }

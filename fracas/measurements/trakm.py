@@ -7,19 +7,9 @@ measurement kind (compiled once per process, then reused), built from
 TRAKM linearises y = h(x, s, u, v, w) about the nominal: dy = H_x dx + H_p dp.  Here H has
 ``nx`` spacecraft-state columns (r km, v km/s, then mass etc. with zero partials) followed by
 one column per parameter label (TRAKM's single H_p "rearranged column by column" is the
-caller's business).  Measurement-parameter labels:
-
-    station_radius_km[NAME]   km     station geocentric radius   (via STAPRL)
-    station_lat_rad[NAME]     rad    station geocentric latitude (via STAPRL)
-    station_lon_rad[NAME]     rad    station east longitude      (via STAPRL)
-    range_bias_km[NAME]       km     range bias of station NAME
-    doppler_bias_km_s[NAME]   km/s   Doppler (range-rate) bias of station NAME
-    azimuth_bias_rad[NAME]    rad    azimuth bias of station NAME
-    elevation_bias_rad[NAME]  rad    elevation bias of station NAME
-    qvlbi_timing_km           km     c dt   (+ in range3, - in diff_range; TRAKM eqs. 9, 11)
-    qvlbi_frequency_km_s      km/s   c df/f (+ in doppler3, - in diff_doppler; eqs. 10, 12)
-    star_planet_bias_rad      rad    star-planet angle bias
-    diameter_bias_rad         rad    apparent-diameter bias
+caller's business).  The measurement-parameter labels (station locations, per-station
+biases, QVLBI timing and frequency, star-planet and diameter biases) and their units are
+listed in the catalogue, :mod:`fracas.measurements.kinds`.
 
 Biases enter with unit partials (TRAKM eq. 8 and its closing remark): 2-way kinds use their
 station's bias, 3-way kinds both stations' (+1 each), differenced kinds station 1 minus

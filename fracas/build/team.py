@@ -1,8 +1,8 @@
 """From a validated TEAM deck to a :class:`~fracas.team.study.Study` in canonical units (FRACAS DATA, sec. 5.3.2).
 
-The application layer of TEAM (the core in :mod:`fracas.team` never sees the deck): reads the trajectory deck named by [ertraj], sorts the
-study's parameters into the augmented-state roles (solve-for s, dynamic consider u,
-measurement consider v, ignore w), builds the a-priori covariances (assumed and, for
+The application layer of TEAM (the core in :mod:`fracas.team` never sees the deck): reads
+the trajectory deck named by [ertraj], sorts the study's parameters into the augmented-state
+roles (solve-for s, dynamic consider u, measurement consider v, ignore w), builds the a-priori covariances (assumed and, for
 generalized covariance, true), the Gauss-Markov thrust noise levels, the stations, the
 observations of every [[tracking]] entry and the event schedule.  Every problem is a
 one-line :class:`~fracas.errors.DeckError` naming the deck, the field and what was expected.
@@ -22,17 +22,24 @@ from fracas.build.trajectory import Problem, build_propagation
 from fracas.config.team import SIGMA_UNITS, APriori, TeamDeck, ThrustNoise
 from fracas.config.trajectory import TrajectoryDeck, load_deck, trajectory_hash
 from fracas.constants import DAY_S
-from fracas.integrate.variational import THRUST_NOISE_LABELS
 from fracas.errors import ConfigError, DeckError
 from fracas.filters.covariance import Layout
+from fracas.integrate.variational import THRUST_NOISE_LABELS
 from fracas.measurements import trakm
 from fracas.measurements.stations import DSN_STATIONS, Station
 from fracas.params import param_unit, parse_label
 from fracas.team.schedule import build_schedule, merge_times, range_times
 from fracas.team.study import Study, TrackingSpec
 
-__all__ = ["TeamCase", "build_study", "build_case", "trajectory_problem", "stm_file_times", "stm_file_labels",
-           "thrust_switch_times"]
+__all__ = [
+    "TeamCase",
+    "build_study",
+    "build_case",
+    "trajectory_problem",
+    "stm_file_times",
+    "stm_file_labels",
+    "thrust_switch_times",
+]
 
 _NOISE_FIELDS = ("proportionality", "in_plane_deg", "out_of_plane_deg")
 _NOISE_SCALE = (1.0, math.pi / 180.0, math.pi / 180.0)
@@ -57,7 +64,9 @@ class TeamCase:
 
 def thrust_switch_times(tdeck: TrajectoryDeck) -> tuple[float, ...]:
     """The thrust on/off times of a trajectory deck (s from its epoch, sorted, unique)."""
-    return tuple(sorted({a.start_days * DAY_S for a in tdeck.thrust_arc} | {a.stop_days * DAY_S for a in tdeck.thrust_arc}))
+    return tuple(
+        sorted({a.start_days * DAY_S for a in tdeck.thrust_arc} | {a.stop_days * DAY_S for a in tdeck.thrust_arc})
+    )
 
 
 def _err(src: str, field: str, value, expected: str) -> DeckError:
@@ -88,8 +97,13 @@ def _classify(label: str, model, station_names, src: str, field: str) -> bool:
             raise _err(src, field, label, str(exc).strip("'\"")) from None
         return False
     lead = "" if dyn_msg.startswith("unknown parameter") else "unknown parameter: "
-    raise _err(src, field, label, f"{lead}{dyn_msg}; measurement parameters are e.g. "
-               "station_lon_rad[goldstone], range_bias_km[madrid], qvlbi_timing_km")
+    raise _err(
+        src,
+        field,
+        label,
+        f"{lead}{dyn_msg}; measurement parameters are e.g. "
+        "station_lon_rad[goldstone], range_bias_km[madrid], qvlbi_timing_km",
+    )
 
 
 def _unit(label: str, dynamic: bool, model) -> str:
@@ -158,8 +172,12 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
     ordered = groups["s"] + groups["u"] + groups["v"] + groups["w"]
     labels = [lab for lab, _, _ in ordered]
     dynamic = np.array([d for _, _, d in ordered], dtype=bool)
-    roles = (["solve_for"] * len(groups["s"]) + ["dynamic_consider"] * len(groups["u"])
-             + ["measurement_consider"] * len(groups["v"]) + ["ignore"] * len(groups["w"]))
+    roles = (
+        ["solve_for"] * len(groups["s"])
+        + ["dynamic_consider"] * len(groups["u"])
+        + ["measurement_consider"] * len(groups["v"])
+        + ["ignore"] * len(groups["w"])
+    )
     units = [_unit(lab, d, model) for lab, _, d in ordered]
     layout = Layout(nx, len(groups["s"]), len(groups["u"]), len(groups["v"]), len(groups["w"]))
 
@@ -168,17 +186,25 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
     p_sig_a = np.array([s for _, s, _ in ordered], dtype=np.float64)
     p_sig_t = np.array([true_sigma.get(lab, s) for lab, s, _ in ordered], dtype=np.float64)
     if layout.nw:  # the filter does not know its ignore parameters
-        p_sig_a[-layout.nw:] = 0.0
+        p_sig_a[-layout.nw :] = 0.0
     if punched is not None:
         if punched.get("trajectory_hash") and punched["trajectory_hash"] != trajectory_hash(tdeck):
-            raise _err(src, "a_priori.from_punch", deck.a_priori.from_punch,
-                       f"was punched on another trajectory (hash {str(punched['trajectory_hash'])[:12]}), this study's "
-                       f"trajectory deck {tdeck.source_path} has {trajectory_hash(tdeck)[:12]}")
+            raise _err(
+                src,
+                "a_priori.from_punch",
+                deck.a_priori.from_punch,
+                f"was punched on another trajectory (hash {str(punched['trajectory_hash'])[:12]}), this study's "
+                f"trajectory deck {tdeck.source_path} has {trajectory_hash(tdeck)[:12]}",
+            )
         P0a = np.array(punched["assumed"], dtype=np.float64)
         P0t = np.array(punched.get("true", punched["assumed"]), dtype=np.float64)
         if list(punched["labels"]) != labels or P0a.shape != (n, n):
-            raise _err(src, "a_priori.from_punch", deck.a_priori.from_punch,
-                       f"the punched covariance has parameters {list(punched['labels'])}, this study {labels}")
+            raise _err(
+                src,
+                "a_priori.from_punch",
+                deck.a_priori.from_punch,
+                f"the punched covariance has parameters {list(punched['labels'])}, this study {labels}",
+            )
     else:
         xs_a = _state_sigmas(deck.a_priori, nx)
         xs_t = _state_sigmas(gen.a_priori, nx) if (gen is not None and gen.a_priori is not None) else xs_a
@@ -193,7 +219,7 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
 
     # ---- observations and their schedule
     obs, tsig, track_times, specs = [], [], [], []
-    for j, t in enumerate(deck.tracking):
+    for t in deck.tracking:
         unit, k = SIGMA_UNITS[t.type]
         obs.append(trakm.Observation(t.type, tuple(t.stations), t.sigma * k))
         star = None
@@ -219,18 +245,28 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
             raise _err(src, f"event[{k}]", None, f"times must be within the trajectory (<= {dur / DAY_S:g} d)")
         if e.predict_to_days is not None:
             if e.predict_to_days * DAY_S > dur:
-                raise _err(src, f"event[{k}].predict_to_days", e.predict_to_days,
-                           f"must be within the trajectory (<= {dur / DAY_S:g} d, its ephemeris and thrust plan)")
+                raise _err(
+                    src,
+                    f"event[{k}].predict_to_days",
+                    e.predict_to_days,
+                    f"must be within the trajectory (<= {dur / DAY_S:g} d, its ephemeris and thrust plan)",
+                )
             if np.any(ts >= e.predict_to_days * DAY_S):
-                raise _err(src, f"event[{k}].predict_to_days", e.predict_to_days,
-                           "must be after every time of the prediction event")
+                raise _err(
+                    src,
+                    f"event[{k}].predict_to_days",
+                    e.predict_to_days,
+                    "must be after every time of the prediction event",
+                )
         events.append((e.type, ts, None if e.predict_to_days is None else e.predict_to_days * DAY_S))
     switches = []
     for arc in tdeck.thrust_arc:
         switches += [(arc.start_days * DAY_S, "thrust_on"), (arc.stop_days * DAY_S, "thrust_off")]
     if deck.errcon.propagation == "pdot" and (deck.filter.type == "wls" or deck.filter.square_root):
-        raise ConfigError(f"{src}: errcon.propagation = \"pdot\" supports the Kalman-Schmidt and user "
-                          "filters in covariance form (use propagation = \"phi\" for WLS or the square-root mode)")
+        raise ConfigError(
+            f'{src}: errcon.propagation = "pdot" supports the Kalman-Schmidt and user '
+            'filters in covariance form (use propagation = "phi" for WLS or the square-root mode)'
+        )
     punch = np.array(deck.punch.times_days) * DAY_S if deck.punch is not None else np.zeros(0)
     sched = build_schedule(start, stop, track_times, events, switches, punch)
     if punched is not None:  # the punched covariance already includes the events at its time
@@ -239,18 +275,44 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
         sched.predict_to_s.pop(0, None)
 
     gain = load_user_gain(deck.filter.user_gain, src) if deck.filter.type == "user" else None
-    problem = dataclasses.replace(problem, param_labels=tuple(lab for lab, d in zip(labels, dynamic) if d),
-                                  sensitivities=True)
+    problem = dataclasses.replace(
+        problem, param_labels=tuple(lab for lab, d in zip(labels, dynamic) if d), sensitivities=True
+    )
     study = Study(
-        source=src, title=deck.title, problem=problem, layout=layout, labels=labels, roles=roles,
-        units=units, dynamic=dynamic, P0_assumed=P0a, P0_true=P0t,
-        noise_sigma_assumed=sig_a, noise_tau_assumed=tau_a, noise_sigma_true=sig_t, noise_tau_true=tau_t,
-        stations=stations, tracking=specs, observations=obs, true_sigma=np.array(tsig, dtype=np.float64),
-        schedule=sched, start_s=start, stop_s=stop, gencov=gen is not None, filter_kind=deck.filter.type,
-        square_root=deck.filter.square_root, user_gain=gain, min_elevation_deg=deck.filter.min_elevation_deg,
-        propagation=deck.errcon.propagation, thrust_switches_s=thrust_switch_times(tdeck), trajectory_end_s=dur,
-        pdot_step_s=deck.ertraj.pdot_step_hours * 3600.0, user_gain_spec=deck.filter.user_gain or "",
-        trajectory_hash=trajectory_hash(tdeck), trajectory_source=tdeck.source_path or "", punched=punched,
+        source=src,
+        title=deck.title,
+        problem=problem,
+        layout=layout,
+        labels=labels,
+        roles=roles,
+        units=units,
+        dynamic=dynamic,
+        P0_assumed=P0a,
+        P0_true=P0t,
+        noise_sigma_assumed=sig_a,
+        noise_tau_assumed=tau_a,
+        noise_sigma_true=sig_t,
+        noise_tau_true=tau_t,
+        stations=stations,
+        tracking=specs,
+        observations=obs,
+        true_sigma=np.array(tsig, dtype=np.float64),
+        schedule=sched,
+        start_s=start,
+        stop_s=stop,
+        gencov=gen is not None,
+        filter_kind=deck.filter.type,
+        square_root=deck.filter.square_root,
+        user_gain=gain,
+        min_elevation_deg=deck.filter.min_elevation_deg,
+        propagation=deck.errcon.propagation,
+        thrust_switches_s=thrust_switch_times(tdeck),
+        trajectory_end_s=dur,
+        pdot_step_s=deck.ertraj.pdot_step_hours * 3600.0,
+        user_gain_spec=deck.filter.user_gain or "",
+        trajectory_hash=trajectory_hash(tdeck),
+        trajectory_source=tdeck.source_path or "",
+        punched=punched,
     )
     return TeamCase(deck, tdeck, study)
 

@@ -20,11 +20,11 @@ Conversions made here (and nowhere else):
 from __future__ import annotations
 
 import math
+
 import numpy as np
 
 from fracas import constants
 from fracas.config.trajectory import TrajectoryDeck
-from fracas.timescales import epoch_to_et
 from fracas.dynamics.model import (
     FRAME_INERTIAL,
     FRAME_VELOCITY,
@@ -32,12 +32,12 @@ from fracas.dynamics.model import (
     POWER_SOLAR,
     ForceModel,
     IntegratorSettings,
-    Params,
     StopCondition,
     default_params,
 )
 from fracas.errors import ConfigError
 from fracas.integrate.problem import Problem
+from fracas.timescales import epoch_to_et
 
 __all__ = ["Problem", "build_propagation", "output_times_s", "model_bodies"]
 
@@ -193,7 +193,7 @@ def build_propagation(deck: TrajectoryDeck) -> Problem:
     for name, ov in f.overrides.items():
         if name not in bodies:
             raise ConfigError(
-                f"{src}: forces.overrides.{name}: body \"{name}\" is not in the force model "
+                f'{src}: forces.overrides.{name}: body "{name}" is not in the force model '
                 f"({', '.join(bodies)}); add it to forces.third_bodies or remove the override"
             )
         k = idx(name)
@@ -203,10 +203,12 @@ def build_propagation(deck: TrajectoryDeck) -> Problem:
             j2[k] = ov.j2
         if ov.radius_km is not None:
             radius[k] = ov.radius_km
-    over: dict = dict(mu=mu, j2=j2, radius=radius, area_m2=sc.area_m2, cr=sc.cr)
+    over: dict = {"mu": mu, "j2": j2, "radius": radius, "area_m2": sc.area_m2, "cr": sc.cr}
     if prop is not None:
         c = prop.exhaust_velocity_km_s if prop.exhaust_velocity_km_s is not None else prop.isp_s * constants.G0_KM_S2
-        decay = prop.decay_days * constants.DAY_S if (prop.power_source == POWER_NUCLEAR and prop.decay_days) else math.inf
+        decay = (
+            prop.decay_days * constants.DAY_S if (prop.power_source == POWER_NUCLEAR and prop.decay_days) else math.inf
+        )
         over.update(
             power_kw=prop.power_kw,
             power_decay_s=decay,
@@ -262,7 +264,7 @@ def build_propagation(deck: TrajectoryDeck) -> Problem:
             try:
                 parse_label(label, model)
             except Exception as exc:  # noqa: BLE001 - any parse failure is a deck problem
-                raise ConfigError(f"{src}: output.sensitivities[{k}] = \"{label}\": {exc}") from None
+                raise ConfigError(f'{src}: output.sensitivities[{k}] = "{label}": {exc}') from None
 
     return Problem(
         model=model,

@@ -2,10 +2,11 @@
 
 The application layer of TEAM (the core in :mod:`fracas.team` never sees the deck): reads
 the trajectory deck named by [ertraj], sorts the study's parameters into the augmented-state
-roles (solve-for s, dynamic consider u, measurement consider v, ignore w), builds the a-priori covariances (assumed and, for
-generalized covariance, true), the Gauss-Markov thrust noise levels, the stations, the
-observations of every [[tracking]] entry and the event schedule.  Every problem is a
-one-line :class:`~fracas.errors.DeckError` naming the deck, the field and what was expected.
+roles (solve-for s, dynamic consider u, measurement consider v, ignore w), builds the
+a-priori covariances (assumed and, for generalized covariance, true), the Gauss-Markov
+thrust noise levels, the stations, the observations of every [[tracking]] entry and the
+event schedule, converting days, hours, degrees and deck sigmas on the way.  Every problem
+is a one-line :class:`~fracas.errors.DeckError` naming the deck, the field and what was expected.
 """
 
 from __future__ import annotations

@@ -216,7 +216,9 @@ class CovarianceHistory:
     P_minus / P_plus (K, n, n): before / after the event at each time (rows and columns as
     the product's labels and units); process_noise (K, nx, nx): DYNO's Q̃ over the interval
     ending at each time; sigma (K, n): 1σ after each event; a_priori_sigma (n,): 1σ of the
-    a-priori covariance; eigen: the eigenvector events.
+    a-priori covariance; eigen: the eigenvector events; event_status (K,) int: the
+    :class:`fracas.status.RunStatus` of P_plus at each event (0 OK, 6 not positive-definite,
+    7 non-finite; None when not computed).
     """
 
     P_minus: np.ndarray
@@ -225,6 +227,7 @@ class CovarianceHistory:
     sigma: np.ndarray
     a_priori_sigma: np.ndarray
     eigen: EigenEvents
+    event_status: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

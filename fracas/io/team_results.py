@@ -35,6 +35,14 @@ def _write_history(h: h5py.Group, c: CovarianceHistory) -> None:
     )
     write(h, "sigma", c.sigma, "labels/units", description="1-sigma after each event")
     write(h, "a_priori_sigma", c.a_priori_sigma, "labels/units", description="1-sigma of the a-priori covariance")
+    if c.event_status is not None:
+        write(
+            h,
+            "event_status",
+            np.asarray(c.event_status, dtype=np.int64),
+            "1",
+            description="fracas.status.RunStatus of P_plus at each event (0 OK, 6 not positive-definite, 7 non-finite)",
+        )
     e = c.eigen
     eg = h.create_group("eigenvector_events")
     write(eg, "index", np.asarray(e.index, dtype=np.int64), "1")
@@ -125,7 +133,9 @@ def write_team_results(path: str | os.PathLike, res: TeamProduct) -> None:
 
 
 def _history(h: h5py.Group) -> dict[str, Any]:
-    out = {k: h[k][()] for k in ("P_minus", "P_plus", "sigma", "process_noise", "a_priori_sigma") if k in h}
+    out = {
+        k: h[k][()] for k in ("P_minus", "P_plus", "sigma", "process_noise", "a_priori_sigma", "event_status") if k in h
+    }
     eg = h["eigenvector_events"]
     out["eigenvector_events"] = {k: eg[k][()] for k in eg}
     return out

@@ -36,13 +36,26 @@ class EigenSummary:
 
 
 def eigen_summary(P: np.ndarray) -> EigenSummary:
-    """The eigenvector event of one augmented covariance (state first: r km, v km/s, ...)."""
-    P = 0.5 * (P + P.T)
-    s, c = (np.asarray(a) for a in correlations(P))
+    """The eigenvector event of one augmented covariance (state first: r km, v km/s, ...).
+
+    Never raises on a bad matrix: a position or velocity block with a non-finite entry (or
+    one ``eigh`` cannot decompose) gets NaN eigenvalues, semi-axes and eigenvectors, so one
+    broken event leaves the others (and the results file) intact; the event's status is
+    :func:`fracas.team.result.event_status`'s business."""
+    P = np.asarray(P, dtype=np.float64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        P = 0.5 * (P + P.T)
+        s, c = (np.asarray(a) for a in correlations(P))
     out = []
     for blk in (slice(0, 3), slice(3, 6)):
-        B = 0.5 * (P[blk, blk] + P[blk, blk].T)
-        w, V = np.linalg.eigh(B)
-        V = V * np.where(V[np.argmax(np.abs(V), axis=0), np.arange(3)] < 0, -1.0, 1.0)  # sign: largest entry > 0
+        with np.errstate(invalid="ignore", over="ignore"):
+            B = 0.5 * (P[blk, blk] + P[blk, blk].T)
+        w, V = np.full(3, np.nan), np.full((3, 3), np.nan)
+        if np.all(np.isfinite(B)):
+            try:
+                w, V = np.linalg.eigh(B)
+                V = V * np.where(V[np.argmax(np.abs(V), axis=0), np.arange(3)] < 0, -1.0, 1.0)  # largest entry > 0
+            except np.linalg.LinAlgError:
+                w, V = np.full(3, np.nan), np.full((3, 3), np.nan)
         out += [w, np.sqrt(np.clip(w, 0.0, None)), V]
     return EigenSummary(s, c, *out)

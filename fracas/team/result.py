@@ -32,6 +32,7 @@ __all__ = [
     "NOISE_STATE_UNITS",
     "EIGEN_EVENTS",
     "psd_problems",
+    "event_status",
     "finish",
     "team_product",
 ]
@@ -76,8 +77,12 @@ class TeamResult:
             return RunStatus(self.ref.status)
         if any(s for lst in self.prediction_status.values() for s in lst):
             return RunStatus.OUTSIDE_TRAJECTORY
-        if self.psd_problems:
-            nonfinite = any(not np.isfinite(e) for _, _, _, e in self.psd_problems)
+        if self.psd_problems or not np.all(np.isfinite(self.Pa_plus)):
+            nonfinite = any(not np.isfinite(e) for _, _, _, e in self.psd_problems) or not np.all(
+                np.isfinite(self.Pa_plus)
+            )
+            if self.Pt_plus is not None and not np.all(np.isfinite(self.Pt_plus)):
+                nonfinite = True
             return RunStatus.NONFINITE_COVARIANCE if nonfinite else RunStatus.NOT_POSITIVE_DEFINITE
         return RunStatus.OK
 
@@ -129,6 +134,17 @@ def psd_problems(study: Study, P: np.ndarray, which: str) -> list[tuple[int, str
     return [(int(k), study.schedule.primary_type(int(k)), which, float(min_eig[k])) for k in np.nonzero(~ok)[0]]
 
 
+def event_status(P: np.ndarray, problems: list[tuple[int, str, str, float]], which: str) -> np.ndarray:
+    """(K,) int64 :class:`~fracas.status.RunStatus` of each event's covariance ``P`` (K, n, n):
+    NONFINITE_COVARIANCE where P[k] has a NaN/inf entry, NOT_POSITIVE_DEFINITE at the other
+    indices :func:`psd_problems` listed for history ``which`` ("assumed" or "true"), OK
+    elsewhere."""
+    out = np.full(P.shape[0], int(RunStatus.OK), dtype=np.int64)
+    out[[k for k, _, w, _ in problems if w == which]] = int(RunStatus.NOT_POSITIVE_DEFINITE)
+    out[~np.all(np.isfinite(P.reshape(P.shape[0], -1)), axis=1)] = int(RunStatus.NONFINITE_COVARIANCE)
+    return out
+
+
 def finish(res: TeamResult, tm: dict) -> None:
     """Positive-definiteness checks and prediction events (shared by PHI and PDOT)."""
     study = res.study
@@ -159,9 +175,11 @@ def _eigen_events(P: np.ndarray, events: list[list[str]]) -> EigenEvents:
     )
 
 
-def _history(Pm, Pp, Q, P0, events) -> CovarianceHistory:
-    sig = np.sqrt(np.clip(np.einsum("kii->ki", Pp), 0, None))
-    return CovarianceHistory(Pm, Pp, Q, sig, np.sqrt(np.clip(np.diag(P0), 0, None)), _eigen_events(Pp, events))
+def _history(Pm, Pp, Q, P0, events, status) -> CovarianceHistory:
+    with np.errstate(invalid="ignore"):
+        sig = np.sqrt(np.clip(np.einsum("kii->ki", Pp), 0, None))
+        sig0 = np.sqrt(np.clip(np.diag(P0), 0, None))
+    return CovarianceHistory(Pm, Pp, Q, sig, sig0, _eigen_events(Pp, events), status)
 
 
 def team_product(
@@ -185,8 +203,12 @@ def team_product(
         out[P0.shape[0] :, P0.shape[0] :] = np.diag(sig**2)
         return out
 
-    assumed = _history(res.Pa_minus, res.Pa_plus, res.Q_assumed, p0(st.P0_assumed), events)
-    true = None if res.Pt_plus is None else _history(res.Pt_minus, res.Pt_plus, res.Q_true, p0(st.P0_true), events)
+    sa = event_status(res.Pa_plus, res.psd_problems, "assumed")
+    assumed = _history(res.Pa_minus, res.Pa_plus, res.Q_assumed, p0(st.P0_assumed), events, sa)
+    true = None
+    if res.Pt_plus is not None:
+        stt = event_status(res.Pt_plus, res.psd_problems, "true")
+        true = _history(res.Pt_minus, res.Pt_plus, res.Q_true, p0(st.P0_true), events, stt)
     recs = res.meas.records
     log = MeasurementLog(
         index=np.array([r.k for r in recs], dtype=np.int64),

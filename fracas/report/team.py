@@ -2,19 +2,59 @@
 
 Everything here reads a results file (:func:`fracas.io.team_results.read_team_results`'s
 dict, ``r`` below), never the engine's state, so ``fracas report FILE`` can print any run.
+
+The printout has three levels (``verbosity``): ``"quiet"`` one line (:func:`quiet_line`),
+``"normal"`` the study, the parameters, an event log thinned to the interesting events, the
+final knowledge, predictions and warnings, and ``"verbose"`` everything (every event the
+deck's ``[print]`` asks for and each eigenvector event's table with correlations).  Every
+table fits an 80-column terminal: text columns (labels, roles, units, events) wrap, numbers
+are printed in a fixed compact format in columns that never wrap or cut.  One unit per
+quantity across a printout: positions in km, velocities in ``velocity_unit``.
 """
 
 from __future__ import annotations
 
+import math
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from fracas.constants import DAY_S
+from fracas.status import RunStatus, status_text
 
-__all__ = ["print_team", "plot_team", "covariance_table", "summary_dict", "load"]
+__all__ = [
+    "print_team",
+    "plot_team",
+    "covariance_table",
+    "summary_dict",
+    "quiet_line",
+    "load",
+    "VERBOSITY",
+    "VELOCITY_UNITS",
+]
 
 _EIGEN_EVENTS = ("eigenvector", "thrust_on", "thrust_off", "final")
+#: the printout levels, least to most
+VERBOSITY = ("quiet", "normal", "verbose")
+#: velocity units the printout can use -> factor from km/s
+VELOCITY_UNITS = {"km/s": 1.0, "m/s": 1e3, "mm/s": 1e6}
+_SHORT_EVENT = {
+    "initial": "init",
+    "thrust_on": "on",
+    "thrust_off": "off",
+    "propagation": "prop",
+    "measurement": "meas",
+    "eigenvector": "eigen",
+    "prediction": "pred",
+    "punch": "punch",
+    "final": "final",
+}
+_EVENT_LEGEND = (
+    "events: init initial, on/off thrust on/off, prop propagation, meas measurement, eigen eigenvector, pred prediction"
+)
+_SHORT_ROLE = {"dynamic_consider": "dyn_consider", "measurement_consider": "meas_consider"}
+_NORMAL_EVENTS = ("initial", "thrust_on", "thrust_off", "eigenvector", "prediction", "punch", "final")
 
 
 def load(path) -> dict:
@@ -24,63 +64,116 @@ def load(path) -> dict:
     return read_team_results(path)
 
 
+def _vfactor(velocity_unit: str) -> float:
+    if velocity_unit not in VELOCITY_UNITS:
+        raise ValueError(f"velocity_unit must be one of {', '.join(VELOCITY_UNITS)}, not {velocity_unit!r}")
+    return VELOCITY_UNITS[velocity_unit]
+
+
+def _unit(u: str, velocity_unit: str) -> tuple[float, str]:
+    """(factor, unit shown) of a value in unit ``u``: km/s becomes ``velocity_unit``."""
+    return (_vfactor(velocity_unit), velocity_unit) if u == "km/s" else (1.0, u)
+
+
 def _rss(P: np.ndarray, blk: slice) -> float:
-    s = np.sqrt(np.clip(np.diag(P)[blk], 0.0, None))
-    return float(np.sqrt(np.sum(s**2)))
+    with np.errstate(invalid="ignore"):
+        s = np.sqrt(np.clip(np.diag(P)[blk], 0.0, None))
+        return float(np.sqrt(np.sum(s**2)))
+
+
+def _trace_rss(P: np.ndarray, blk: slice) -> float:
+    with np.errstate(invalid="ignore"):
+        return float(np.sqrt(max(np.trace(P[blk, blk]), 0.0))) if np.isfinite(np.trace(P[blk, blk])) else math.nan
 
 
 def _eigen_at(h: dict, k: int):
     """(sigma, corr, pos axes, pos eigvec, vel axes, vel eigvec) of history ``h`` at event k."""
     eg = h["eigenvector_events"]
     i = int(np.nonzero(eg["index"] == k)[0][0])
-    return (
-        h["sigma"][k],
-        eg["correlations"][i],
-        np.sqrt(np.clip(eg["position_eigenvalues"][i], 0.0, None)),
-        eg["position_eigenvectors"][i],
-        np.sqrt(np.clip(eg["velocity_eigenvalues"][i], 0.0, None)),
-        eg["velocity_eigenvectors"][i],
-    )
+    with np.errstate(invalid="ignore"):
+        return (
+            h["sigma"][k],
+            eg["correlations"][i],
+            np.sqrt(np.clip(eg["position_eigenvalues"][i], 0.0, None)),
+            eg["position_eigenvectors"][i],
+            np.sqrt(np.clip(eg["velocity_eigenvalues"][i], 0.0, None)),
+            eg["velocity_eigenvectors"][i],
+        )
 
 
 _EVENT_SHOW = ("thrust_on", "thrust_off", "propagation", "eigenvector", "prediction", "punch", "final", "initial")
 
 
 def _fmt(x: float) -> str:
-    return f"{x:.4g}" if np.isfinite(x) else "-"
+    """The one compact number format of the tables (at most 10 characters)."""
+    return f"{x:.4g}" if np.isfinite(x) else ("nan" if np.isnan(x) else f"{x}")
 
 
-def covariance_table(h: dict, k: int, labels: list[str], units: list[str], title: str, correlations: bool = True):
-    """Standard deviations and the state correlation matrix (like App. 9.3 Table 2) of
-    history ``h`` at eigenvector event ``k``, and the position/velocity semi-axes."""
-    from rich.markup import escape
+def _table(title: str, boxed: bool = True):
+    from rich import box
     from rich.table import Table
 
-    sigma, corr, pos_axes, pos_vec, vel_axes, vel_vec = _eigen_at(h, k)
-    state = labels[:6]
-    t = Table(title=title, title_justify="left", show_edge=False, pad_edge=False)
-    t.add_column("", justify="left")
-    t.add_column("1σ", justify="right")
-    t.add_column("unit")
-    if correlations:
-        for s in state:
-            t.add_column(s, justify="right")
-    for i, lab in enumerate(labels):
-        row = [escape(lab), f"{sigma[i]:.6g}", escape(units[i])]
-        if correlations:
-            row += [f"{corr[i, j]:+.4f}" if (j <= i or i >= 6) else "" for j in range(6)]
-        t.add_row(*row)
-    eig = Table(
-        title="position / velocity 1σ semi-axes (eigenvalues^½) and eigenvectors",
+    return Table(
+        title=title,
         title_justify="left",
         show_edge=False,
         pad_edge=False,
+        box=box.HEAVY_HEAD if boxed else None,
+        header_style="bold",
     )
-    for c in ("block", "axis", "1σ", "unit", "x", "y", "z"):
-        eig.add_column(c, justify="right")
-    for name, ax, V, unit in (("position", pos_axes, pos_vec, "km"), ("velocity", vel_axes * 1e6, vel_vec, "mm/s")):
+
+
+def _num_col(t, header: str) -> None:
+    t.add_column(header, justify="right", no_wrap=True)
+
+
+def _text_col(t, header: str, justify: str = "left") -> None:
+    t.add_column(header, justify=justify, overflow="fold")
+
+
+def covariance_table(
+    h: dict,
+    k: int,
+    labels: list[str],
+    units: list[str],
+    title: str,
+    correlations: bool = True,
+    velocity_unit: str = "mm/s",
+):
+    """Standard deviations and the state correlation matrix (like App. 9.3 Table 2) of
+    history ``h`` at eigenvector event ``k``, and the position/velocity semi-axes (km and
+    ``velocity_unit``); two :class:`rich.table.Table`."""
+    from rich.markup import escape
+
+    sigma, corr, pos_axes, pos_vec, vel_axes, vel_vec = _eigen_at(h, k)
+    state = labels[:6]
+    t = _table(title, boxed=False)
+    _text_col(t, "")
+    _num_col(t, "1σ")
+    _text_col(t, "unit")
+    if correlations:
+        for s in state:
+            _num_col(t, s)
+    for i, lab in enumerate(labels):
+        f, u = _unit(units[i], velocity_unit)
+        row = [escape(lab), _fmt(sigma[i] * f), escape(u)]
+        if correlations:
+            row += [f"{corr[i, j]:+.3f}" if (j <= i or i >= 6) else "" for j in range(6)]
+        t.add_row(*row)
+    eig = _table("position / velocity 1σ semi-axes (eigenvalues^½) and eigenvectors", boxed=False)
+    for c in ("block", "axis"):
+        _text_col(eig, c, "right")
+    _num_col(eig, "1σ")
+    _text_col(eig, "unit", "right")
+    for c in ("x", "y", "z"):
+        _num_col(eig, c)
+    vf = _vfactor(velocity_unit)
+    for name, ax, V, unit in (
+        ("position", pos_axes, pos_vec, "km"),
+        ("velocity", vel_axes * vf, vel_vec, velocity_unit),
+    ):
         for a in range(3)[::-1]:
-            eig.add_row(name, str(3 - a), f"{ax[a]:.5g}", unit, *(f"{v:+.4f}" for v in V[:, a]))
+            eig.add_row(name, str(3 - a), _fmt(ax[a]), unit, *(f"{v:+.3f}" for v in V[:, a]))
     return t, eig
 
 
@@ -119,21 +212,93 @@ def summary_dict(r: dict) -> dict:
     return out
 
 
-def print_team(r: dict, console=None) -> None:
-    """The FRACAS-style printout of a results file: study, event log, eigenvector events,
-    predictions, warnings."""
+def quiet_line(r: dict, velocity_unit: str = "mm/s") -> str:
+    """The one-line summary (``--quiet``): events, measurements used, final assumed RSS, file."""
+    s = summary_dict(r)
+    v = s["assumed"]["velocity_rss_km_s"] * _vfactor(velocity_unit)
+    line = (
+        f"{s['events']} events, {s['measurements_used']} measurements; final assumed RSS "
+        f"{s['assumed']['position_rss_km']:.4g} km, {v:.4g} {velocity_unit}; written: {r['path']}"
+    )
+    return line
+
+
+def _event_status(r: dict, which: str) -> np.ndarray:
+    """Per-event status of history ``which`` (the file's event_status; older files: from
+    psd_problems and the stored matrices)."""
+    h = r[which]
+    if "event_status" in h:
+        return np.asarray(h["event_status"], dtype=np.int64)
+    P = h["P_plus"]
+    st = np.zeros(len(P), dtype=np.int64)
+    for k, _e, w, _v in r["psd_problems"]:
+        if w == which:
+            st[k] = int(RunStatus.NOT_POSITIVE_DEFINITE)
+    st[~np.all(np.isfinite(P.reshape(len(P), -1)), axis=1)] = int(RunStatus.NONFINITE_COVARIANCE)
+    return st
+
+
+def _log_rows(events: list[list[str]], every: int, verbosity: str, bad: set[int], max_rows: int) -> list[int]:
+    """Schedule indices shown in the event log."""
+    meas = [k for k, e in enumerate(events) if "measurement" in e]
+    if verbosity == "verbose":
+        keep = {k for k, e in enumerate(events) if any(x in _EVENT_SHOW for x in e)}
+        keep |= {k for i, k in enumerate(meas, 1) if i % every == 0}
+        return sorted(keep | bad)
+    keep = {k for k, e in enumerate(events) if any(x in _NORMAL_EVENTS for x in e)}
+    keep |= set(sorted(bad)[:1])
+    if meas:
+        keep |= {meas[0], meas[-1]}
+        room = max(max_rows - len(keep), 1)
+        step = max(every, math.ceil(len(meas) / room))
+        keep |= {k for i, k in enumerate(meas, 1) if i % step == 0}
+    return sorted(keep)
+
+
+def print_team(
+    r: dict,
+    console=None,
+    *,
+    verbosity: str = "verbose",
+    velocity_unit: str = "mm/s",
+    width: int | None = None,
+    max_log_rows: int = 16,
+) -> None:
+    """The FRACAS-style printout of a results file ``r`` (:func:`load`).
+
+    ``verbosity``: ``"quiet"`` (:func:`quiet_line`), ``"normal"`` (study, parameters, an
+    event log of at most about ``max_log_rows`` rows -- thrust switches, eigenvector,
+    prediction and punch events, the first and last measurement and every N-th --, the
+    final assumed/true 1σ table, predictions, warnings) or ``"verbose"`` (every event the
+    deck's ``[print] every`` asks for and every eigenvector event's tables, the printout
+    before the levels existed; the default of this function, the command line's default is
+    ``"normal"``).  ``velocity_unit``: one of :data:`VELOCITY_UNITS`, used for every velocity
+    in the printout.  ``console``: a :class:`rich.console.Console` (default: stdout, ``width``
+    columns, else the terminal's width, 160 when not a terminal).
+    """
     from rich.console import Console
     from rich.markup import escape
-    from rich.table import Table
 
-    con = console or Console(width=None if __import__("sys").stdout.isatty() else 160)
+    if verbosity not in VERBOSITY:
+        raise ValueError(f"verbosity must be one of {', '.join(VERBOSITY)}, not {verbosity!r}")
+    vf = _vfactor(velocity_unit)
+    vu = velocity_unit
+    con = console or Console(width=width or (None if sys.stdout.isatty() else 160))
+    if verbosity == "quiet":
+        con.print(quiet_line(r, vu), markup=False, highlight=False, soft_wrap=True)
+        return
     at, pr = r["attrs"], r["print"]
     labels, units, roles = r["labels"], r["units"], r["roles"]
     events = [e.split("+") for e in r["event_types"]]
     times = r["times_s"]
+    K = len(times)
     A, T = r["assumed"], r.get("true")
     gencov = T is not None
     nx = int(at.get("n_state", 7))
+    hist = [("assumed", A)] + ([("true", T)] if gencov else [])
+    status = {w: _event_status(r, w) for w, _ in hist}
+    bad = {int(k) for st in status.values() for k in np.nonzero(st)[0]}
+
     con.rule(f"[bold]TEAM[/bold] {escape(str(at['title']))}")
     con.print(
         escape(
@@ -142,109 +307,144 @@ def print_team(r: dict, console=None) -> None:
             f"reference: {at['reference']}"
         )
     )
-    pt = Table(title="augmented parameters", title_justify="left", show_edge=False, pad_edge=False)
-    for c in ("label", "role", "unit", "a-priori 1σ (assumed)", "a-priori 1σ (true)", "final 1σ (assumed)"):
-        pt.add_column(c, justify="right" if "σ" in c else "left")
+    pt = _table("augmented parameters (1σ)")
+    for c in ("label", "role", "unit"):
+        _text_col(pt, c)
+    for c in ("a priori\nassumed", "a priori\ntrue", "final\nassumed"):
+        _num_col(pt, c)
     for i in range(nx, len(labels)):
         if roles[i] == "noise_state":
             continue
+        f, u = _unit(units[i], vu)
         true0 = T["a_priori_sigma"][i] if gencov else A["a_priori_sigma"][i]
         pt.add_row(
             escape(labels[i]),
-            roles[i],
-            escape(units[i]),
-            _fmt(A["a_priori_sigma"][i]),
-            _fmt(true0),
-            _fmt(np.sqrt(max(A["P_plus"][-1][i, i], 0.0))),
+            _SHORT_ROLE.get(roles[i], roles[i]),
+            escape(u),
+            _fmt(A["a_priori_sigma"][i] * f),
+            _fmt(true0 * f),
+            _fmt(A["sigma"][-1][i] * f),
         )
     con.print(pt)
 
-    ev = Table(title="event log (RSS 1σ after each event)", title_justify="left", show_edge=False, pad_edge=False)
-    for c in ("t (d)", "event", "obs", "pos (km)", "vel (mm/s)"):
-        ev.add_column(c, justify="right")
-    if gencov:
-        ev.add_column("true pos (km)", justify="right")
-        ev.add_column("true vel (mm/s)", justify="right")
     m = r["measurements"]
     used = np.asarray(m["used"], dtype=bool)
     used_at: dict[int, int] = {}
     for k in np.asarray(m["index"])[used]:
         used_at[int(k)] = used_at.get(int(k), 0) + 1
-    n_meas = 0
-    every = int(pr.get("every", 1))
-    for k in range(len(times)):
-        evs = events[k]
-        show = any(e in _EVENT_SHOW for e in evs)
-        if "measurement" in evs:
-            n_meas += 1
-            show = show or (n_meas % every == 0)
-        if not show:
-            continue
-        P = A["P_plus"][k]
-        row = [
-            f"{times[k] / DAY_S:.4f}",
-            "+".join(evs),
-            str(used_at.get(k, "")),
-            f"{np.sqrt(max(np.trace(P[:3, :3]), 0)):.5g}",
-            f"{np.sqrt(max(np.trace(P[3:6, 3:6]), 0)) * 1e6:.5g}",
-        ]
-        if gencov:
-            Pt = T["P_plus"][k]
-            row += [
-                f"{np.sqrt(max(np.trace(Pt[:3, :3]), 0)):.5g}",
-                f"{np.sqrt(max(np.trace(Pt[3:6, 3:6]), 0)) * 1e6:.5g}",
-            ]
+    rows = _log_rows(events, max(int(pr.get("every", 1)), 1), verbosity, bad, max_log_rows)
+    title = "event log (RSS 1σ after each event)"
+    if len(rows) < K:
+        title += f", {len(rows)} of {K} events"
+    ev = _table(title)
+    _num_col(ev, "t (d)")
+    _text_col(ev, "event")
+    _num_col(ev, "obs")
+    _num_col(ev, "pos\n(km)")
+    _num_col(ev, f"vel\n({vu})")
+    if gencov:
+        _num_col(ev, "true pos\n(km)")
+        _num_col(ev, f"true vel\n({vu})")
+    for k in rows:
+        row = [f"{times[k] / DAY_S:.4f}", " ".join(_SHORT_EVENT.get(e, e) for e in events[k]), str(used_at.get(k, ""))]
+        for _w, h in hist:
+            P = h["P_plus"][k]
+            row += [_fmt(_trace_rss(P, slice(0, 3))), _fmt(_trace_rss(P, slice(3, 6)) * vf)]
         ev.add_row(*row)
+    ev.caption = _EVENT_LEGEND
+    ev.caption_justify = "left"
     con.print(ev)
     if int(pr.get("process_noise", 0)):
-        kq = [k for k in range(len(times)) if "propagation" in events[k]]
+        kq = [k for k in range(K) if "propagation" in events[k]]
         if kq:
-            q = np.array([np.sqrt(max(np.trace(A["process_noise"][k][3:6, 3:6]), 0)) * 1e6 for k in kq])
+            q = np.array([_trace_rss(A["process_noise"][k], slice(3, 6)) * vf for k in kq])
             con.print(
-                f"process noise at propagation events: RSS velocity 1σ {q.min():.3g}..{q.max():.3g} mm/s per interval"
+                f"process noise at propagation events: RSS velocity 1σ {_fmt(np.nanmin(q))}..{_fmt(np.nanmax(q))} "
+                f"{vu} per interval"
             )
 
-    for k in range(len(times)):
-        if not (set(_EIGEN_EVENTS) & set(events[k])):
-            continue
-        for which, h in (("assumed", A), ("true", T)):
-            if h is None:
+    if verbosity == "verbose":
+        for k in range(K):
+            if not (set(_EIGEN_EVENTS) & set(events[k])):
                 continue
-            t, eig = covariance_table(
-                h,
-                k,
-                labels,
-                units,
-                escape(f"{which} knowledge at t = {times[k] / DAY_S:.4f} d ({'+'.join(events[k])})"),
-                bool(int(pr.get("correlations", 1))),
-            )
-            con.print(t)
-            con.print(eig)
+            for which, h in hist:
+                t, eig = covariance_table(
+                    h,
+                    k,
+                    labels,
+                    units,
+                    escape(f"{which} knowledge at t = {times[k] / DAY_S:.4f} d ({'+'.join(events[k])})"),
+                    bool(int(pr.get("correlations", 1))),
+                    velocity_unit=vu,
+                )
+                con.print(t)
+                con.print(eig)
+    else:
+        ft = _table(f"final knowledge at t = {times[-1] / DAY_S:.4f} d (1σ)", boxed=False)
+        for c in ("label", "unit"):
+            _text_col(ft, c)
+        _num_col(ft, "assumed")
+        if gencov:
+            _num_col(ft, "true")
+        for i, lab in enumerate(labels):
+            f, u = _unit(units[i], vu)
+            ft.add_row(escape(lab), escape(u), *(_fmt(h["sigma"][-1][i] * f) for _w, h in hist))
+        con.print(ft)
+        for which, h in hist:
+            eg = h["eigenvector_events"]
+            if K - 1 in np.asarray(eg["index"]).tolist():
+                _s, _c, pa, _pv, va, _vv = _eigen_at(h, K - 1)
+                con.print(
+                    f"{which} 1σ semi-axes at the end: position {', '.join(_fmt(x) for x in pa[::-1])} km; "
+                    f"velocity {', '.join(_fmt(x * vf) for x in va[::-1])} {vu}"
+                )
+
     for p in r["predictions"]:
         line = f"prediction {p['time_from_s'] / DAY_S:.4f} d -> {p['time_to_s'] / DAY_S:.4f} d: "
         if p["status"]:
             con.print(escape(line + "not computed: the trajectory ends before the target time"))
             continue
         Pa, Pt = p["assumed"], p["true"]
-        line += f"assumed RSS {_rss(Pa, slice(0, 3)):.5g} km, {_rss(Pa, slice(3, 6)) * 1e6:.5g} mm/s"
+        line += f"assumed RSS {_fmt(_rss(Pa, slice(0, 3)))} km, {_fmt(_rss(Pa, slice(3, 6)) * vf)} {vu}"
         if Pt is not None:
-            line += f"; true RSS {_rss(Pt, slice(0, 3)):.5g} km, {_rss(Pt, slice(3, 6)) * 1e6:.5g} mm/s"
+            line += f"; true RSS {_fmt(_rss(Pt, slice(0, 3)))} km, {_fmt(_rss(Pt, slice(3, 6)) * vf)} {vu}"
         con.print(escape(line))
-    skipped: dict[int, int] = {}
-    for j in np.asarray(m["tracking"])[~used]:
-        skipped[int(j)] = skipped.get(int(j), 0) + 1
-    if skipped:
-        parts = [f"{r['tracking'][j][0]} {r['tracking'][j][1]}: {c}" for j, c in sorted(skipped.items())]
-        con.print(
-            f"[yellow]below {float(at.get('min_elevation_deg', 0.0)):g} deg elevation, skipped:[/yellow] "
-            + escape("; ".join(parts))
-        )
+
+    mask = float(at.get("min_elevation_deg", 0.0))
+    trk = np.asarray(m["tracking"])
+    parts, none_used = [], []
+    for j, (kind, sta) in enumerate(r["tracking"]):
+        n = int(np.sum(trk == j))
+        nu = int(np.sum(used[trk == j]))
+        if n - nu:
+            parts.append(f"{kind} {sta}: skipped {n - nu} of {n}")
+        if nu == 0:
+            why = f"all {n} below {mask:g} deg elevation" if n else "none scheduled in the run"
+            none_used.append(f"tracking[{j}] {kind} {sta}: no usable measurement ({why})")
+    if parts:
+        con.print(f"[yellow]below {mask:g} deg elevation:[/yellow] " + escape("; ".join(parts)))
+    for line in none_used:
+        con.print("[yellow]warning:[/yellow] " + escape(line))
     for k, e, which, val in r["psd_problems"][:5]:
-        con.print(
-            f"[red]warning:[/red] {which} covariance not positive semi-definite at t = "
-            f"{times[k] / DAY_S:.6g} d ({e} event), smallest eigenvalue {val:.3g} (mixed units)"
-        )
-    con.print(escape(f"written: {r['path']}"))
+        if np.isfinite(val):
+            con.print(
+                f"[red]warning:[/red] {which} covariance not positive semi-definite at t = "
+                f"{times[k] / DAY_S:.4f} d ({e} event), smallest eigenvalue {_fmt(val)} (mixed units)"
+            )
+    for which, _h in hist:
+        st = status[which]
+        nz = np.nonzero(st)[0]
+        if len(nz):
+            k = int(nz[0])
+            con.print(
+                f"[red]warning:[/red] {which} covariance first at t = {times[k] / DAY_S:.4f} d "
+                f"({escape('+'.join(events[k]))} event): {escape(status_text(st[k]))}; "
+                f"{len(nz)} of {K} events affected"
+            )
+    code = int(at.get("status", 0))
+    if code:
+        con.print(f"[red]status {code}:[/red] {escape(str(at.get('status_text', status_text(code))))}")
+    con.print(f"written: {r['path']}", markup=False, highlight=False, soft_wrap=True)
 
 
 def plot_team(r: dict, png: str | Path) -> Path:

@@ -117,5 +117,5 @@ def test_report_names_first_bad_event(broken):
     st = r["assumed"]["event_status"]
     k = int(np.nonzero(st)[0][0])
     ev = r["event_types"][k]
-    line = next(ln for ln in text.splitlines() if "assumed covariance" in ln and "from t =" in ln)
+    line = next(ln for ln in text.splitlines() if "assumed covariance" in ln and "first at t =" in ln)
     assert f"{r['times_s'][k] / 86400.0:.4f} d" in line and ev.split("+")[0] in line

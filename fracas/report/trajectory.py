@@ -32,12 +32,11 @@ def _valid(data: TrajectoryData) -> np.ndarray:
     return np.isfinite(np.asarray(data.t_s, dtype=np.float64))
 
 
-def _vec(x) -> str:
-    return "[" + ", ".join(f"{float(c):.6g}" for c in x) + "]"
-
-
 def summary_table(data: TrajectoryData):
-    """A :class:`rich.table.Table` summarising ``data`` (states, mass used, steps, status)."""
+    """A :class:`rich.table.Table` summarising ``data`` (states, mass used, steps, status).
+
+    Fits an 80-column terminal: one row per vector component, numbers in columns that never
+    wrap or cut; the status is the last row."""
     from rich.markup import escape
     from rich.table import Table
 
@@ -48,14 +47,16 @@ def summary_table(data: TrajectoryData):
     rf, vf, mf = data.r_final_km, data.v_final_km_s, float(data.mass_final_kg)
     title = data.title or "trajectory"
     t = Table(title=escape(title), show_header=True, header_style="bold", title_justify="left")
-    t.add_column("", style="bold")
-    t.add_column("initial", justify="right")
-    t.add_column("final", justify="right")
+    t.add_column("", style="bold", overflow="fold")
+    t.add_column("initial", justify="right", no_wrap=True)
+    t.add_column("final", justify="right", no_wrap=True)
     t.add_row("time (days)", f"{float(data.t_s[first]) / DAY_S:.6g}", f"{data.t_final_s / DAY_S:.6g}")
     t.add_row("primary", escape(p0), escape(data.primary_final))
-    t.add_row("r (km)", _vec(r0), _vec(rf))
+    for i, c in enumerate("xyz"):
+        t.add_row(f"r{c} (km)", f"{float(r0[i]):.9g}", f"{float(rf[i]):.9g}")
     t.add_row("|r| (km)", f"{np.linalg.norm(r0):.6f}", f"{np.linalg.norm(rf):.6f}")
-    t.add_row("v (km/s)", _vec(v0), _vec(vf))
+    for i, c in enumerate("xyz"):
+        t.add_row(f"v{c} (km/s)", f"{float(v0[i]):.9g}", f"{float(vf[i]):.9g}")
     t.add_row("|v| (km/s)", f"{np.linalg.norm(v0):.9f}", f"{np.linalg.norm(vf):.9f}")
     t.add_row("mass (kg)", f"{m0:.6f}", f"{mf:.6f}")
     t.add_section()
@@ -70,11 +71,12 @@ def summary_table(data: TrajectoryData):
     return t
 
 
-def print_summary(data: TrajectoryData, path: str | Path | None = None, console=None) -> None:
-    """Print :func:`summary_table` to ``console`` (a :class:`rich.console.Console`; stdout by default)."""
+def print_summary(data: TrajectoryData, path: str | Path | None = None, console=None, width: int | None = None) -> None:
+    """Print :func:`summary_table` to ``console`` (a :class:`rich.console.Console`; stdout by
+    default, ``width`` columns or the terminal's)."""
     from rich.console import Console
 
-    console = console or Console()
+    console = console or Console(width=width)
     console.print(summary_table(data))
     if data.sensitivities is not None:
         sd = data.sensitivities

@@ -193,6 +193,29 @@ def stm_info(ctx: click.Context, file: Path, debug: bool) -> None:
         click.echo(describe(file))
 
 
+def _print_options(f):
+    """--verbose, --velocity-unit, --width: how much of a printout, in which units, how wide."""
+    f = click.option(
+        "--width",
+        type=click.IntRange(60, 400),
+        default=None,
+        help="Columns of the printout (default: the terminal's, 160 when piped).",
+    )(f)
+    f = click.option(
+        "--velocity-unit",
+        type=click.Choice(["km/s", "m/s", "mm/s"]),
+        default="mm/s",
+        show_default=True,
+        help="One unit for every velocity in the printout.",
+    )(f)
+    f = click.option(
+        "--verbose",
+        is_flag=True,
+        help="Print everything: every eigenvector event with its correlations, the whole event log.",
+    )(f)
+    return f
+
+
 @main.command()
 @click.argument("deck", type=click.Path(dir_okay=True, path_type=Path))
 @click.option(
@@ -210,6 +233,7 @@ def stm_info(ctx: click.Context, file: Path, debug: bool) -> None:
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), help="Also write a PNG plot.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON summary instead of the tables.")
 @click.option("--quiet", is_flag=True, help="Print only the one-line summary.")
+@_print_options
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
 @click.pass_context
 def run(
@@ -220,6 +244,9 @@ def run(
     plot: Path | None,
     as_json: bool,
     quiet: bool,
+    verbose: bool,
+    velocity_unit: str,
+    width: int | None,
     debug: bool,
 ) -> None:
     """Run a DECK in the mode it names (mode = "team": a TEAM study; a trajectory deck: a propagation)."""
@@ -245,12 +272,29 @@ def run(
                 click.echo(f"reference ready ({source}); errcon.analysis = false: no analysis run")
                 return
             png = plot or (cfg.resolve(cfg.output.plot) if cfg.output.plot else None)
-            _team_report(path, png, as_json, quiet, stage, extra_timing=product.timing)
+            _team_report(path, png, as_json, _verbosity(quiet, verbose), stage, product.timing, velocity_unit, width)
 
 
-def _team_report(path: Path, png: Path | None, as_json: bool, quiet: bool, stage=None, extra_timing=None) -> None:
-    """Print (and plot) a TEAM results file: tables, --json or --quiet's one line."""
-    from fracas.report.team import load, plot_team, print_team, summary_dict
+def _verbosity(quiet: bool, verbose: bool) -> str:
+    from fracas.errors import FracasError
+
+    if quiet and verbose:
+        raise FracasError("--quiet and --verbose: choose one")
+    return "quiet" if quiet else ("verbose" if verbose else "normal")
+
+
+def _team_report(
+    path: Path,
+    png: Path | None,
+    as_json: bool,
+    verbosity: str = "normal",
+    stage=None,
+    extra_timing=None,
+    velocity_unit: str = "mm/s",
+    width: int | None = None,
+) -> None:
+    """Print (and plot) a TEAM results file: tables at a verbosity, --json, or --quiet's one line."""
+    from fracas.report.team import load, plot_team, print_team, quiet_line, summary_dict
 
     r = load(path)
     if png is not None:
@@ -263,15 +307,10 @@ def _team_report(path: Path, png: Path | None, as_json: bool, quiet: bool, stage
         if png is not None:
             out["plot"] = str(png)
         click.echo(json.dumps(out))
-    elif quiet:
-        s = summary_dict(r)
-        click.echo(
-            f"{s['events']} events, {s['measurements_used']} measurements; final assumed RSS "
-            f"{s['assumed']['position_rss_km']:.4g} km, {s['assumed']['velocity_rss_km_s'] * 1e6:.4g} mm/s; "
-            f"written: {path}"
-        )
+    elif verbosity == "quiet":
+        click.echo(quiet_line(r, velocity_unit))
     else:
-        print_team(r)
+        print_team(r, verbosity=verbosity, velocity_unit=velocity_unit, width=width)
 
 
 @main.command()
@@ -279,9 +318,20 @@ def _team_report(path: Path, png: Path | None, as_json: bool, quiet: bool, stage
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), help="Also write a PNG plot.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON summary instead of the tables.")
 @click.option("--quiet", is_flag=True, help="Print only the one-line summary.")
+@_print_options
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
 @click.pass_context
-def report(ctx: click.Context, file: Path, plot: Path | None, as_json: bool, quiet: bool, debug: bool) -> None:
+def report(
+    ctx: click.Context,
+    file: Path,
+    plot: Path | None,
+    as_json: bool,
+    quiet: bool,
+    verbose: bool,
+    velocity_unit: str,
+    width: int | None,
+    debug: bool,
+) -> None:
     """Print the report of a results FILE (a TEAM results file or a trajectory file)."""
     debug = debug or bool((ctx.obj or {}).get("debug"))
     with _errors(debug):
@@ -297,7 +347,7 @@ def report(ctx: click.Context, file: Path, plot: Path | None, as_json: bool, qui
         except OSError as exc:
             raise ResultsFileError(f"{file}: not an HDF5 results file ({exc})") from None
         if kind == "fracas-team-results":
-            _team_report(file, plot, as_json, quiet)
+            _team_report(file, plot, as_json, _verbosity(quiet, verbose), None, None, velocity_unit, width)
             return
         from fracas.io.trajectory_file import read_trajectory_file
         from fracas.report.trajectory import plot_trajectory, print_summary
@@ -308,7 +358,7 @@ def report(ctx: click.Context, file: Path, plot: Path | None, as_json: bool, qui
         if as_json:
             click.echo(json.dumps({**data.summary_dict(), "file": str(file)}))
         else:
-            print_summary(data, file)
+            print_summary(data, file, width=width)
 
 
 if __name__ == "__main__":  # python -m fracas.cli

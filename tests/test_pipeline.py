@@ -94,3 +94,21 @@ def test_unknown_or_future_mode_is_refused(tmp_path):
         r = fracas("run", deck)
         assert r.exit_code == 2, r.output
         assert r.stderr.strip() == f"fracas: error: {deck}: {expected}"
+
+
+def test_report_levels_and_units(tmp_path):
+    """--quiet < normal < --verbose in lines; --velocity-unit m/s puts every velocity in m/s
+    (the quiet line's RSS equals the file's final sigma in m/s); --quiet with --verbose is
+    refused in one line."""
+    out = tmp_path / "small.h5"
+    assert fracas("run", SMALL, "-o", out, "--quiet").exit_code == 0
+    n = {
+        lvl: len(fracas("report", out, *flags).stdout.splitlines())
+        for lvl, flags in (("quiet", ["--quiet"]), ("normal", []), ("verbose", ["--verbose"]))
+    }
+    assert n["quiet"] == 1 < n["normal"] < n["verbose"]
+    line = fracas("report", out, "--quiet", "--velocity-unit", "m/s").stdout
+    sig = read_team_results(out)["assumed"]["sigma"][-1]
+    assert f"{np.sqrt(np.sum(sig[3:6] ** 2)) * 1e3:.4g} m/s" in line and "mm/s" not in line
+    r = fracas("report", out, "--quiet", "--verbose")
+    assert r.exit_code == 2 and r.stderr.strip() == "fracas: error: --quiet and --verbose: choose one"

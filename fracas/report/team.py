@@ -259,7 +259,7 @@ def print_team(
     r: dict,
     console=None,
     *,
-    verbosity: str = "verbose",
+    verbosity: str = "normal",
     velocity_unit: str = "mm/s",
     width: int | None = None,
     max_log_rows: int = 16,

@@ -101,7 +101,7 @@ def test_run_quiet(tmp_mod):
 
 @pytest.fixture(scope="module")
 def printout(tmp_mod) -> str:
-    res = fracas("run", SMALL, "-o", tmp_mod / "print.h5")
+    res = fracas("run", SMALL, "-o", tmp_mod / "print.h5", "--verbose")  # every eigenvector event
     ok(res)
     return res.stdout
 

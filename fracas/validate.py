@@ -135,6 +135,14 @@ def _trajectory_problems(tdeck: TrajectoryDeck) -> list[str]:
 
 
 def _team_problems(deck: TeamDeck) -> list[str]:
+    try:
+        return _team_checks(deck)
+    except OSError as exc:  # a path no file system accepts (too long, NUL, ...)
+        src = deck.source_path or "<deck>"
+        return [f"{src}: a file named in the deck is not a usable path ({exc.strerror or type(exc).__name__})"]
+
+
+def _team_checks(deck: TeamDeck) -> list[str]:
     src = deck.source_path or "<deck>"
     out: list[str] = []
     path = deck.resolve(deck.ertraj.deck)

@@ -93,7 +93,8 @@ def range_count(start: float, stop: float, step: float) -> float:
     makes them), as a float so that absurd steps give a large number instead of a list."""
     if stop < start:
         return 0.0
-    return math.floor((stop - start) / step * (1 + 1e-12) + 1e-9) + 1.0
+    q = (stop - start) / step * (1 + 1e-12) + 1e-9
+    return math.floor(q) + 1.0 if q < 1e18 else q  # inf for a subnormal step
 
 
 def tracking_count(t: Any, start_days: float | None = None, stop_days: float | None = None) -> float:

@@ -586,7 +586,8 @@ def output_count(out: Output, duration_days: float) -> float:
     """How many output times ``[output]`` asks for (an upper bound, computed without building them)."""
     n = 2.0 + len(out.times_days)
     if out.step_days is not None:
-        n += math.floor(duration_days / out.step_days * (1.0 + 1e-12)) + 1.0
+        q = duration_days / out.step_days * (1.0 + 1e-12)
+        n += (math.floor(q) + 1.0) if q < 1e18 else q
     return n
 
 

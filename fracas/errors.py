@@ -8,9 +8,21 @@ from __future__ import annotations
 
 
 class FracasError(Exception):
-    """Base class of every error fracas reports to a user."""
+    """Base class of every error fracas reports to a user.
+
+    ``problems``: every problem found, one line each (``source: field = value: expected``);
+    ``str(exc)`` stays the first of them plus " (and N more errors)".  An error raised with
+    a message only has ``problems == [message]``.
+    """
 
     exit_code = 2
+
+    def __init__(self, *args, problems: list[str] | None = None):
+        super().__init__(*args)
+        if problems:
+            self.problems = list(problems)
+        else:
+            self.problems = [str(args[0])] if args else []
 
 
 class DeckError(FracasError):

@@ -101,7 +101,11 @@ class ParamKind:
     example decks; informational, never applied by the program), None where no default makes
     sense; ``bounds``: physical (lower, upper), None for an open side (informational: the
     deck validators enforce their own); ``field``: the :class:`fracas.dynamics.model.Params`
-    field the label addresses.
+    field the label addresses; ``max_sigma``: the largest a-priori sigma a deck may give,
+    in ``unit`` (for ``body_element`` one per element, None for no bound), or with
+    ``relative`` a fraction of the body's catalogue value (:mod:`fracas.constants`): a
+    proportionality or a fraction at most 1 (100 %), an angle at most pi rad, a GM or a
+    radius at most itself; None where no range exists (times, dV, power, areas).
     """
 
     name: str
@@ -111,6 +115,8 @@ class ParamKind:
     sigma: float | None = None
     bounds: tuple[float | None, float | None] = (None, None)
     field: str = ""
+    max_sigma: float | tuple[float | None, ...] | None = None
+    relative: bool = False
 
     def __post_init__(self):
         if self.index not in INDEX_KINDS:
@@ -124,37 +130,75 @@ class ParamKind:
 
 
 _INF = float("inf")
+_PI = 3.141592653589793
 _KINDS = (
     # spacecraft and propulsion (scalars)
     ParamKind("area_m2", INDEX_SCALAR, "m^2", "SRP reference area", None, (0.0, None)),
-    ParamKind("cr", INDEX_SCALAR, "1", "SRP reflectivity coefficient (1 absorber .. 2 mirror)", 0.1, (0.0, 2.0)),
+    ParamKind(
+        "cr", INDEX_SCALAR, "1", "SRP reflectivity coefficient (1 absorber .. 2 mirror)", 0.1, (0.0, 2.0), max_sigma=2.0
+    ),
     ParamKind("power_kw", INDEX_SCALAR, "kW", "base power: at 1 AU (solar) or at t = 0 (nuclear)", None, (0.0, None)),
     ParamKind("power_decay_s", INDEX_SCALAR, "s", "nuclear power e-folding time", None, (0.0, None)),
-    ParamKind("efficiency", INDEX_SCALAR, "1", "thruster efficiency eta", None, (0.0, 1.0)),
+    ParamKind("efficiency", INDEX_SCALAR, "1", "thruster efficiency eta", None, (0.0, 1.0), max_sigma=1.0),
     ParamKind("exhaust_velocity_km_s", INDEX_SCALAR, "km/s", "exhaust velocity c", None, (0.0, None)),
-    ParamKind("thrust_scale", INDEX_SCALAR, "1", "overall thrust proportionality (1 nominal)", 0.01, (0.0, None)),
-    ParamKind("bias_in_rad", INDEX_SCALAR, "rad", "overall in-plane pointing bias", 0.005),
-    ParamKind("bias_out_rad", INDEX_SCALAR, "rad", "overall out-of-plane pointing bias", 0.005),
+    ParamKind(
+        "thrust_scale",
+        INDEX_SCALAR,
+        "1",
+        "overall thrust proportionality (1 nominal)",
+        0.01,
+        (0.0, None),
+        max_sigma=1.0,
+    ),
+    ParamKind("bias_in_rad", INDEX_SCALAR, "rad", "overall in-plane pointing bias", 0.005, max_sigma=_PI),
+    ParamKind("bias_out_rad", INDEX_SCALAR, "rad", "overall out-of-plane pointing bias", 0.005, max_sigma=_PI),
     ParamKind("impulse_isp_s", INDEX_SCALAR, "s", "specific impulse of the impulsive engine", None, (0.0, None)),
     # per body
-    ParamKind("mu", INDEX_BODY, "km^3/s^2", "gravitational parameter GM of a body", None, (0.0, None)),
-    ParamKind("j2", INDEX_BODY, "1", "unnormalised J2 of a body"),
-    ParamKind("radius", INDEX_BODY, "km", "equatorial (J2 reference) radius of a body", None, (0.0, None)),
+    ParamKind(
+        "mu",
+        INDEX_BODY,
+        "km^3/s^2",
+        "gravitational parameter GM of a body",
+        None,
+        (0.0, None),
+        max_sigma=1.0,
+        relative=True,
+    ),
+    ParamKind("j2", INDEX_BODY, "1", "unnormalised J2 of a body", max_sigma=1.0),
+    ParamKind(
+        "radius",
+        INDEX_BODY,
+        "km",
+        "equatorial (J2 reference) radius of a body",
+        None,
+        (0.0, None),
+        max_sigma=1.0,
+        relative=True,
+    ),
     ParamKind(
         "body_elements",
         INDEX_BODY_ELEMENT,
         ELEMENT_UNITS,
         "heliocentric conic element (a, e, i, raan, argp, M) of an EPHEM body",
+        max_sigma=(None, 1.0, _PI, _PI, _PI, _PI),
     ),
     # per thrust arc
     ParamKind("arc_t_on", INDEX_ARC, "s", "arc start, s from the propagation epoch"),
     ParamKind("arc_t_off", INDEX_ARC, "s", "arc end, s from the propagation epoch"),
-    ParamKind("arc_alpha", INDEX_ARC, "rad", "arc in-plane angle / right ascension"),
-    ParamKind("arc_beta", INDEX_ARC, "rad", "arc out-of-plane angle / declination"),
-    ParamKind("arc_throttle", INDEX_ARC, "1", "arc thrust level factor", None, (0.0, 1.0)),
-    ParamKind("arc_thrust_scale", INDEX_ARC, "1", "per-arc thrust proportionality (1 nominal)", 0.01, (0.0, None)),
-    ParamKind("arc_bias_in_rad", INDEX_ARC, "rad", "per-arc in-plane pointing bias", 0.005),
-    ParamKind("arc_bias_out_rad", INDEX_ARC, "rad", "per-arc out-of-plane pointing bias", 0.005),
+    ParamKind("arc_alpha", INDEX_ARC, "rad", "arc in-plane angle / right ascension", max_sigma=_PI),
+    ParamKind("arc_beta", INDEX_ARC, "rad", "arc out-of-plane angle / declination", max_sigma=_PI),
+    ParamKind("arc_throttle", INDEX_ARC, "1", "arc thrust level factor", None, (0.0, 1.0), max_sigma=1.0),
+    ParamKind(
+        "arc_thrust_scale",
+        INDEX_ARC,
+        "1",
+        "per-arc thrust proportionality (1 nominal)",
+        0.01,
+        (0.0, None),
+        max_sigma=1.0,
+    ),
+    ParamKind("arc_bias_in_rad", INDEX_ARC, "rad", "per-arc in-plane pointing bias", 0.005, max_sigma=_PI),
+    ParamKind("arc_bias_out_rad", INDEX_ARC, "rad", "per-arc out-of-plane pointing bias", 0.005, max_sigma=_PI),
     # impulsive events
     ParamKind("impulse_t", INDEX_IMPULSE, "s", "time of an impulsive dV, s from the propagation epoch"),
     ParamKind("impulse_dv", INDEX_IMPULSE_AXIS, "km/s", "impulsive dV component in its impulse frame"),

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracas.build.trajectory import Problem, build_propagation
+from fracas.config.limits import check_team_sizes
 from fracas.config.team import SIGMA_UNITS, APriori, TeamDeck, ThrustNoise
 from fracas.config.trajectory import TrajectoryDeck, load_deck, trajectory_hash
 from fracas.constants import DAY_S
@@ -81,6 +82,7 @@ def trajectory_problem(deck: TeamDeck, src: str) -> tuple[TrajectoryDeck, Proble
     if not path.exists():
         raise _err(src, "ertraj.deck", deck.ertraj.deck, f"no such trajectory deck ({path})")
     tdeck = load_deck(path)
+    check_team_sizes(deck, tdeck)  # refuse a study too big for its trajectory before building anything
     return tdeck, build_propagation(tdeck)
 
 

@@ -10,8 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import tomllib
-
+from fracas.config.trajectory import cut, load_toml
 from fracas.errors import DeckError
 
 __all__ = ["MODES", "PLANNED_MODES", "deck_mode", "parse_any", "load_any"]
@@ -23,20 +22,17 @@ PLANNED_MODES = ("tom", "tsim", "sweep")
 def deck_mode(text: str, source: str = "<deck>") -> str:
     """The mode of deck text: its ``mode`` value, else "team" for a legacy TEAM deck (an
     [ertraj] table), else "propagate".  DeckError for a TOML error or an unknown mode."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise DeckError(f"{source}: TOML syntax error: {exc}") from None
+    data = load_toml(text, source)
     mode = data.get("mode")
     if mode is None:
         return "team" if "ertraj" in data else "propagate"
-    if mode in MODES:
+    if isinstance(mode, str) and mode in MODES:
         return mode
-    if mode in PLANNED_MODES:
+    if isinstance(mode, str) and mode in PLANNED_MODES:
         raise DeckError(
             f'{source}: mode = "{mode}": not available in this release (expected one of: {", ".join(MODES)})'
         )
-    raise DeckError(f"{source}: mode = {mode!r}: unknown mode (expected one of: {', '.join(MODES)})")
+    raise DeckError(f"{source}: mode = {cut(repr(mode))}: unknown mode (expected one of: {', '.join(MODES)})")
 
 
 def parse_any(text: str, source: str = "<deck>"):

@@ -32,6 +32,16 @@ Layout (only ``[ertraj]`` is required)::
                    parameter, or a new role = "ignore" one), thrust_noise = {...},
                    measurement_sigma = {type = sigma}                         ($GENCOV)
     [output]       results = "out/x_team.h5", plot = "out/x_team.png"
+    [limits]       max_measurements, max_events, ... (fracas.config.limits.Limits)
+
+Station names and parameter labels are case-insensitive and stored as the catalogues spell
+them (lower case).  Sigmas are bounded where a physical range exists: a [[tracking]] or
+gencov sigma by its kind's ``max_sigma`` (fracas.measurements.kinds), a parameter sigma by
+its catalogue entry's (fracas.params, fracas.measurements.kinds), thrust-noise
+proportionality at most 1 (100 %) and pointing at most 180 deg, a-priori velocity below
+the speed of light.  The implied sizes (observations per [[tracking]] entry and in all,
+event times) are checked against ``[limits]`` here; those that need the trajectory's
+duration by :func:`fracas.config.limits.check_team_sizes`.
 
 Consider parameters are split by the catalogue: labels the dynamics depend on are dynamic
 consider (u), measurement labels (station locations, biases) are measurement consider (v).
@@ -43,21 +53,26 @@ import re
 from pathlib import Path
 from typing import Annotated, Literal
 
-import tomllib
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_validator
 
+from fracas.config.limits import Limits, count_text, event_count, tracking_count
 from fracas.config.trajectory import (
     FieldProblem,
     ParamLabel,
     PositiveFloat,
     SourcedDeck,
     Vector3,
+    canonical_name,
+    load_toml,
     parse_sourced,
+    raise_problems,
     read_deck_text,
 )
+from fracas.constants import BODIES
+from fracas.errors import DeckError
 from fracas.measurements.kinds import KINDS as MEASUREMENT_TYPES  # the data types, one catalogue
-from fracas.measurements.kinds import MEASUREMENT_KINDS, N_STATIONS, SIGMA_UNITS
-from fracas.params import DECK_ROLES
+from fracas.measurements.kinds import MEASUREMENT_KINDS, MEASUREMENT_PARAMETERS, N_STATIONS, SIGMA_UNITS
+from fracas.params import DECK_ROLES, INDEX_BODY, INDEX_BODY_ELEMENT, PARAMETER_KINDS
 
 __all__ = ["TeamDeck", "load_team_deck", "parse_team_deck", "is_team_text", "MEASUREMENT_TYPES", "SIGMA_UNITS"]
 
@@ -65,6 +80,58 @@ __all__ = ["TeamDeck", "load_team_deck", "parse_team_deck", "is_team_text", "MEA
 # the factor to km, km/s or rad) and N_STATIONS come from fracas.measurements.kinds.
 MAX_STATIONS = 9
 NonNeg = Annotated[float, Field(ge=0)]
+#: a station name, case-insensitive (stored in lower case)
+StationName = Annotated[str, BeforeValidator(canonical_name)]
+#: the speed of light (km/s): no velocity uncertainty can exceed it
+LIGHT_KM_S = 299_792.458
+#: the largest a-priori position sigma (km): 1e12 km (~6,700 AU) is no knowledge at all
+MAX_POSITION_SIGMA_KM = 1e12
+_LABEL_PARTS = re.compile(r"^([a-z_0-9]+)(?:\[([^\]]+)\])?$")
+
+
+def sigma_bound(label: str) -> tuple[float, str] | None:
+    """(largest sigma, why) for a parameter label from the catalogues, None if unbounded or unknown.
+
+    :data:`fracas.params.PARAMETER_KINDS` and :data:`fracas.measurements.kinds.MEASUREMENT_PARAMETERS`
+    carry ``max_sigma``; a ``relative`` one is a fraction of the body's catalogue value."""
+    m = _LABEL_PARTS.match(label)
+    if m is None:
+        return None
+    name, idx = m.group(1), m.group(2)
+    parts = [p.strip() for p in idx.split(",")] if idx else []
+    kind = PARAMETER_KINDS.get(name)
+    if kind is not None and kind.max_sigma is not None:
+        if kind.index == INDEX_BODY_ELEMENT:
+            if len(parts) == 2 and parts[1] in ("a", "e", "i", "raan", "argp", "M"):
+                k = ("a", "e", "i", "raan", "argp", "M").index(parts[1])
+                hi = kind.max_sigma[k]
+                return None if hi is None else (hi, f"{kind.unit[k]} (the element's range)")
+            return None
+        if kind.relative:
+            if kind.index != INDEX_BODY or len(parts) != 1 or parts[0] not in BODIES:
+                return None
+            body = BODIES[parts[0]]
+            value = body.mu_km3_s2 if name == "mu" else body.radius_km
+            return kind.max_sigma * value, f"{kind.unit} ({kind.max_sigma:g} x {parts[0]}'s {value:g})"
+        return float(kind.max_sigma), f"{kind.unit}" + (" (100 %)" if kind.unit == "1" else "")
+    mp = MEASUREMENT_PARAMETERS.get(name)
+    if mp is not None and mp.max_sigma is not None:
+        return mp.max_sigma, mp.unit
+    return None
+
+
+def _check_sigma(label: str, sigma: float, field) -> FieldProblem | None:
+    bound = sigma_bound(label)
+    if bound is not None and sigma > bound[0]:
+        return FieldProblem(field, sigma, f"must be <= {bound[0]:g} {bound[1]} for {label}")
+    return None
+
+
+def _kind_sigma(kind: str, sigma: float, field) -> FieldProblem | None:
+    mk = MEASUREMENT_KINDS.get(kind)
+    if mk is not None and mk.max_sigma is not None and sigma > mk.max_sigma:
+        return FieldProblem(field, sigma, f'must be <= {mk.max_sigma:g} {mk.sigma_unit} for type "{kind}"')
+    return None
 
 
 class _Section(BaseModel):
@@ -115,9 +182,9 @@ class APriori(_Section):
     """A-priori knowledge of the spacecraft state (1σ, ICRF axes)."""
 
     position_sigma_km: Vector3 | None = None
-    position_rss_km: PositiveFloat | None = None
+    position_rss_km: Annotated[float, Field(gt=0, le=MAX_POSITION_SIGMA_KM)] | None = None
     velocity_sigma_km_s: Vector3 | None = None
-    velocity_rss_km_s: PositiveFloat | None = None
+    velocity_rss_km_s: Annotated[float, Field(gt=0, lt=LIGHT_KM_S)] | None = None
     mass_sigma_kg: NonNeg = 0.0
     from_punch: str | None = None
 
@@ -127,10 +194,15 @@ class APriori(_Section):
             for a, b in (("position_sigma_km", "position_rss_km"), ("velocity_sigma_km_s", "velocity_rss_km_s")):
                 if (getattr(self, a) is None) == (getattr(self, b) is None):
                     raise FieldProblem((), None, f"give exactly one of {a}, {b} (or from_punch)")
-        for a in ("position_sigma_km", "velocity_sigma_km_s"):
+        for a, hi, why in (
+            ("position_sigma_km", MAX_POSITION_SIGMA_KM, ""),
+            ("velocity_sigma_km_s", LIGHT_KM_S, " (the speed of light)"),
+        ):
             v = getattr(self, a)
             if v is not None and min(v) < 0:
                 raise FieldProblem(a, v, "sigmas must be >= 0")
+            if v is not None and max(v) >= hi:
+                raise FieldProblem(a, v, f"sigmas must be < {hi:g}{why}")
         return self
 
     def sigmas(self) -> tuple[list[float], list[float]]:
@@ -146,6 +218,11 @@ class Parameter(_Section):
     sigma: NonNeg
     role: Literal[DECK_ROLES]  # type: ignore[valid-type]
 
+    @model_validator(mode="after")
+    def _bounded(self) -> Parameter:
+        raise_problems([p for p in [_check_sigma(self.label, self.sigma, "sigma")] if p])
+        return self
+
 
 class NoiseComponent(_Section):
     sigma: NonNeg
@@ -153,15 +230,29 @@ class NoiseComponent(_Section):
 
 
 class ThrustNoise(_Section):
-    """Gauss-Markov thrust errors: proportionality (fraction), pointing (deg); τ in days."""
+    """Gauss-Markov thrust errors: proportionality (fraction, <= 1), pointing (deg, <= 180); τ in days."""
 
     proportionality: NoiseComponent | None = None
     in_plane_deg: NoiseComponent | None = None
     out_of_plane_deg: NoiseComponent | None = None
 
+    @model_validator(mode="after")
+    def _bounded(self) -> ThrustNoise:
+        problems = []
+        for name, hi, why in (
+            ("proportionality", 1.0, "(100 %)"),
+            ("in_plane_deg", 180.0, "deg"),
+            ("out_of_plane_deg", 180.0, "deg"),
+        ):
+            c = getattr(self, name)
+            if c is not None and c.sigma > hi:
+                problems.append(FieldProblem((name, "sigma"), c.sigma, f"must be <= {hi:g} {why}"))
+        raise_problems(problems)
+        return self
+
 
 class StationDef(_Section):
-    name: Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]*$")]
+    name: Annotated[str, BeforeValidator(canonical_name), Field(pattern=r"^[a-z][a-z0-9_]*$")]
     radius_km: Annotated[float, Field(gt=6000, lt=7000)]
     latitude_deg: Annotated[float, Field(ge=-90, le=90)]
     longitude_deg: Annotated[float, Field(ge=-360, le=360)]
@@ -169,7 +260,7 @@ class StationDef(_Section):
 
 class Tracking(_Section):
     type: Literal[MEASUREMENT_TYPES]  # type: ignore[valid-type]
-    stations: list[str] = []
+    stations: list[StationName] = []
     start_days: NonNeg
     stop_days: NonNeg
     interval_hours: PositiveFloat
@@ -194,6 +285,7 @@ class Tracking(_Section):
             raise FieldProblem("body", None, f'required for type "{self.type}" (the observed body)')
         if kind.needs_star and (self.star_ra_deg is None or self.star_dec_deg is None):
             raise FieldProblem("star_ra_deg", None, "star_ra_deg and star_dec_deg are required for star_planet_angle")
+        raise_problems([p for p in [_kind_sigma(self.type, self.sigma, "sigma")] if p])
         return self
 
 
@@ -217,6 +309,8 @@ class Event(_Section):
         return self
 
     def times(self) -> list[float]:
+        """The event's times (days, sorted, unique); a validated deck bounds how many
+        ([limits] max_events)."""
         out = list(self.times_days)
         if self.start_days is not None and self.stop_days is not None and self.interval_days:
             n = int((self.stop_days - self.start_days) / self.interval_days + 1e-9)
@@ -240,6 +334,11 @@ class GenCovParameter(_Section):
     sigma: NonNeg
     role: Literal["ignore"] | None = None
 
+    @model_validator(mode="after")
+    def _bounded(self) -> GenCovParameter:
+        raise_problems([p for p in [_check_sigma(self.label, self.sigma, "sigma")] if p])
+        return self
+
 
 class GenCov(_Section):
     """$GENCOV: only what the real world does differently from the filter's assumptions."""
@@ -256,6 +355,7 @@ class GenCov(_Section):
         for k in v:
             if k not in MEASUREMENT_TYPES:
                 raise ValueError(f'unknown measurement type "{k}" (expected one of: {", ".join(MEASUREMENT_TYPES)})')
+        raise_problems([p for k, s in v.items() if (p := _kind_sigma(k, s, (k,)))])
         return v
 
 
@@ -283,6 +383,7 @@ class TeamDeck(SourcedDeck):
     punch: Punch | None = None
     gencov: GenCov | None = None
     output: OutputSection = OutputSection()
+    limits: Limits = Limits()
 
     def resolve(self, rel: str) -> Path:
         """A path named in the deck, relative to the deck's folder."""
@@ -331,7 +432,58 @@ class TeamDeck(SourcedDeck):
                         s,
                         f"unknown station (expected one of: {', '.join(sorted(known))})",
                     )
+        self._check_sizes()
         return self
+
+    def _check_sizes(self) -> None:
+        """The sizes the deck alone implies (observations, event times) against ``[limits]``."""
+        lim = self.limits
+        problems = []
+        total = 0.0
+        for k, t in enumerate(self.tracking):
+            n = tracking_count(t)
+            total += n
+            if n > lim.max_measurements:
+                problems.append(
+                    FieldProblem(
+                        ("tracking", k, "interval_hours"),
+                        t.interval_hours,
+                        f"gives {count_text(n)} observation times over {t.start_days:g}-{t.stop_days:g} d "
+                        f"(limit {lim.max_measurements}, [limits] max_measurements); use a longer interval",
+                    )
+                )
+        if not problems and total > lim.max_measurements:
+            problems.append(
+                FieldProblem(
+                    ("tracking",),
+                    None,
+                    f"the {len(self.tracking)} entries give {count_text(total)} observation times in all "
+                    f"(limit {lim.max_measurements}, [limits] max_measurements); use longer intervals",
+                )
+            )
+        total = 0.0
+        for k, e in enumerate(self.event):
+            n = event_count(e)
+            total += n
+            if n > lim.max_events:
+                problems.append(
+                    FieldProblem(
+                        ("event", k, "interval_days" if e.interval_days else "times_days"),
+                        e.interval_days if e.interval_days else None,
+                        f"gives {count_text(n)} event times (limit {lim.max_events}, [limits] max_events); "
+                        "use a longer interval",
+                    )
+                )
+        if not any(p.field[0] == "event" for p in problems) and total > lim.max_events:
+            problems.append(
+                FieldProblem(
+                    ("event",),
+                    None,
+                    f"the {len(self.event)} entries give {count_text(total)} event times in all "
+                    f"(limit {lim.max_events}, [limits] max_events)",
+                )
+            )
+        raise_problems(problems)
 
 
 def parse_team_deck(text: str, source: str = "<deck>") -> TeamDeck:
@@ -342,8 +494,8 @@ def parse_team_deck(text: str, source: str = "<deck>") -> TeamDeck:
 def is_team_text(text: str) -> bool:
     """Whether TOML text is a TEAM deck (it has an [ertraj] table) rather than a trajectory deck."""
     try:
-        return "ertraj" in tomllib.loads(text)
-    except tomllib.TOMLDecodeError:
+        return "ertraj" in load_toml(text, "<deck>")
+    except DeckError:
         return False
 
 

@@ -40,6 +40,7 @@ one line ``path: field.path = value: what was expected``.
 from __future__ import annotations
 
 import datetime as _dt
+import difflib
 import hashlib
 import json
 import math
@@ -53,6 +54,7 @@ import tomllib
 from pydantic import (
     AfterValidator,
     BaseModel,
+    BeforeValidator,
     ConfigDict,
     Field,
     PlainValidator,
@@ -62,6 +64,7 @@ from pydantic import (
     model_validator,
 )
 
+from fracas.config.limits import Limits, count_text
 from fracas.constants import BODIES, DAY_S
 from fracas.errors import ConfigError, DeckError
 from fracas.timescales import calendar_to_et, epoch_to_et
@@ -71,7 +74,21 @@ __all__ = [
     "load_deck",
     "parse_deck",
     "FieldProblem",
+    "FieldProblems",
+    "load_toml",
+    "validation_problems",
+    "MAX_NESTING",
+    "MAX_DECK_BYTES",
 ]
+
+#: deepest nesting of arrays / inline tables a deck may use (the schema needs 3)
+MAX_NESTING = 16
+#: largest deck file (a deck is a page of text; this only stops a runaway file)
+MAX_DECK_BYTES = 16 * 1024 * 1024
+#: TOML integers are 64-bit signed (TOML 1.0); tomllib accepts any size
+_INT_MIN, _INT_MAX = -(2**63), 2**63 - 1
+#: longest echo of a value in an error line
+ECHO_CHARS = 40
 
 BODY_NAMES = tuple(BODIES)
 
@@ -88,6 +105,22 @@ class FieldProblem(ValueError):
         self.value = value
         self.expected = expected
         super().__init__(expected)
+
+
+class FieldProblems(ValueError):
+    """Several :class:`FieldProblem` found by one validator (all of them are reported)."""
+
+    def __init__(self, problems: list[FieldProblem]):
+        self.problems = list(problems)
+        super().__init__("; ".join(p.expected for p in problems))
+
+
+def raise_problems(problems: list[FieldProblem]) -> None:
+    """Raise the problems a cross-check collected (nothing if none)."""
+    if len(problems) == 1:
+        raise problems[0]
+    if problems:
+        raise FieldProblems(problems)
 
 
 class _Given(str):
@@ -157,9 +190,13 @@ def _vector3(v: Any) -> list[float]:
     ok = ok and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
     if not ok:
         raise ValueError("must be a list of 3 numbers")
-    if not all(math.isfinite(x) for x in v):
+    try:
+        out = [float(x) for x in v]
+    except OverflowError:
+        raise ValueError("must be finite numbers") from None
+    if not all(math.isfinite(x) for x in out):
         raise ValueError("must be finite numbers")
-    return [float(x) for x in v]
+    return out
 
 
 Vector3 = Annotated[list[float], PlainValidator(_vector3)]
@@ -174,7 +211,13 @@ def _check_label(v: str) -> str:
     return v
 
 
-ParamLabel = Annotated[str, AfterValidator(_check_label)]
+def canonical_name(v: Any) -> Any:
+    """A name as the catalogues spell it (lower case, no surrounding blanks); other types as given."""
+    return v.strip().lower() if isinstance(v, str) else v
+
+
+#: a parameter label, case-insensitive: "Mu[Sun]" is stored as "mu[sun]" (the catalogue's spelling)
+ParamLabel = Annotated[str, BeforeValidator(canonical_name), AfterValidator(_check_label)]
 
 
 class _Section(BaseModel):
@@ -447,6 +490,7 @@ class TrajectoryDeck(SourcedDeck):
     integrator: Integrator = Integrator()
     stop: Stop
     output: Output = Output()
+    limits: Limits = Limits()
 
     @property
     def primary(self) -> str:
@@ -521,7 +565,30 @@ class TrajectoryDeck(SourcedDeck):
                 raise FieldProblem(("output", "times_days", k), t, f"must be <= the final time, {dur:g} days")
         if self.stop.condition == "soi_entry" and self.stop.body == centre:
             raise FieldProblem(("stop", "body"), self.stop.body, "must differ from the centre for soi_entry")
+        n = output_count(self.output, dur)
+        if n > self.limits.max_output_times:
+            field = ("output", "step_days") if self.output.step_days is not None else ("output", "times_days")
+            value = (
+                self.output.step_days
+                if self.output.step_days is not None
+                else _Given(f"[{len(self.output.times_days)} times]")
+            )
+            raise FieldProblem(
+                field,
+                value,
+                f"gives {count_text(n)} output times over 0-{dur:g} d "
+                f"(limit {self.limits.max_output_times}, [limits] max_output_times); use a longer step",
+            )
         return self
+
+
+def output_count(out: Output, duration_days: float) -> float:
+    """How many output times ``[output]`` asks for (an upper bound, computed without building them)."""
+    n = 2.0 + len(out.times_days)
+    if out.step_days is not None:
+        q = duration_days / out.step_days * (1.0 + 1e-12)
+        n += (math.floor(q) + 1.0) if q < 1e18 else q
+    return n
 
 
 # --------------------------------------------------------------------------- loading
@@ -535,9 +602,14 @@ def _fmt_value(v: Any) -> str:
     else:
         try:
             s = json.dumps(v, default=str)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, RecursionError):
             s = repr(v)
-    return s if len(s) <= 80 else s[:77] + "..."
+    return cut(s)
+
+
+def cut(s: str, n: int = ECHO_CHARS) -> str:
+    """``s`` cut to ``n`` characters with "…" (values echoed in error lines)."""
+    return s if len(s) <= n else s[: n - 1] + "…"
 
 
 def _fmt_loc(loc: tuple) -> str:
@@ -627,42 +699,200 @@ def _expected(err: dict) -> str:
     return msg.replace("Input should be", "must be")
 
 
-def format_validation_error(exc: ValidationError, source: str, root: type[BaseModel] | None = None) -> str:
-    """One line for the first error of ``exc``: ``source: field.path = value: expected``."""
-    errs = exc.errors()
-    err = errs[0]
-    loc = tuple(err["loc"])
-    value = err.get("input")
-    expected = _expected(err)
-    problem = (err.get("ctx") or {}).get("error")
-    if isinstance(problem, FieldProblem):
-        loc = loc + problem.field
-        value = problem.value
-        expected = problem.expected
-    if err["type"] == "extra_forbidden":
-        parent = _model_at(loc[:-1], root)
-        known = ", ".join(parent.model_fields) if parent is not None else ""
-        expected = "unknown field" + (f" (expected one of: {known})" if known else "")
+def _data_at(data: Any, loc: tuple) -> Any:
+    for part in loc:
+        if isinstance(data, dict) and part in data:
+            data = data[part]
+        elif isinstance(data, list) and isinstance(part, int) and 0 <= part < len(data):
+            data = data[part]
+        else:
+            return None
+    return data
+
+
+def _line(source: str, loc: tuple, value: Any, expected: str, missing: bool = False) -> str:
     field = _fmt_loc(loc)
-    if value is None or err["type"] == "missing":
-        line = f"{source}: {field}: {expected}"
-    else:
-        line = f"{source}: {field} = {_fmt_value(value)}: {expected}"
-    if len(errs) > 1:
-        line += f" (and {len(errs) - 1} more error{'s' if len(errs) > 2 else ''})"
+    if value is None or missing:
+        return f"{source}: {field}: {expected}"
+    return f"{source}: {field} = {_fmt_value(value)}: {expected}"
+
+
+def validation_problems(
+    exc: ValidationError, source: str, root: type[BaseModel] | None = None, data: Any = None
+) -> list[str]:
+    """Every error of ``exc``, one line each (``source: field.path = value: expected``).
+
+    Unknown keys come first (a typo usually also makes a required key "missing"); when a
+    known key that the table does not give is close to the unknown one, the line says
+    ``did you mean``.  ``data``: the TOML data validated (for the keys a table gives).
+    """
+    errs = sorted(exc.errors(), key=lambda e: e["type"] != "extra_forbidden")
+    lines: list[str] = []
+    for err in errs:
+        loc = tuple(err["loc"])
+        problem = (err.get("ctx") or {}).get("error")
+        if isinstance(problem, FieldProblems):
+            lines += [_line(source, loc + p.field, p.value, p.expected) for p in problem.problems]
+            continue
+        if isinstance(problem, FieldProblem):
+            lines.append(_line(source, loc + problem.field, problem.value, problem.expected))
+            continue
+        value = err.get("input")
+        expected = _expected(err)
+        if err["type"] == "extra_forbidden":
+            parent = _model_at(loc[:-1], root)
+            known = list(parent.model_fields) if parent is not None else []
+            given = _data_at(data, loc[:-1])
+            free = [k for k in known if not (isinstance(given, dict) and k in given)]
+            key = str(loc[-1]) if loc else ""
+            close = difflib.get_close_matches(key.lower(), free, n=1, cutoff=0.6)
+            if close:
+                lines.append(f"{source}: {cut(_fmt_loc(loc), 80)}: unknown key; did you mean {close[0]}?")
+                continue
+            expected = "unknown field" + (f" (expected one of: {', '.join(known)})" if known else "")
+        lines.append(_line(source, loc, value, expected, missing=err["type"] == "missing"))
+    return lines
+
+
+def first_and_count(problems: list[str]) -> str:
+    """The first problem line, with " (and N more errors)" when there are more."""
+    line = problems[0]
+    if len(problems) > 1:
+        n = len(problems) - 1
+        line += f" (and {n} more error{'s' if n > 1 else ''})"
     return line
 
 
-def parse_sourced(text: str, source: str, cls: type[SourcedDeck]) -> SourcedDeck:
-    """Validate TOML text as a ``cls`` deck; any problem -> DeckError('source: field = value: expected')."""
+def format_validation_error(exc: ValidationError, source: str, root: type[BaseModel] | None = None) -> str:
+    """One line for the first error of ``exc``: ``source: field.path = value: expected``."""
+    return first_and_count(validation_problems(exc, source, root))
+
+
+def deck_error(problems: list[str]) -> DeckError:
+    """One DeckError carrying every problem line (``str`` is the first, counted)."""
+    return DeckError(first_and_count(problems), problems=problems)
+
+
+def _strip_bom(text: str) -> str:
+    return text[1:] if text.startswith("\ufeff") else text
+
+
+_HEADER_RE = re.compile(r"^\s*\[\[?\s*([^\]=]+?)\s*\]\]?\s*(#.*)?$")
+_KEY_RE = re.compile(r"^\s*([^=\[\]{}#]+?)\s*=")
+
+
+def _too_deep_line(text: str, source: str) -> str:
+    """The line naming the key whose value nests too deeply (after tomllib's RecursionError)."""
+    table, key, depth = "", "", 0
+    for number, raw in enumerate(text.splitlines(), start=1):
+        if depth == 0:
+            m = _HEADER_RE.match(raw)
+            if m:
+                table = m.group(1).strip()
+                continue
+            m = _KEY_RE.match(raw)
+            if m:
+                key = m.group(1).strip().strip("\"'")
+        for ch in raw:
+            if ch in "[{":
+                depth += 1
+                if depth > MAX_NESTING:
+                    field = f"{table}.{key}" if table else key
+                    return (
+                        f"{source}: {cut(field or f'line {number}', 80)} = {cut(raw.split('=', 1)[-1].strip())}: "
+                        f"arrays / inline tables nested more than {MAX_NESTING} deep (line {number})"
+                    )
+            elif ch in "]}":
+                depth = max(depth - 1, 0)
+            elif ch == "#":
+                break
+    return f"{source}: arrays / inline tables nested more than {MAX_NESTING} deep"
+
+
+def _scan(data: Any, loc: tuple, out: list[tuple[tuple, Any, str]], depth: int = 0) -> None:
+    """Problems no schema can see: integers beyond 64 bits, nesting beyond MAX_NESTING."""
+    if isinstance(data, bool):
+        return
+    if isinstance(data, int):
+        if not (_INT_MIN <= data <= _INT_MAX):
+            digits = len(str(abs(data)))
+            out.append((loc, _Given(cut(str(data))), f"an integer of {digits} digits (TOML integers are 64-bit)"))
+        return
+    if isinstance(data, (list, dict)):
+        if depth > MAX_NESTING:
+            while len(loc) > 1 and isinstance(loc[-1], int) and isinstance(loc[-2], int):
+                loc = loc[:-1]  # name the key (and its first index), not the whole way down
+            out.append(
+                (loc, _Given("[…]" if isinstance(data, list) else "{…}"), f"nested more than {MAX_NESTING} deep")
+            )
+            return
+        items = data.items() if isinstance(data, dict) else enumerate(data)
+        for k, v in items:
+            _scan(v, loc + (k,), out, depth + 1)
+
+
+def load_toml(text: str, source: str) -> dict:
+    """TOML text (a leading BOM dropped) -> data; syntax errors, nesting beyond
+    :data:`MAX_NESTING` and integers beyond 64 bits are one-line DeckErrors."""
+    text = _strip_bom(text)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise DeckError(f"{source}: TOML syntax error: {exc}") from None
+    except RecursionError:
+        raise DeckError(_too_deep_line(text, source)) from None
+    found: list[tuple[tuple, Any, str]] = []
+    _scan(data, (), found)
+    if found:
+        raise deck_error([_line(source, loc, value, expected) for loc, value, expected in found])
+    return data
+
+
+def _named_mode(data: dict) -> str | None:
+    """The mode the data evidently is, for a deck of the wrong kind (None: no evidence)."""
+    mode = data.get("mode")
+    if mode is not None:
+        return mode if isinstance(mode, str) else None
+    if "ertraj" in data:
+        return "team"
+    if any(k in data for k in ("epoch", "initial_state", "spacecraft", "stop")):
+        return "propagate"
+    return None
+
+
+_KIND_NAMES = {
+    "propagate": ("a trajectory deck", "fracas propagate"),
+    "team": ("a TEAM deck", "fracas run"),
+}
+
+
+def _wrong_kind(data: dict, source: str, cls: type[SourcedDeck]) -> None:
+    want = cls.model_fields["mode"].default
+    got = _named_mode(data)
+    if got is None or got == want or got not in _KIND_NAMES:
+        return
+    how = (
+        f'mode = "{got}"'
+        if "mode" in data
+        else ("it has an [ertraj] table" if got == "team" else "it has no [ertraj] table")
+    )
+    what, command = _KIND_NAMES[got]
+    raise DeckError(f"{source}: this is {what} ({how}), not {_KIND_NAMES[want][0]}: run it with {command}")
+
+
+def parse_sourced(text: str, source: str, cls: type[SourcedDeck]) -> SourcedDeck:
+    """Validate TOML text as a ``cls`` deck; any problem -> DeckError('source: field = value: expected').
+
+    The DeckError's ``problems`` lists every problem found, one line each."""
+    text = _strip_bom(text)
+    data = load_toml(text, source)
+    _wrong_kind(data, source, cls)
     try:
         deck = cls.model_validate(data)
     except ValidationError as exc:
-        raise DeckError(format_validation_error(exc, source, cls)) from None
+        raise deck_error(validation_problems(exc, source, cls, data)) from None
+    except RecursionError:  # defensive: load_toml bounds the nesting
+        raise DeckError(f"{source}: nested too deeply to validate") from None
     deck._source_path = source
     deck._source_text = text
     return deck
@@ -685,6 +915,10 @@ def read_deck_text(path: str | Path) -> str:
         raise DeckError(f"{source}: is a directory, expected a TOML deck file") from None
     except OSError as exc:
         raise DeckError(f"{source}: cannot read: {exc.strerror or exc}") from None
+    if len(raw) > MAX_DECK_BYTES:
+        raise DeckError(f"{source}: is {len(raw)} bytes; a deck is at most {MAX_DECK_BYTES} bytes") from None
+    if raw.startswith(b"\xef\xbb\xbf"):
+        raw = raw[3:]
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -708,10 +942,11 @@ def trajectory_hash(deck) -> str:
     implicit and the file's name or place do not change the hash; any changed value does.
     Every section counts (title and ``[output]`` included): the file is tied to exactly
     the deck it was built from (FRACAS writes ERTRAJ at the head of the STM tape).  The
-    ``mode`` line does not count (it says what to do with the trajectory, not what it is).
+    ``mode`` line and ``[limits]`` do not count (they say what to do with the trajectory and
+    how big a run may get, not what the trajectory is).
     """
     body = json.dumps(
-        deck.model_dump(mode="json", exclude={"mode"}),
+        deck.model_dump(mode="json", exclude={"mode", "limits"}),
         sort_keys=True,
         separators=(",", ":"),
         ensure_ascii=True,

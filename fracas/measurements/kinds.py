@@ -58,7 +58,10 @@ class MeasurementKind:
     spacecraft-based); ``needs_body``: a target body (its position, for planet_diameter its
     radius); ``needs_star``: a star direction; ``bias_terms``: unit bias partials
     ((label name, station slot or None, coefficient), TRAKM eq. 8); ``trakm_name``: the
-    FRACAS TRAKM data type and its equations.
+    FRACAS TRAKM data type and its equations.  ``max_sigma``: the largest white-noise
+    sigma a deck may give, in ``sigma_unit`` (a generous physical bound: 10,000 km for a
+    range, 1 km/s for a Doppler, 180 deg for an angle, pi rad for an optical angle; a larger
+    sigma means no information, and is almost surely a unit mistake).
     """
 
     name: str
@@ -71,24 +74,36 @@ class MeasurementKind:
     bias_terms: tuple[tuple[str, int | None, float], ...] = ()
     needs_body: bool = False
     needs_star: bool = False
+    max_sigma: float | None = None
 
 
 @dataclass(frozen=True)
 class MeasurementParam:
     """One measurement-parameter label name: ``unit`` (canonical); ``per_station``: the
     label is ``name[STATION]`` (else plain ``name``); ``sigma``: a typical a-priori 1-sigma
-    (as in the example decks; informational, never applied), None where none makes sense."""
+    (as in the example decks; informational, never applied), None where none makes sense;
+    ``max_sigma``: the largest a-priori sigma a deck may give (``unit``; the same generous
+    bounds as the measurement kinds': 10,000 km, 1 km/s, pi rad; 1,000 km for a station radius)."""
 
     name: str
     unit: str
     per_station: bool
     description: str
     sigma: float | None = None
+    max_sigma: float | None = None
 
 
 _KINDS = (
     MeasurementKind(
-        "range2", "km", "m", 1e-3, 1, "2-way range rho", "2-way range (TRAKM eqs. 1-2)", (("range_bias_km", 0, 1.0),)
+        "range2",
+        "km",
+        "m",
+        1e-3,
+        1,
+        "2-way range rho",
+        "2-way range (TRAKM eqs. 1-2)",
+        (("range_bias_km", 0, 1.0),),
+        max_sigma=1e7,
     ),
     MeasurementKind(
         "doppler2",
@@ -99,6 +114,7 @@ _KINDS = (
         "2-way Doppler as range rate rho_dot",
         "2-way Doppler (TRAKM eqs. 3-7)",
         (("doppler_bias_km_s", 0, 1.0),),
+        max_sigma=1e6,
     ),
     MeasurementKind(
         "range3",
@@ -109,6 +125,7 @@ _KINDS = (
         "3-way range rho_1 + rho_2",
         "QVLBI 3-way range (TRAKM eq. 9)",
         (("range_bias_km", 0, 1.0), ("range_bias_km", 1, 1.0), ("qvlbi_timing_km", None, 1.0)),
+        max_sigma=1e7,
     ),
     MeasurementKind(
         "doppler3",
@@ -119,6 +136,7 @@ _KINDS = (
         "3-way Doppler rho_dot_1 + rho_dot_2",
         "QVLBI 3-way Doppler (TRAKM eq. 10)",
         (("doppler_bias_km_s", 0, 1.0), ("doppler_bias_km_s", 1, 1.0), ("qvlbi_frequency_km_s", None, 1.0)),
+        max_sigma=1e6,
     ),
     MeasurementKind(
         "diff_range",
@@ -129,6 +147,7 @@ _KINDS = (
         "differenced range rho_1 - rho_2",
         "differenced range (TRAKM eqs. 11, 13-16)",
         (("range_bias_km", 0, 1.0), ("range_bias_km", 1, -1.0), ("qvlbi_timing_km", None, -1.0)),
+        max_sigma=1e7,
     ),
     MeasurementKind(
         "diff_doppler",
@@ -139,6 +158,7 @@ _KINDS = (
         "differenced Doppler rho_dot_1 - rho_dot_2",
         "differenced Doppler (TRAKM eqs. 12, 14-16)",
         (("doppler_bias_km_s", 0, 1.0), ("doppler_bias_km_s", 1, -1.0), ("qvlbi_frequency_km_s", None, -1.0)),
+        max_sigma=1e6,
     ),
     MeasurementKind(
         "azimuth",
@@ -149,6 +169,7 @@ _KINDS = (
         "topocentric azimuth of the spacecraft",
         "azimuth (TRAKM eqs. 21-30, rebuilt topocentric)",
         (("azimuth_bias_rad", 0, 1.0),),
+        max_sigma=180.0,
     ),
     MeasurementKind(
         "elevation",
@@ -159,6 +180,7 @@ _KINDS = (
         "topocentric elevation of the spacecraft",
         "elevation (TRAKM eqs. 17-20, rebuilt topocentric)",
         (("elevation_bias_rad", 0, 1.0),),
+        max_sigma=180.0,
     ),
     MeasurementKind(
         "star_planet_angle",
@@ -171,6 +193,7 @@ _KINDS = (
         (("star_planet_bias_rad", None, 1.0),),
         needs_body=True,
         needs_star=True,
+        max_sigma=3.141592653589793e6,
     ),
     MeasurementKind(
         "planet_diameter",
@@ -182,23 +205,32 @@ _KINDS = (
         "apparent planet diameter (TRAKM eqs. 36-39)",
         (("diameter_bias_rad", None, 1.0),),
         needs_body=True,
+        max_sigma=3.141592653589793e6,
     ),
 )
 #: name -> :class:`MeasurementKind`, in the order decks and reports list them
 MEASUREMENT_KINDS: dict[str, MeasurementKind] = {k.name: k for k in _KINDS}
 
 _PARAMS = (
-    MeasurementParam("station_radius_km", "km", True, "station geocentric radius (via STAPRL)", 0.001),
-    MeasurementParam("station_lat_rad", "rad", True, "station geocentric latitude (via STAPRL)"),
-    MeasurementParam("station_lon_rad", "rad", True, "station east longitude (via STAPRL)", 9.6e-8),
-    MeasurementParam("range_bias_km", "km", True, "range bias of a station", 0.002),
-    MeasurementParam("doppler_bias_km_s", "km/s", True, "Doppler (range-rate) bias of a station"),
-    MeasurementParam("azimuth_bias_rad", "rad", True, "azimuth bias of a station"),
-    MeasurementParam("elevation_bias_rad", "rad", True, "elevation bias of a station"),
-    MeasurementParam("qvlbi_timing_km", "km", False, "QVLBI c dt (+ in range3, - in diff_range)", 0.003),
-    MeasurementParam("qvlbi_frequency_km_s", "km/s", False, "QVLBI c df/f (+ in doppler3, - in diff_doppler)", 3.0e-8),
-    MeasurementParam("star_planet_bias_rad", "rad", False, "star-planet angle bias"),
-    MeasurementParam("diameter_bias_rad", "rad", False, "apparent-diameter bias"),
+    MeasurementParam(
+        "station_radius_km", "km", True, "station geocentric radius (via STAPRL)", 0.001, max_sigma=1000.0
+    ),
+    MeasurementParam(
+        "station_lat_rad", "rad", True, "station geocentric latitude (via STAPRL)", max_sigma=3.141592653589793
+    ),
+    MeasurementParam(
+        "station_lon_rad", "rad", True, "station east longitude (via STAPRL)", 9.6e-8, max_sigma=3.141592653589793
+    ),
+    MeasurementParam("range_bias_km", "km", True, "range bias of a station", 0.002, max_sigma=1e4),
+    MeasurementParam("doppler_bias_km_s", "km/s", True, "Doppler (range-rate) bias of a station", max_sigma=1.0),
+    MeasurementParam("azimuth_bias_rad", "rad", True, "azimuth bias of a station", max_sigma=3.141592653589793),
+    MeasurementParam("elevation_bias_rad", "rad", True, "elevation bias of a station", max_sigma=3.141592653589793),
+    MeasurementParam("qvlbi_timing_km", "km", False, "QVLBI c dt (+ in range3, - in diff_range)", 0.003, max_sigma=1e4),
+    MeasurementParam(
+        "qvlbi_frequency_km_s", "km/s", False, "QVLBI c df/f (+ in doppler3, - in diff_doppler)", 3.0e-8, max_sigma=1.0
+    ),
+    MeasurementParam("star_planet_bias_rad", "rad", False, "star-planet angle bias", max_sigma=3.141592653589793),
+    MeasurementParam("diameter_bias_rad", "rad", False, "apparent-diameter bias", max_sigma=3.141592653589793),
 )
 #: label name -> :class:`MeasurementParam`
 MEASUREMENT_PARAMETERS: dict[str, MeasurementParam] = {p.name: p for p in _PARAMS}

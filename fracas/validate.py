@@ -1,0 +1,233 @@
+"""``fracas validate``: every problem of a deck, without running (or importing) anything heavy.
+
+:func:`validate_path` reads a deck of any mode and returns every problem found, one line
+each (``source: field = value: expected``; an empty list means the deck is valid):
+
+* the schema (all problems, not only the first: :attr:`fracas.errors.FracasError.problems`);
+* a TEAM deck's trajectory deck ([ertraj] deck: exists, parses, its sizes) and the sizes
+  that need its duration (:func:`fracas.config.limits.team_size_problems`);
+* parameter labels against the catalogues (:func:`fracas.params.parse_label` with the
+  trajectory's bodies, arcs and impulses; measurement labels against the stations);
+* files a run reads: an STM file ([errcon] stm_file when the run does not build it: an
+  HDF5 file of file_kind "fracas-stm" built from this trajectory, by its hash) and a
+  punch file ([a_priori] from_punch: file_kind "fracas-punch"); only attributes are read;
+* a user gain ``module:function``: importable and callable (this imports the module);
+* files a run writes ([output] results/plot, [punch] file, [errcon] stm_file when built):
+  not a directory, the folder exists or can be created, and is writable (nothing is created).
+
+No JAX is imported (the deck, the catalogues and h5py only), so this takes milliseconds per
+deck: about 5-20 ms per bundled deck in a warm process on the 2-core development machine.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import types
+from pathlib import Path
+
+from fracas.build.trajectory import model_bodies
+from fracas.config.limits import team_size_problems
+from fracas.config.modes import deck_mode, parse_any
+from fracas.config.team import TeamDeck
+from fracas.config.trajectory import TrajectoryDeck, cut, load_deck, read_deck_text, trajectory_hash
+from fracas.errors import FracasError
+from fracas.measurements.kinds import check_measurement_label, is_measurement_label
+from fracas.params import parse_label
+
+__all__ = ["validate_path", "check_path"]
+
+_BUILTIN_STATIONS = ("goldstone", "madrid", "canberra")
+
+
+def _line(src: str, field: str, value, expected: str) -> str:
+    if value is None:
+        return f"{src}: {field}: {expected}"
+    v = f'"{cut(value)}"' if isinstance(value, str) else cut(str(value))
+    return f"{src}: {field} = {v}: {expected}"
+
+
+def _model(tdeck: TrajectoryDeck) -> types.SimpleNamespace:
+    """What :func:`fracas.params.parse_label` reads of a force model, from the deck alone."""
+    return types.SimpleNamespace(
+        bodies=model_bodies(tdeck), n_arcs=len(tdeck.thrust_arc), n_impulses=len(tdeck.impulse)
+    )
+
+
+def _label_problem(label: str, model, stations, src: str, field: str, dynamic_only: bool = False) -> str | None:
+    try:
+        parse_label(label, model)
+        return None
+    except KeyError as exc:
+        dyn_msg = str(exc).strip("'\"")
+    if not dynamic_only and is_measurement_label(label):
+        try:
+            check_measurement_label(label, stations)
+            return None
+        except KeyError as exc:
+            return _line(src, field, label, str(exc).strip("'\""))
+    return _line(src, field, label, dyn_msg)
+
+
+def _output_problem(path: Path, src: str, field: str, rel: str) -> str | None:
+    """A file a run will write: not a directory; its folder exists or can be made, writable."""
+    if path.is_dir():
+        return _line(src, field, rel, f"is a directory ({path}); expected a file name")
+    parent = path.parent
+    while not parent.exists():
+        if parent == parent.parent:
+            break
+        parent = parent.parent
+    if parent.exists() and not parent.is_dir():
+        return _line(src, field, rel, f"cannot create its folder: {parent} is a file")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return _line(src, field, rel, f"cannot write there: {parent} is not writable")
+    return None
+
+
+def _h5_attrs(path: Path, group: str | None = None) -> dict | str:
+    """The attributes of an HDF5 file (or one of its groups), or why they cannot be read."""
+    import h5py  # noqa: PLC0415 (only when a deck names a file to read)
+
+    try:
+        with h5py.File(path, "r") as f:
+            node = f if group is None else f.get(group)
+            if node is None:
+                return {}
+            return {k: (v.decode() if isinstance(v, bytes) else v) for k, v in node.attrs.items()}
+    except OSError:
+        return "not an HDF5 file"
+
+
+def _input_problems(path: Path, src: str, field: str, rel: str, kind: str, thash: str | None) -> list[str]:
+    if not path.exists():
+        return [_line(src, field, rel, f"no such file ({path})")]
+    if path.is_dir():
+        return [_line(src, field, rel, f"is a directory ({path}); expected a {kind} file")]
+    attrs = _h5_attrs(path)
+    if isinstance(attrs, str):
+        return [_line(src, field, rel, f"{attrs} ({path}); expected a {kind} file")]
+    if attrs.get("file_kind") != kind:
+        return [_line(src, field, rel, f"file_kind = {attrs.get('file_kind')!r}, expected {kind!r}")]
+    if thash is not None:
+        got = attrs.get("trajectory_hash")
+        if got is None and kind == "fracas-stm":
+            sub = _h5_attrs(path, "trajectory_deck")
+            got = sub.get("trajectory_hash") if isinstance(sub, dict) else None
+        if got and str(got) != thash:
+            return [
+                _line(
+                    src, field, rel, f"was built from another trajectory (hash {str(got)[:12]}, this one {thash[:12]})"
+                )
+            ]
+    return []
+
+
+def _trajectory_problems(tdeck: TrajectoryDeck) -> list[str]:
+    src = tdeck.source_path or "<deck>"
+    model = _model(tdeck)
+    out = []
+    for k, lab in enumerate(tdeck.output.sensitivities):
+        p = _label_problem(lab, model, (), src, f"output.sensitivities[{k}]", dynamic_only=True)
+        if p:
+            out.append(p)
+    return out
+
+
+def _team_problems(deck: TeamDeck) -> list[str]:
+    try:
+        return _team_checks(deck)
+    except OSError as exc:  # a path no file system accepts (too long, NUL, ...)
+        src = deck.source_path or "<deck>"
+        return [f"{src}: a file named in the deck is not a usable path ({exc.strerror or type(exc).__name__})"]
+
+
+def _team_checks(deck: TeamDeck) -> list[str]:
+    src = deck.source_path or "<deck>"
+    out: list[str] = []
+    path = deck.resolve(deck.ertraj.deck)
+    tdeck = None
+    if not path.exists():
+        out.append(_line(src, "ertraj.deck", deck.ertraj.deck, f"no such trajectory deck ({path})"))
+    else:
+        try:
+            tdeck = load_deck(path)
+        except FracasError as exc:
+            out += exc.problems
+    if tdeck is not None:
+        out += _trajectory_problems(tdeck)
+        out += team_size_problems(deck, tdeck)
+        model = _model(tdeck)
+        stations = set(_BUILTIN_STATIONS) | {s.name for s in deck.station}
+        for k, p in enumerate(deck.parameter):
+            out.append(_label_problem(p.label, model, stations, src, f"parameter[{k}].label"))
+        if deck.gencov is not None:
+            for k, g in enumerate(deck.gencov.parameter):
+                if g.role == "ignore":
+                    out.append(_label_problem(g.label, model, stations, src, f"gencov.parameter[{k}].label"))
+        for k, lab in enumerate(deck.stm.parameters):
+            out.append(_label_problem(lab, model, stations, src, f"stm.parameters[{k}]", dynamic_only=True))
+        dur = tdeck.duration_days
+        for k, e in enumerate(deck.event):
+            late = [t for t in e.times() if t > dur * (1 + 1e-12)]
+            if late:
+                out.append(_line(src, f"event[{k}]", None, f"times must be within the trajectory (<= {dur:g} d)"))
+            if e.predict_to_days is not None and e.predict_to_days > dur * (1 + 1e-12):
+                out.append(
+                    _line(
+                        src, f"event[{k}].predict_to_days", e.predict_to_days, f"must be <= {dur:g} d (the trajectory)"
+                    )
+                )
+    thash = trajectory_hash(tdeck) if tdeck is not None else None
+    ec = deck.errcon
+    if ec.stm_file:
+        spath = deck.resolve(ec.stm_file)
+        if ec.build_stm:
+            out.append(_output_problem(spath, src, "errcon.stm_file", ec.stm_file))
+        else:
+            out += _input_problems(spath, src, "errcon.stm_file", ec.stm_file, "fracas-stm", thash)
+    if deck.a_priori is not None and deck.a_priori.from_punch:
+        rel = deck.a_priori.from_punch
+        out += _input_problems(deck.resolve(rel), src, "a_priori.from_punch", rel, "fracas-punch", None)
+    if deck.filter.user_gain and deck.filter.type == "user":
+        spec = deck.filter.user_gain
+        mod, _, fn = spec.partition(":")
+        try:
+            obj = getattr(importlib.import_module(mod), fn)
+        except Exception as exc:  # noqa: BLE001 (any failure of the user's module is a deck problem)
+            out.append(_line(src, "filter.user_gain", spec, f"cannot import it ({cut(str(exc), 80)})"))
+        else:
+            if not callable(obj):
+                out.append(_line(src, "filter.user_gain", spec, "is not callable"))
+    for field, rel in (
+        ("output.results", deck.output.results),
+        ("output.plot", deck.output.plot),
+        ("punch.file", deck.punch.file if deck.punch is not None else None),
+    ):
+        if rel:
+            out.append(_output_problem(deck.resolve(rel), src, field, rel))
+    return [p for p in out if p]
+
+
+def check_path(path: str | Path) -> tuple[str | None, list[str]]:
+    """(the deck's mode or None if unreadable, every problem one line each)."""
+    src = str(path)
+    try:
+        text = read_deck_text(path)
+        mode = deck_mode(text, src)
+        deck = parse_any(text, src)
+    except FracasError as exc:
+        kind = None
+        try:
+            kind = deck_mode(read_deck_text(path), src)
+        except FracasError:
+            pass
+        return kind, list(exc.problems)
+    if mode == "team":
+        return mode, _team_problems(deck)
+    return mode, _trajectory_problems(deck)
+
+
+def validate_path(path: str | Path) -> list[str]:
+    """Every problem of the deck at ``path`` (any mode), one line each; [] if it is valid."""
+    return check_path(path)[1]

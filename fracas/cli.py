@@ -361,5 +361,30 @@ def report(
             print_summary(data, file, width=width)
 
 
+@main.command()
+@click.argument("decks", nargs=-1, required=True, type=click.Path(dir_okay=True, path_type=Path))
+@click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
+@click.pass_context
+def validate(ctx: click.Context, decks: tuple[Path, ...], debug: bool) -> None:
+    """Check DECKS and everything they name (trajectory decks, STM and punch files, user gains,
+    output folders, sizes) without integrating anything; every problem on its own line, exit 2
+    if there is any."""
+    debug = debug or bool((ctx.obj or {}).get("debug"))
+    with _errors(debug):
+        from fracas.validate import check_path
+
+        bad = 0
+        for deck in decks:
+            kind, problems = check_path(deck)
+            if problems:
+                bad += 1
+                for line in problems:
+                    click.echo(f"fracas: error: {line}", err=True)
+            else:
+                click.echo(f"ok: {deck} ({kind})")
+        if bad:
+            sys.exit(2)
+
+
 if __name__ == "__main__":  # python -m fracas.cli
     main()

@@ -185,3 +185,29 @@ def test_no_jax_imported():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_validate_command_lists_every_problem(tmp_path):
+    """``fracas validate``: "ok: DECK (mode)" and exit 0 for the bundled decks; a broken copy
+    gets one line per problem on stderr and exit 2, no traceback."""
+    from click.testing import CliRunner
+
+    from fracas.cli import main
+
+    decks = sorted(str(p) for p in (ROOT / "namelists").glob("*.toml"))
+    r = CliRunner().invoke(main, ["validate", *decks])
+    assert r.exit_code == 0, r.output
+    assert r.stdout.splitlines() == [f"ok: {d} ({'team' if d.endswith('_team.toml') else 'propagate'})" for d in decks]
+    bad = tmp_path / "bad.toml"
+    text = (ROOT / "tests/data/team_small.toml").read_text(encoding="utf-8")
+    bad.write_text(
+        text.replace('title = "TEAM test study"', 'title = "x"\nbogus_key = 1').replace(
+            "sigma = 0.01", "sigma = 1e300", 1
+        ),
+        encoding="utf-8",
+    )
+    r = CliRunner().invoke(main, ["validate", str(bad)])
+    lines = r.stderr.strip().splitlines()
+    assert r.exit_code == 2 and len(lines) >= 2 and "Traceback" not in r.output
+    assert all(line.startswith(f"fracas: error: {bad}: ") for line in lines)
+    assert any("bogus_key" in line for line in lines) and any("parameter[0].sigma" in line for line in lines)

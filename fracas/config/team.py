@@ -113,7 +113,7 @@ def sigma_bound(label: str) -> tuple[float, str] | None:
             body = BODIES[parts[0]]
             value = body.mu_km3_s2 if name == "mu" else body.radius_km
             return kind.max_sigma * value, f"{kind.unit} ({kind.max_sigma:g} x {parts[0]}'s {value:g})"
-        return float(kind.max_sigma), f"{kind.unit}" + (" (100 %)" if kind.unit == "1" else "")
+        return float(kind.max_sigma), (f"({kind.max_sigma * 100:g} %)" if kind.unit == "1" else kind.unit)
     mp = MEASUREMENT_PARAMETERS.get(name)
     if mp is not None and mp.max_sigma is not None:
         return mp.max_sigma, mp.unit

@@ -180,7 +180,7 @@ BOUNDS = {
     "proportionality parameter": (
         "sigma = 0.005\n",
         "sigma = 2.0\n",
-        "parameter[0].sigma = 2.0: must be <= 1 1 (100 %) for thrust_scale",
+        "parameter[0].sigma = 2.0: must be <= 1 (100 %) for thrust_scale",
     ),
     "angle parameter": (
         "sigma = 0.0087266\n",
@@ -195,7 +195,7 @@ BOUNDS = {
     "gencov parameter": (
         'label = "cr"\nsigma = 0.1',
         'label = "cr"\nsigma = 3.0',
-        "gencov.parameter[0].sigma = 3.0: must be <= 2 1 (100 %) for cr",
+        "gencov.parameter[0].sigma = 3.0: must be <= 2 (200 %) for cr",
     ),
     "a-priori velocity": (
         "velocity_rss_km_s = 0.025",

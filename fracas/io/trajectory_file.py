@@ -152,7 +152,8 @@ def write_trajectory_file(path: str | os.PathLike, data: TrajectoryData) -> Path
 def read_trajectory_file(path: str | os.PathLike, *, verify: bool = True) -> TrajectoryData:
     """Read a file written by :func:`write_trajectory_file`.
 
-    Every dataset is checked (dtype, shapes consistent with ``t_s``, an integer status) and, with ``verify`` and a schema-2 file, its SHA-256 checksum.
+    Every dataset is checked (dtype, shapes consistent with ``t_s``, an integer status)
+    and, with ``verify`` and a schema-2 file, its SHA-256 checksum.
     One-line StmFileError naming the file and the dataset."""
     src = Path(path)
     if not src.exists():

@@ -170,6 +170,11 @@ def read_provenance(f: h5py.File) -> dict[str, Any]:
 # --------------------------------------------------------------------------- checked reading
 
 
+def dtype_name(dtype: np.dtype) -> str:
+    """``float64``, ``int64``, ... or ``strings`` for an HDF5 string dtype."""
+    return "strings" if h5py.check_string_dtype(dtype) is not None else str(dtype)
+
+
 class Checked:
     """Read datasets of an open file, each checked before use; every refusal is one line,
     ``error(f"{src}: {dataset}: {problem}, expected {what}")``.
@@ -245,9 +250,9 @@ class Checked:
         ds = self.dataset(name)
         if integer:
             if ds.dtype.kind not in "iu":
-                raise self.fail(name, f"dtype {ds.dtype}, expected an integer dtype")
+                raise self.fail(name, f"dtype {dtype_name(ds.dtype)}, expected an integer dtype")
         elif ds.dtype != np.float64:
-            raise self.fail(name, f"dtype {ds.dtype}, expected float64")
+            raise self.fail(name, f"dtype {dtype_name(ds.dtype)}, expected float64")
         self._shape(name, tuple(ds.shape), shape)
         try:
             val = ds[()]

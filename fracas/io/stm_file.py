@@ -50,6 +50,7 @@ from fracas.io.hdf5 import (
     attr_int,
     attr_text,
     digest_array,
+    dtype_name,
     provenance,
     read_provenance,
     set_attr,
@@ -369,7 +370,7 @@ def _read_checked(
     name = "stm/par_step"
     ds = c.dataset(name)
     if ds.dtype != np.float64:
-        raise c.fail(name, f"dtype {ds.dtype}, expected float64")
+        raise c.fail(name, f"dtype {dtype_name(ds.dtype)}, expected float64")
     c._shape(name, tuple(ds.shape), (n_p, n, 7))
     par = np.empty((len(cols), n, 7))
     if c.verify and n_p and "column_sha256" not in ds.attrs:

@@ -6,10 +6,13 @@ would give it (``0o666 & ~umask``), then moved over the destination with ``os.re
 (atomic on POSIX within one filesystem).  A failure, or a kill, at any point leaves the
 previous file at the destination untouched: readers never see a partial file.
 
-Temporary files are named ``.<name>.<pid>.<random>.tmp`` (``<random>``: 8 characters of
-``tempfile``'s alphabet) in the destination folder, so they can be recognised.  A killed
-run leaves one behind; the next write to that folder removes those of this pattern whose
-process is gone or that are older than an hour (:func:`remove_stale_temps`), nothing else.
+Temporary files are named ``.<name>.<pid>-<host>.<random>.tmp`` in the destination folder
+(``<host>``: 8 hex digits identifying this machine and PID namespace, :func:`host_tag`;
+``<random>``: 8 characters of ``tempfile``'s alphabet), so they can be recognised.  A
+killed run leaves one behind; the next write to that folder removes those of this pattern
+whose process is gone (judged only for temporaries of this host: on a shared filesystem
+another machine's pid means nothing here) or that are older than an hour
+(:func:`remove_stale_temps`), nothing else.
 
 :func:`check_output_path` checks an output path before a run starts, creating nothing.
 """
@@ -17,8 +20,11 @@ process is gone or that are older than an hour (:func:`remove_stale_temps`), not
 from __future__ import annotations
 
 import contextlib
+import functools
+import hashlib
 import os
 import re
+import socket
 import tempfile
 import time
 from collections.abc import Iterator
@@ -33,13 +39,24 @@ __all__ = [
     "atomic_path",
     "check_output_path",
     "file_mode",
+    "host_tag",
     "remove_stale_temps",
     "savefig_atomic",
     "temp_prefix",
 ]
 
 STALE_AGE_S = 3600.0  # a temporary file older than this is stale even if its pid is alive (pid reuse)
-TEMP_PATTERN = re.compile(r"^\.(?P<name>.+)\.(?P<pid>[0-9]+)\.(?P<rand>[a-z0-9_]{8})\.tmp$")
+TEMP_PATTERN = re.compile(r"^\.(?P<name>.+)\.(?P<pid>[0-9]+)-(?P<host>[0-9a-f]{8})\.(?P<rand>[a-z0-9_]{8})\.tmp$")
+
+
+@functools.cache
+def host_tag() -> str:
+    """8 hex digits naming this machine and PID namespace (hostname, ``/proc/self/ns/pid``)."""
+    try:
+        ns = os.readlink("/proc/self/ns/pid")
+    except OSError:
+        ns = ""
+    return hashlib.sha256(f"{socket.gethostname()}\0{ns}".encode()).hexdigest()[:8]
 
 
 def _umask() -> int:
@@ -60,8 +77,8 @@ def file_mode() -> int:
 
 
 def temp_prefix(name: str) -> str:
-    """``.<name>.<pid>.``: the start of this process's temporary names for ``name``."""
-    return f".{name}.{os.getpid()}."
+    """``.<name>.<pid>-<host>.``: the start of this process's temporary names for ``name``."""
+    return f".{name}.{os.getpid()}-{host_tag()}."
 
 
 def _pid_alive(pid: int) -> bool:
@@ -79,8 +96,9 @@ def _pid_alive(pid: int) -> bool:
 
 
 def remove_stale_temps(folder: str | os.PathLike, max_age_s: float = STALE_AGE_S) -> list[Path]:
-    """Remove this module's temporary files in ``folder`` whose process is gone or that are
-    older than ``max_age_s``; only plain files matching :data:`TEMP_PATTERN`.  Returns them."""
+    """Remove this module's temporary files in ``folder`` whose process is gone (temporaries
+    of this host only) or that are older than ``max_age_s``; only plain files matching
+    :data:`TEMP_PATTERN`.  Returns them."""
     removed: list[Path] = []
     now = time.time()
     try:
@@ -97,10 +115,10 @@ def remove_stale_temps(folder: str | os.PathLike, max_age_s: float = STALE_AGE_S
             age = now - entry.stat(follow_symlinks=False).st_mtime
         except OSError:
             continue
-        pid = int(m.group("pid"))
-        if pid == os.getpid() and age <= max_age_s:
+        pid, here = int(m.group("pid")), m.group("host") == host_tag()
+        if here and pid == os.getpid() and age <= max_age_s:
             continue  # possibly a write in progress in another thread of this process
-        if age > max_age_s or not _pid_alive(pid):
+        if age > max_age_s or (here and not _pid_alive(pid)):
             with contextlib.suppress(OSError):
                 os.unlink(entry.path)
                 removed.append(Path(entry.path))
@@ -120,7 +138,7 @@ def _fsync_dir(folder: Path) -> None:
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """``with atomic_path(dest) as tmp:`` write ``tmp``; on success it becomes ``dest``.
 
-    ``tmp`` is an empty file ``.<name>.<pid>.<random>.tmp`` in ``dest``'s folder (created
+    ``tmp`` is an empty file ``.<name>.<pid>-<host>.<random>.tmp`` in ``dest``'s folder (created
     if needed); the writer may truncate or recreate it.  On leaving the block normally it is
     fsync-ed, given mode ``0o666 & ~umask`` and renamed over ``dest``; on any exception it
     is removed and the exception propagates, ``dest`` untouched.  Stale temporary files of

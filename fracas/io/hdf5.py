@@ -2,7 +2,7 @@
 datasets, checked reading, provenance.
 
 Writes are atomic (:mod:`fracas.io.atomic`): the file is built under a temporary name
-``.<name>.<pid>.<random>.tmp`` in the destination directory, flushed and ``fsync``-ed, given
+``.<name>.<pid>-<host>.<random>.tmp`` in the destination directory, flushed and ``fsync``-ed, given
 the user's normal permissions, then moved over the destination with ``os.replace``.  A
 failure or a kill at any point leaves a previous file at the destination untouched.
 

@@ -47,7 +47,15 @@ def _write_history(h: h5py.Group, c: CovarianceHistory) -> None:
 
 
 def write_team_results(path: str | os.PathLike, res: TeamProduct) -> None:
-    """Write the full event history of a TEAM run (a :class:`fracas.products.TeamProduct`)."""
+    """Write the full event history of a TEAM run (a :class:`fracas.products.TeamProduct`)
+    atomically; an OS failure is a one-line ResultsFileError, the previous file untouched."""
+    try:
+        _write_team_results(path, res)
+    except OSError as exc:
+        raise ResultsFileError(f"{path}: cannot write the results file: {exc.strerror or exc}") from None
+
+
+def _write_team_results(path: str | os.PathLike, res: TeamProduct) -> None:
     st = res.settings
     with atomic_h5(path) as f:
         f.attrs["file_kind"] = "fracas-team-results"
@@ -265,7 +273,14 @@ def read_team_results(path: str | os.PathLike, *, verify: bool = True) -> dict[s
 
 def write_punch(path: str | os.PathLike, res: TeamProduct, indices: list[int] | None = None) -> None:
     """Punch knowledge covariances at schedule ``indices`` (default: the punch events) for a
-    later TEAM run (or TSIM)."""
+    later TEAM run (or TSIM), atomically; an OS failure is a one-line ResultsFileError."""
+    try:
+        _write_punch(path, res, indices)
+    except OSError as exc:
+        raise ResultsFileError(f"{path}: cannot write the punch file: {exc.strerror or exc}") from None
+
+
+def _write_punch(path: str | os.PathLike, res: TeamProduct, indices: list[int] | None) -> None:
     idx = res.punch_indices if indices is None else indices
     n = sum(r != "noise_state" for r in res.roles)  # PDOT's noise states are not punched
     nx = res.n_state

@@ -25,6 +25,7 @@ from fracas.io.atomic import (
     atomic_path,
     check_output_path,
     file_mode,
+    host_tag,
     remove_stale_temps,
     savefig_atomic,
 )
@@ -95,6 +96,7 @@ def test_temp_name_is_recognisable_and_in_the_target_folder(tmp_path):
         m = TEMP_PATTERN.match(tmp.name)
         assert tmp.parent == tmp_path / "sub" and tmp.exists()
         assert m and m.group("name") == "out.h5" and int(m.group("pid")) == os.getpid()
+        assert m.group("host") == host_tag() and tmp.name.startswith(f".out.h5.{os.getpid()}-{host_tag()}.")
         assert not (tmp_path / "sub" / "out.h5").exists()  # invisible until complete
         tmp.write_bytes(b"done")
     assert (tmp_path / "sub" / "out.h5").read_bytes() == b"done"
@@ -108,29 +110,35 @@ def _dead_pid() -> int:
 
 
 def test_stale_temps_removed_only_ours(tmp_path):
-    dead, alive = _dead_pid(), os.getppid()
+    dead, alive, host = _dead_pid(), os.getppid(), host_tag()
+    other = "0123abcd" if host != "0123abcd" else "fedc9876"
     names = {
-        "dead": f".out.h5.{dead}.abcd1234.tmp",  # process gone: removed
-        "old": f".out.h5.{alive}.zzzz_999.tmp",  # alive pid but 2 h old (pid reuse): removed
-        "fresh": f".out.h5.{alive}.qwer5678.tmp",  # a live write elsewhere: kept
-        "mine": f".out.h5.{os.getpid()}.mine0000.tmp",  # this process, recent: kept
+        "dead": f".out.h5.{dead}-{host}.abcd1234.tmp",  # process gone: removed
+        "old": f".out.h5.{alive}-{host}.zzzz_999.tmp",  # alive pid but 2 h old (pid reuse): removed
+        "fresh": f".out.h5.{alive}-{host}.qwer5678.tmp",  # a live write elsewhere: kept
+        "mine": f".out.h5.{os.getpid()}-{host}.mine0000.tmp",  # this process, recent: kept
+        "remote": f".out.h5.{dead}-{other}.rmte0000.tmp",  # another host's pid: judged by age only, kept
+        "remote_old": f".out.h5.{dead}-{other}.rmte1111.tmp",  # ... removed when 2 h old
         "other_tmp": ".out.h5.tmp",  # not our pattern: kept
         "plain": "notes.tmp",
-        "upper": f".out.h5.{dead}.ABCD1234.tmp",  # tempfile never writes capitals: kept
+        "no_host": f".out.h5.{dead}.abcd1234.tmp",
+        "upper": f".out.h5.{dead}-{host}.ABCD1234.tmp",  # tempfile never writes capitals: kept
     }
     for n in names.values():
         (tmp_path / n).write_text("x")
     two_h = time.time() - 7200
     os.utime(tmp_path / names["old"], (two_h, two_h))
-    (tmp_path / f".dir.{dead}.abcdefgh.tmp").mkdir()  # a directory: never touched
+    os.utime(tmp_path / names["remote_old"], (two_h, two_h))
+    folder = f".dir.{dead}-{host}.abcdefgh.tmp"
+    (tmp_path / folder).mkdir()  # a directory: never touched
     removed = {p.name for p in remove_stale_temps(tmp_path)}
-    assert removed == {names["dead"], names["old"]}
+    assert removed == {names["dead"], names["old"], names["remote_old"]}
     left = {p.name for p in tmp_path.iterdir()}
-    assert left == (set(names.values()) - removed) | {f".dir.{dead}.abcdefgh.tmp"}
+    assert left == (set(names.values()) - removed) | {folder}
 
 
 def test_next_write_to_the_folder_removes_stale_temps(tmp_path):
-    stale = tmp_path / f".x.h5.{_dead_pid()}.abcdefgh.tmp"
+    stale = tmp_path / f".x.h5.{_dead_pid()}-{host_tag()}.abcdefgh.tmp"
     stale.write_bytes(b"partial")
     with atomic_h5(tmp_path / "y.h5") as f:
         f["a"] = 1
@@ -220,3 +228,25 @@ def test_check_output_path_unwritable_folder_by_access(tmp_path, monkeypatch):
     monkeypatch.setattr("fracas.io.atomic.os.access", lambda p, mode: Path(p) != ro)
     _path_refused(ro / "r.h5", f"folder {ro} is not writable")
     _path_refused(ro / "sub" / "r.h5", "cannot create folder", f"({ro} is not writable)")
+
+
+def test_results_write_failure_is_one_line_and_keeps_the_previous_file(tmp_path, monkeypatch):
+    from fracas.errors import ResultsFileError
+    from fracas.io.team_results import write_punch, write_team_results
+    from tests.io.test_corrupt_files import _team_product
+
+    prod = _team_product()
+    path = tmp_path / "r.h5"
+    write_team_results(path, prod)
+    before = path.read_bytes()
+
+    def full(*_a, **_k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr("fracas.io.team_results.write_provenance", full)
+    with pytest.raises(ResultsFileError, match=r"r\.h5: cannot write the results file: No space left on device$"):
+        write_team_results(path, prod)
+    with pytest.raises(ResultsFileError, match=r"p\.h5: cannot write the punch file: No space left on device$"):
+        write_punch(tmp_path / "p.h5", prod)
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.h5"]

@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[2]
 PNG_REASON = "report/trajectory.py writes the PNG in place; to be switched to fracas.io.atomic.savefig_atomic"
 HOOK = r"""
 import os, re, sys, time, runpy
-_pat = re.compile(r"^\..+\.[0-9]+\.[a-z0-9_]{8}\.tmp$")
+_pat = re.compile(r"^\..+\.[0-9]+-[0-9a-f]{8}\.[a-z0-9_]{8}\.tmp$")
 _replace = os.replace
 def _slow_replace(src, dst, *a, **k):
     if _pat.match(os.path.basename(os.fspath(src))):

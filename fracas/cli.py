@@ -122,7 +122,7 @@ def propagate(
         from fracas.pipeline import propagate_deck
 
         with _progress(True) as stage:
-            _, path = propagate_deck(deck, output, on_stage=stage)
+            _, path = propagate_deck(deck, output, on_stage=stage, plot=plot)
             data = read_trajectory_file(path)  # the report reads the file it describes
             if plot is not None:
                 stage("plotting")
@@ -266,13 +266,14 @@ def run(
         from fracas.pipeline import run_team
 
         cfg = load_team_deck(deck)
+        png = plot or (cfg.resolve(cfg.output.plot) if cfg.output.plot else None)
+        verbosity = _verbosity(quiet, verbose)
         with _progress(not as_json) as stage:
-            product, path, source = run_team(cfg, stm_file, output, on_stage=stage)
+            product, path, source = run_team(cfg, stm_file, output, on_stage=stage, plot=png)
             if product is None:
                 click.echo(f"reference ready ({source}); errcon.analysis = false: no analysis run")
                 return
-            png = plot or (cfg.resolve(cfg.output.plot) if cfg.output.plot else None)
-            _team_report(path, png, as_json, _verbosity(quiet, verbose), stage, product.timing, velocity_unit, width)
+            _team_report(path, png, as_json, verbosity, stage, product.timing, velocity_unit, width)
 
 
 def _verbosity(quiet: bool, verbose: bool) -> str:
@@ -346,6 +347,10 @@ def report(
             raise ResultsFileError(f"{file}: no such results file") from None
         except OSError as exc:
             raise ResultsFileError(f"{file}: not an HDF5 results file ({exc})") from None
+        if plot is not None:
+            from fracas.io.atomic import check_output_path
+
+            check_output_path(plot, "plot")
         if kind == "fracas-team-results":
             _team_report(file, plot, as_json, _verbosity(quiet, verbose), None, None, velocity_unit, width)
             return

@@ -41,6 +41,10 @@ class ResultsFileError(FracasError):
     """A results file is missing, unreadable, of another kind or incomplete."""
 
 
+class OutputPathError(FracasError):
+    """An output path cannot be written (a directory, an unwritable or impossible folder, empty)."""
+
+
 class ConvergenceError(FracasError):
     """An iteration (Kepler, event location, targeting) did not converge."""
 

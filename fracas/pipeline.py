@@ -23,6 +23,7 @@ from fracas.config.modes import load_any
 from fracas.config.trajectory import TrajectoryDeck, load_deck, trajectory_hash
 from fracas.constants import DAY_S
 from fracas.errors import NumericalError, StmFileError
+from fracas.io.atomic import check_output_path
 from fracas.io.hdf5 import provenance
 from fracas.io.trajectory_file import SensitivityData, TrajectoryData, write_trajectory_file
 from fracas.status import RunStatus
@@ -54,8 +55,8 @@ def run(deck, **kw):
     """Run a deck (path or validated config) in the mode it names: ``propagate`` or ``team``."""
     cfg = load_any(deck) if isinstance(deck, (str, Path)) else deck
     if isinstance(cfg, TrajectoryDeck):
-        return propagate_deck(cfg, kw.get("output"), kw.get("on_stage"))
-    return run_team(cfg, kw.get("stm"), kw.get("output"), kw.get("on_stage"))
+        return propagate_deck(cfg, kw.get("output"), kw.get("on_stage"), kw.get("plot"))
+    return run_team(cfg, kw.get("stm"), kw.get("output"), kw.get("on_stage"), kw.get("plot"))
 
 
 # ----------------------------------------------------------------------------- propagation
@@ -117,19 +118,24 @@ def trajectory_data(problem: Problem, traj, sens) -> TrajectoryData:
 
 
 def propagate_deck(
-    deck, output: str | Path | None = None, on_stage: Stage | None = None
+    deck, output: str | Path | None = None, on_stage: Stage | None = None, plot: str | Path | None = None
 ) -> tuple[TrajectoryData, Path]:
-    """Trajectory deck (path or TrajectoryDeck) -> build -> propagate -> trajectory file."""
+    """Trajectory deck (path or TrajectoryDeck) -> build -> propagate -> trajectory file.
+
+    ``plot``: a PNG the caller will draw; checked with the outputs before any work starts."""
     say = _say(on_stage)
     say("reading the deck")
     cfg = load_deck(deck) if isinstance(deck, (str, Path)) else deck
+    output = check_output_path(output or default_output(cfg.source_path), "trajectory file")
+    if plot is not None:
+        check_output_path(plot, "plot")
     say("building the force model and ephemeris")
     problem = build_propagation(cfg)
     say("compiling and propagating" + (" with sensitivities" if problem.sensitivities else ""))
     traj, sens = run_propagation(problem)
     data = trajectory_data(problem, traj, sens)
     say("writing the trajectory file")
-    path = write_trajectory_file(output or default_output(cfg.source_path), data)
+    path = write_trajectory_file(output, data)
     return data, path
 
 
@@ -198,6 +204,7 @@ def build_stm(deck, output: str | Path | None = None, on_stage: Stage | None = N
     if output is None:
         ec = case.deck.errcon
         output = case.deck.resolve(ec.stm_file) if ec.stm_file else default_output(case.deck.source_path, "stm_files")
+    output = check_output_path(output, "STM file")
     say("integrating the reference and its sensitivities")
     data = stm_product(case)
     say("writing the STM file")
@@ -210,16 +217,26 @@ def reference_from_stm(study, stm_path: str | Path):
     from fracas.io.stm_file import check_trajectory, read_stm_file
     from fracas.team.reference import reference_from_product
 
-    data = read_stm_file(stm_path, labels=study.dynamic_labels, times_s=study.schedule.times_s)
+    data = read_stm_file(
+        stm_path,
+        labels=study.dynamic_labels,
+        times_s=study.schedule.times_s,
+        epoch_et_s=float(study.problem.epoch_et_s),
+    )  # within 1e-6 s, absolute
     check_trajectory(data, study.trajectory_hash, stm_path, study.trajectory_source)
-    if abs(float(data.epoch_et_s) - float(study.problem.epoch_et_s)) > 1e-6:
-        raise StmFileError(f"{stm_path}: epoch differs from the study's trajectory deck")
     return reference_from_product(study, data, str(stm_path))
 
 
-def run_team(deck, stm: str | Path | None = None, output: str | Path | None = None, on_stage: Stage | None = None):
+def run_team(
+    deck,
+    stm: str | Path | None = None,
+    output: str | Path | None = None,
+    on_stage: Stage | None = None,
+    plot: str | Path | None = None,
+):
     """``fracas run`` on a TEAM deck (path or TeamDeck): case -> reference (STM file or in
-    line) -> filter -> TeamProduct -> results file (and punch file).
+    line) -> filter -> TeamProduct -> results file (and punch file).  Every output (results,
+    punch, an STM file to build, the ``plot`` the caller will draw) is checked before any work.
 
     Returns (TeamProduct or None when ``errcon.analysis = false``, results path, reference source).
     """
@@ -235,6 +252,19 @@ def run_team(deck, stm: str | Path | None = None, output: str | Path | None = No
     cfg, study = case.deck, case.study
     ec = cfg.errcon
     stm_path = Path(stm) if stm is not None else (cfg.resolve(ec.stm_file) if ec.stm_file else None)
+    out = (
+        Path(output)
+        if output is not None
+        else (cfg.resolve(cfg.output.results) if cfg.output.results else default_output(cfg.source_path))
+    )
+    if ec.analysis:
+        check_output_path(out, "results file")
+        if cfg.punch is not None:
+            check_output_path(cfg.resolve(cfg.punch.file), "punch file")
+        if plot is not None:
+            check_output_path(plot, "plot")
+    if ec.build_stm and stm is None and stm_path is not None:
+        check_output_path(stm_path, "STM file")
     t1 = time.perf_counter()
     if ec.build_stm and stm is None:
         stm_path, _ = build_stm(cfg, stm_path, on_stage, case=case)
@@ -278,11 +308,6 @@ def run_team(deck, stm: str | Path | None = None, output: str | Path | None = No
             },
         },
         provenance=provenance(cfg.source_text, study.source),
-    )
-    out = (
-        Path(output)
-        if output is not None
-        else (cfg.resolve(cfg.output.results) if cfg.output.results else default_output(cfg.source_path))
     )
     say("writing the results file")
     write_team_results(out, product)

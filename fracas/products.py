@@ -36,7 +36,7 @@ __all__ = [
     "TIME_TOL_S",
 ]
 
-SCHEMA_VERSION = 1  # of the STM file that stores a ReferenceTrajectory
+SCHEMA_VERSION = 2  # of the STM file that stores a ReferenceTrajectory
 TIME_TOL_S = 1e-6  # a requested time matches a file time within this (s); the deck's eps_t
 
 

@@ -42,13 +42,17 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from fracas.constants import DAY_S
+from fracas.constants import BODIES, DAY_S
 from fracas.errors import StmFileError
 from fracas.io.hdf5 import (
+    Checked,
     atomic_h5,
+    attr_int,
+    attr_text,
+    digest_array,
+    dtype_name,
     provenance,
     read_provenance,
-    read_str,
     set_attr,
     write,
     write_provenance,
@@ -57,6 +61,7 @@ from fracas.io.hdf5 import (
 from fracas.params import STATE_LABELS, STATE_UNITS  # noqa: F401  (re-exported)
 from fracas.products import (
     SCHEMA_VERSION,
+    TIME_TOL_S,
     ReferenceTrajectory,
     _indices,
     chain,
@@ -209,6 +214,7 @@ def write_stm_file(path: str | os.PathLike, data: StmData) -> None:
                 "par_step[p, i, row]; i = 0: from t = 0 to times_s[0]"
             )
             ds.attrs["dims"] = "(parameter, time, row)"
+            set_attr(ds, "column_sha256", [digest_array(par[p]) for p in range(n_p)])
 
             h = f.create_group("parameters")
             write_strings(h, "labels", data.param_labels, meaning="fracas.params labels: columns of par_step")
@@ -248,8 +254,8 @@ def write_stm_file(path: str | os.PathLike, data: StmData) -> None:
 
 
 def _attr_str(obj: h5py.HLObject, key: str, default: str = "") -> str:
-    val = obj.attrs.get(key, default)
-    return val.decode() if isinstance(val, bytes) else str(val)
+    val = attr_text(obj, key)
+    return default if val is None else val
 
 
 def _open(path: str | os.PathLike) -> tuple[Path, h5py.File]:
@@ -268,105 +274,187 @@ def _open(path: str | os.PathLike) -> tuple[Path, h5py.File]:
     try:
         f = h5py.File(src, "r")
     except OSError as exc:
-        raise StmFileError(f"{src}: unreadable HDF5 file: {exc}") from None
-    kind = _attr_str(f, "file_kind")
-    if kind != FILE_KIND:
-        other = _attr_str(f, "format")
-        f.close()
-        what = f"file_kind = {kind!r}" if kind else (f"a {other!r} file" if other else "no file_kind attribute")
-        raise StmFileError(f"{src}: not a fracas STM file ({what}, expected file_kind = {FILE_KIND!r})")
-    version = int(f.attrs.get("schema_version", -1))
-    if version != SCHEMA_VERSION:
-        f.close()
-        raise StmFileError(
-            f"{src}: STM file schema_version = {version}, this fracas reads {SCHEMA_VERSION}: "
-            "regenerate the file with this fracas version"
+        raise StmFileError(f"{src}: unreadable HDF5 file (truncated or damaged?): {exc}") from None
+    try:
+        if "file_kind" in f.attrs and attr_text(f, "file_kind") is None:
+            raise StmFileError(
+                f"{src}: attribute file_kind is {type(f.attrs['file_kind']).__name__}, "
+                f"expected the string {FILE_KIND!r}"
+            )
+        kind = _attr_str(f, "file_kind")
+        if kind != FILE_KIND:
+            other = _attr_str(f, "format")
+            what = f"file_kind = {kind!r}" if kind else (f"a {other!r} file" if other else "no file_kind attribute")
+            raise StmFileError(f"{src}: not a fracas STM file ({what}, expected file_kind = {FILE_KIND!r})")
+        raw = f.attrs.get("schema_version")
+        version = attr_int(
+            f,
+            "schema_version",
+            StmFileError(
+                f"{src}: attribute schema_version is {type(raw).__name__} ({raw!r}), expected an integer "
+                f"({SCHEMA_VERSION}): regenerate with fracas stm build"
+            ),
         )
+        if version is None:
+            raise StmFileError(f"{src}: no schema_version attribute, expected {SCHEMA_VERSION}")
+        if version != SCHEMA_VERSION:
+            raise StmFileError(
+                f"{src}: STM file schema_version = {version}, this fracas reads {SCHEMA_VERSION}: "
+                "regenerate with fracas stm build"
+            )
+    except BaseException:
+        f.close()
+        raise
     return src, f
+
+
+def _read_checked(
+    src: Path,
+    f: h5py.File,
+    labels: Sequence[str] | None,
+    verify: bool,
+) -> StmData:
+    c = Checked(f, src, StmFileError, verify=verify)
+    file_labels = c.strs("parameters/labels")
+    n_p = len(file_labels)
+    if len(set(file_labels)) != n_p:
+        raise c.fail("parameters/labels", f"repeated labels {file_labels}, expected each parameter once")
+    file_units = c.strs("parameters/units", n_p)
+    values = c.num("parameters/values", (n_p,), finite=True)
+    steps = c.num("parameters/steps", (n_p,))  # NaN: matrices by AD
+    if labels is None:
+        cols = list(range(n_p))
+    else:
+        labels = [str(x) for x in labels]
+        missing = [x for x in labels if x not in file_labels]
+        if missing:
+            raise StmFileError(
+                f"{src}: parameter{'s' if len(missing) > 1 else ''} {', '.join(missing)} not on the STM file; "
+                f"it has {', '.join(file_labels) if file_labels else 'no parameters'}: regenerate it "
+                "with every parameter the study solves for, considers or ignores"
+            )
+        cols = [file_labels.index(x) for x in labels]
+
+    epoch = c.scalar("stm/epoch_et_s")
+    t_file = c.num("stm/times_s", (None,), finite=True)
+    n = t_file.shape[0]
+    if n == 0:
+        raise c.fail("stm/times_s", "no times, expected at least one")
+    dec = np.flatnonzero(np.diff(t_file) < 0)
+    if dec.size:
+        k = int(dec[0]) + 1
+        raise c.fail(
+            "stm/times_s", f"decreases at index {k} ({t_file[k - 1]!r} -> {t_file[k]!r} s), expected non-decreasing"
+        )
+    events = c.strs("stm/event_types", n)
+    prim = c.strs("stm/primary", n)
+    unknown = sorted(set(prim) - set(BODIES))
+    if unknown:
+        raise c.fail(
+            "stm/primary",
+            f"unknown bod{'ies' if len(unknown) > 1 else 'y'} {unknown}, expected names in fracas.constants.BODIES",
+        )
+    states = c.num("stm/states", (n, 7), finite=True)
+    stm_step = c.num("stm/stm_step", (n, 7, 7), finite=True)
+    det = np.linalg.det(stm_step)
+    bad = np.flatnonzero(~np.isfinite(det) | (det == 0.0))
+    if bad.size:
+        raise c.fail(
+            "stm/stm_step",
+            f"singular step matrix at index {int(bad[0])} (det = {det[bad[0]]!r}), "
+            "expected a finite non-zero determinant",
+        )
+    if t_file[0] == 0.0 and np.max(np.abs(stm_step[0] - np.eye(7))) > 1e-12:
+        raise c.fail("stm/stm_step", "stm_step[0] is not the identity although times_s[0] = 0, expected Phi(0, 0) = I")
+
+    name = "stm/par_step"
+    ds = c.dataset(name)
+    if ds.dtype != np.float64:
+        raise c.fail(name, f"dtype {dtype_name(ds.dtype)}, expected float64")
+    c._shape(name, tuple(ds.shape), (n_p, n, 7))
+    par = np.empty((len(cols), n, 7))
+    if c.verify and n_p and "column_sha256" not in ds.attrs:
+        raise c.fail(name, "no column_sha256 attribute, expected one SHA-256 checksum per parameter column")
+    for j, col in enumerate(cols):  # one chunk per parameter: only the requested columns are read
+        try:
+            par[j] = ds[col]
+        except (OSError, ValueError) as exc:
+            raise c.fail(name, f"column {col} unreadable ({exc}), expected float64 data") from None
+        c.check_digest(name, ds, digest_array(par[j]), attr="column_sha256", index=col)
+    if not np.all(np.isfinite(par)):
+        j = int(np.argwhere(~np.isfinite(par))[0][0])
+        raise c.fail(name, f"non-finite value in column {cols[j]} ({file_labels[cols[j]]}), expected finite numbers")
+    if t_file[0] == 0.0 and par.size and np.max(np.abs(par[:, 0])) > 1e-12:
+        raise c.fail(name, "par_step[:, 0] is not zero although times_s[0] = 0, expected Theta(0, 0) = 0")
+
+    deck = c.dataset("trajectory_deck")
+    deck_text = c.text("trajectory_deck")
+    if verify:
+        sha = _attr_str(deck, "text_sha256")
+        if sha and sha != hashlib.sha256(deck_text.encode("utf-8")).hexdigest():
+            raise c.fail("trajectory_deck", "text_sha256 does not match the deck text, expected equal")
+    return StmData(
+        times_s=t_file,
+        epoch_et_s=epoch,
+        event_types=events,
+        states=states,
+        primary=prim,
+        stm_step=stm_step,
+        par_step=np.ascontiguousarray(np.transpose(par, (1, 2, 0))),
+        param_labels=[file_labels[col] for col in cols],
+        param_units=[file_units[col] for col in cols],
+        param_values=values[cols] if cols else np.zeros(0),
+        param_steps=steps[cols] if cols else np.zeros(0),
+        deck_text=deck_text,
+        deck_hash=_attr_str(deck, "trajectory_hash"),
+        deck_path=_attr_str(deck, "path") or None,
+        title=_attr_str(f, "title"),
+        centre=_attr_str(f, "centre"),
+        frame=_attr_str(f, "frame"),
+        fracas_version=_attr_str(f, "fracas_version"),
+        schema_version=int(f.attrs["schema_version"]),
+        sensitivity_method=_attr_str(f, "sensitivity_method"),
+        provenance=read_provenance(f),
+        source_path=str(src),
+    )
 
 
 def read_stm_file(
     path: str | os.PathLike,
     labels: Sequence[str] | None = None,
     times_s: Sequence[float] | None = None,
+    *,
+    epoch_et_s: float | None = None,
+    verify: bool = True,
 ) -> StmData:
     """Read an STM file (FRACAS STMRDR), loading only the parameter columns ``labels``.
 
     ``labels``: parameter labels in the order the study wants its columns (None: all);
     ``times_s``: times (s from the epoch) the study will ask :func:`chain` for; each must be
-    on the file within 1e-6 s (all file times are still returned: chaining needs them).
-    Refuses with a one-line StmFileError: missing file, not HDF5, not a fracas STM file,
-    another schema_version, an unknown label (lists the file's), a time not on the file
-    (names the nearest), an incomplete or inconsistent file.
+    on the file within 1e-6 s (all file times are still returned: chaining needs them);
+    ``epoch_et_s``: the study's epoch (TDB s past J2000), refused unless within 1e-6 s of the
+    file's; ``verify``: check each dataset's SHA-256 checksum (False skips only that).
+    Refuses with a one-line StmFileError naming the file and the dataset: missing file, not
+    HDF5, not a fracas STM file, another schema_version, a dataset of the wrong dtype or
+    shape, non-finite or decreasing times, non-finite states or matrices, a singular step
+    matrix, an unknown primary, a checksum mismatch, an unknown label (lists the file's), a
+    time not on the file (names the nearest), another epoch.
     """
     src, f = _open(path)
     try:
         with f:
-            g, h = f["stm"], f["parameters"]
-            file_labels = read_str(h["labels"])
-            file_units = read_str(h["units"])
-            if labels is None:
-                cols = list(range(len(file_labels)))
-            else:
-                labels = [str(x) for x in labels]
-                missing = [x for x in labels if x not in file_labels]
-                if missing:
-                    raise StmFileError(
-                        f"{src}: parameter{'s' if len(missing) > 1 else ''} {', '.join(missing)} not on the STM file; "
-                        f"it has {', '.join(file_labels) if file_labels else 'no parameters'}: regenerate it "
-                        "with every parameter the study solves for, considers or ignores"
-                    )
-                cols = [file_labels.index(x) for x in labels]
-            t_file = g["times_s"][()]
-            n = t_file.shape[0]
-            events = read_str(g["event_types"])
-            prim = read_str(g["primary"])
-            ds = g["par_step"]
-            if ds.shape[0] != len(file_labels) or ds.shape[1:] != (n, 7):
-                raise StmFileError(
-                    f"{src}: inconsistent STM file: par_step has shape {ds.shape}, expected "
-                    f"({len(file_labels)}, {n}, 7)"
-                )
-            if cols == list(range(len(file_labels))):
-                par = ds[()]
-            else:  # one chunk per parameter: only the requested columns are read
-                par = np.empty((len(cols), n, 7))
-                for j, c in enumerate(cols):
-                    par[j] = ds[c]
-            data = StmData(
-                times_s=t_file,
-                epoch_et_s=float(g["epoch_et_s"][()]),
-                event_types=list(events) if not isinstance(events, str) else [events],
-                states=g["states"][()],
-                primary=list(prim) if not isinstance(prim, str) else [prim],
-                stm_step=g["stm_step"][()],
-                par_step=np.ascontiguousarray(np.transpose(par, (1, 2, 0))),
-                param_labels=[file_labels[c] for c in cols],
-                param_units=[file_units[c] for c in cols],
-                param_values=h["values"][()][cols] if cols else np.zeros(0),
-                param_steps=h["steps"][()][cols] if cols else np.zeros(0),
-                deck_text=read_str(f["trajectory_deck"]),
-                deck_hash=_attr_str(f["trajectory_deck"], "trajectory_hash"),
-                deck_path=_attr_str(f["trajectory_deck"], "path") or None,
-                title=_attr_str(f, "title"),
-                centre=_attr_str(f, "centre"),
-                frame=_attr_str(f, "frame"),
-                fracas_version=_attr_str(f, "fracas_version"),
-                schema_version=int(f.attrs["schema_version"]),
-                sensitivity_method=_attr_str(f, "sensitivity_method"),
-                provenance=read_provenance(f),
-                source_path=str(src),
-            )
+            data = _read_checked(src, f, labels, verify)
     except StmFileError:
         raise
     except (OSError, KeyError, ValueError, IndexError, TypeError) as exc:
         raise StmFileError(f"{src}: unreadable or incomplete STM file: {exc}") from None
-    for name, shape in (("states", (n, 7)), ("stm_step", (n, 7, 7)), ("event_types", (n,)), ("primary", (n,))):
-        got = np.shape(getattr(data, name)) if name in ("states", "stm_step") else (len(getattr(data, name)),)
-        if tuple(got) != shape:
-            raise StmFileError(f"{src}: inconsistent STM file: {name} has shape {tuple(got)}, expected {shape}")
+    if epoch_et_s is not None and not abs(float(epoch_et_s) - data.epoch_et_s) <= TIME_TOL_S:
+        raise StmFileError(
+            f"{src}: stm/epoch_et_s = {data.epoch_et_s!r} s, expected the study's epoch {float(epoch_et_s)!r} s "
+            f"(within {TIME_TOL_S:g} s): regenerate with fracas stm build"
+        )
     if times_s is not None:
-        _indices(t_file, data.event_types, np.atleast_1d(np.asarray(times_s, np.float64)), str(src))
+        _indices(data.times_s, data.event_types, np.atleast_1d(np.asarray(times_s, np.float64)), str(src))
     return data
 
 
@@ -390,50 +478,32 @@ def check_trajectory(data: StmData, deck_hash: str, path, study_deck: str | None
 
 
 def describe(path: str | os.PathLike) -> str:
-    """Readable multi-line summary of an STM file (``fracas stm info FILE``)."""
+    """Readable multi-line summary of an STM file (``fracas stm info FILE``); the file is
+    checked as by :func:`read_stm_file` first."""
     from fracas.timescales import et_to_calendar
 
-    src, f = _open(path)
-    try:
-        with f:
-            g, h = f["stm"], f["parameters"]
-            t = g["times_s"][()]
-            events = read_str(g["event_types"])
-            events = [events] if isinstance(events, str) else events
-            labels = read_str(h["labels"])
-            units = read_str(h["units"])
-            values = h["values"][()]
-            deck = f["trajectory_deck"]
-            epoch = float(g["epoch_et_s"][()])
-            prim = read_str(g["primary"])
-            prim = [prim] if isinstance(prim, str) else prim
-            prov = read_provenance(f)
-            lines = [
-                f"STM file     {src}",
-                f"title        {_attr_str(f, 'title') or '-'}",
-                (
-                    f"trajectory   {_attr_str(deck, 'path') or '<unknown deck>'} "
-                    f"(hash {_attr_str(deck, 'trajectory_hash')[:16]})"
-                ),
-                f"epoch        {et_to_calendar(epoch)} TDB ({epoch:.3f} s past J2000)",
-                (
-                    f"span         {t[0] / DAY_S:.6f} to {t[-1] / DAY_S:.6f} d ({(t[-1] - t[0]) / DAY_S:.6f} d), "
-                    f"centre {_attr_str(f, 'centre') or '-'}, frame {_attr_str(f, 'frame')}"
-                ),
-                f"primaries    {', '.join(dict.fromkeys(prim))}",
-                f"times        {t.shape[0]}: " + ", ".join(f"{c} {e}" for e, c in sorted(Counter(events).items())),
-                f"parameters   {len(labels)} (matrices by {_attr_str(f, 'sensitivity_method')})",
-            ]
-            lines += [f"  {lab:<28s} {val: .10g} {u}" for lab, u, val in zip(labels, units, values)]
-            lines += [
-                f"file size    {src.stat().st_size / 1024:.1f} KiB",
-                (
-                    f"written by   fracas {_attr_str(f, 'fracas_version')} at {prov.get('created_utc', '?')}, "
-                    f"schema_version {int(f.attrs['schema_version'])}"
-                ),
-            ]
-            return "\n".join(lines)
-    except StmFileError:
-        raise
-    except (OSError, KeyError, ValueError, IndexError) as exc:
-        raise StmFileError(f"{src}: unreadable or incomplete STM file: {exc}") from None
+    d = read_stm_file(path)
+    src = Path(path)
+    t, prov = d.times_s, d.provenance or {}
+    lines = [
+        f"STM file     {src}",
+        f"title        {d.title or '-'}",
+        f"trajectory   {d.deck_path or '<unknown deck>'} (hash {d.deck_hash[:16]})",
+        f"epoch        {et_to_calendar(d.epoch_et_s)} TDB ({d.epoch_et_s:.3f} s past J2000)",
+        (
+            f"span         {t[0] / DAY_S:.6f} to {t[-1] / DAY_S:.6f} d ({(t[-1] - t[0]) / DAY_S:.6f} d), "
+            f"centre {d.centre or '-'}, frame {d.frame}"
+        ),
+        f"primaries    {', '.join(dict.fromkeys(d.primary))}",
+        f"times        {t.shape[0]}: " + ", ".join(f"{c} {e}" for e, c in sorted(Counter(d.event_types).items())),
+        f"parameters   {len(d.param_labels)} (matrices by {d.sensitivity_method})",
+    ]
+    lines += [f"  {lab:<28s} {val: .10g} {u}" for lab, u, val in zip(d.param_labels, d.param_units, d.param_values)]
+    lines += [
+        f"file size    {src.stat().st_size / 1024:.1f} KiB (SHA-256 checksums verified)",
+        (
+            f"written by   fracas {d.fracas_version} at {prov.get('created_utc', '?')}, "
+            f"schema_version {d.schema_version}"
+        ),
+    ]
+    return "\n".join(lines)

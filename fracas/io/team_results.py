@@ -13,14 +13,14 @@ import h5py
 import numpy as np
 
 from fracas.errors import DeckError, ResultsFileError
-from fracas.io.hdf5 import atomic_h5, read_str, write, write_provenance, write_strings
+from fracas.io.hdf5 import Checked, atomic_h5, attr_int, attr_text, write, write_provenance, write_strings
 from fracas.products import CovarianceHistory, TeamProduct
 from fracas.status import status_text
 
 __all__ = ["write_team_results", "read_team_results", "write_punch", "read_punch", "RESULTS_SCHEMA", "PUNCH_SCHEMA"]
 
-RESULTS_SCHEMA = 1
-PUNCH_SCHEMA = 1
+RESULTS_SCHEMA = 2  # 2: every dataset carries data_sha256; 1 (no checksums) is still read
+PUNCH_SCHEMA = 2
 
 
 def _write_history(h: h5py.Group, c: CovarianceHistory) -> None:
@@ -55,7 +55,15 @@ def _write_history(h: h5py.Group, c: CovarianceHistory) -> None:
 
 
 def write_team_results(path: str | os.PathLike, res: TeamProduct) -> None:
-    """Write the full event history of a TEAM run (a :class:`fracas.products.TeamProduct`)."""
+    """Write the full event history of a TEAM run (a :class:`fracas.products.TeamProduct`)
+    atomically; an OS failure is a one-line ResultsFileError, the previous file untouched."""
+    try:
+        _write_team_results(path, res)
+    except OSError as exc:
+        raise ResultsFileError(f"{path}: cannot write the results file: {exc.strerror or exc}") from None
+
+
+def _write_team_results(path: str | os.PathLike, res: TeamProduct) -> None:
     st = res.settings
     with atomic_h5(path) as f:
         f.attrs["file_kind"] = "fracas-team-results"
@@ -132,75 +140,137 @@ def write_team_results(path: str | os.PathLike, res: TeamProduct) -> None:
         write_provenance(f, res.provenance)
 
 
-def _history(h: h5py.Group) -> dict[str, Any]:
-    out = {
-        k: h[k][()] for k in ("P_minus", "P_plus", "sigma", "process_noise", "a_priori_sigma", "event_status") if k in h
+def _history(c: Checked, base: str, n: int, m: int, nx: int) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    shapes = {
+        "P_minus": (n, m, m),
+        "P_plus": (n, m, m),
+        "sigma": (n, m),
+        "process_noise": (n, nx, nx),
+        "a_priori_sigma": (m,),
     }
-    eg = h["eigenvector_events"]
-    out["eigenvector_events"] = {k: eg[k][()] for k in eg}
+    for k, shape in shapes.items():
+        if f"{base}/{k}" in c.f:
+            out[k] = c.num(f"{base}/{k}", shape)  # NaN allowed: a run that lost its covariance
+    if f"{base}/event_status" in c.f:
+        out["event_status"] = c.num(f"{base}/event_status", (n,), integer=True)
+    eg = f"{base}/eigenvector_events"
+    idx = c.num(f"{eg}/index", (None,), integer=True)
+    k = idx.shape[0]
+    ev = {"index": idx}
+    if f"{eg}/position_eigenvalues" in c.f or k:
+        for name, shape in (
+            ("position_eigenvalues", (k, 3)),
+            ("position_eigenvectors", (k, 3, 3)),
+            ("velocity_eigenvalues", (k, 3)),
+            ("velocity_eigenvectors", (k, 3, 3)),
+            ("correlations", (k, m, m)),
+        ):
+            ev[name] = c.num(f"{eg}/{name}", shape)
+    out["eigenvector_events"] = ev
     return out
 
 
-def read_team_results(path: str | os.PathLike) -> dict[str, Any]:
+def _version(f: h5py.File, p: Path, latest: int, err: type[Exception], what: str, prefix: str = "") -> int:
+    raw = f.attrs.get("schema_version")
+    version = attr_int(
+        f,
+        "schema_version",
+        err(f"{prefix}{p}: attribute schema_version is {type(raw).__name__} ({raw!r}), expected an integer"),
+    )
+    if version is None or not 1 <= version <= latest:
+        raise err(f"{prefix}{p}: {what} schema_version = {version}, this fracas reads 1 to {latest}")
+    return version
+
+
+def read_team_results(path: str | os.PathLike, *, verify: bool = True) -> dict[str, Any]:
     """Everything a report needs from a results file (``docs/team_results.md``), as a dict.
 
-    A missing file, another kind of file or a damaged one: one-line ResultsFileError."""
+    Every dataset is checked (dtype, shapes consistent with the schedule and the labels,
+    finite times and states) and, with ``verify`` and a schema-2 file, its SHA-256
+    checksum.  A missing file, another kind of file or a damaged one: one-line
+    ResultsFileError naming the file and the dataset."""
     p = Path(path)
     if not p.exists():
         raise ResultsFileError(f"{p}: no such results file")
+    if p.is_dir():
+        raise ResultsFileError(f"{p}: is a directory, expected a TEAM results file (HDF5)")
     try:
         with h5py.File(p, "r") as f:
-            if f.attrs.get("file_kind") != "fracas-team-results":
+            kind = attr_text(f, "file_kind")
+            if kind != "fracas-team-results":
                 raise ResultsFileError(
-                    f"{p}: not a fracas TEAM results file (file_kind = {f.attrs.get('file_kind')!r})"
+                    f"{p}: not a fracas TEAM results file (file_kind = {f.attrs.get('file_kind')!r}, "
+                    "expected 'fracas-team-results')"
                 )
+            version = _version(f, p, RESULTS_SCHEMA, ResultsFileError, "results file")
+            c = Checked(f, p, ResultsFileError, verify=verify, require_checksum=version >= 2)
+            if not isinstance(f.get("team"), h5py.Group):
+                raise c.fail("team", "missing, expected a group")
             g = f["team"]
+            times = c.num("team/times_s", (None,), finite=True)
+            n = times.shape[0]
+            labels = c.strs("team/labels/names")
+            m = len(labels)
+            states = c.num("team/states", (n, 7), finite=True)
+            nx = int(g.attrs.get("n_state", 7))
             out = {
                 "path": str(p),
                 "attrs": dict(g.attrs),
-                "times_s": g["times_s"][()],
-                "event_types": read_str(g["event_types"]),
-                "labels": read_str(g["labels/names"]),
-                "units": read_str(g["labels/units"]),
-                "roles": read_str(g["labels/roles"]),
-                "states": g["states"][()],
-                "primary": read_str(g["primary"]),
+                "times_s": times,
+                "event_types": c.strs("team/event_types", n),
+                "labels": labels,
+                "units": c.strs("team/labels/units", m),
+                "roles": c.strs("team/labels/roles", m),
+                "states": states,
+                "primary": c.strs("team/primary", n),
                 "print": dict(g["print"].attrs) if "print" in g else {},
                 "timing": dict(g["timing"].attrs) if "timing" in g else {},
             }
-            out["tracking"] = (
-                list(zip(read_str(g["tracking/type"]), read_str(g["tracking/stations"]))) if "tracking" in g else []
-            )
+            if "tracking" in g:
+                types = c.strs("team/tracking/type")
+                out["tracking"] = list(zip(types, c.strs("team/tracking/stations", len(types))))
+            else:
+                out["tracking"] = []
             for which in ("assumed", "true"):
                 if which in g:
-                    out[which] = _history(g[which])
-            out["measurements"] = {k: g["measurements"][k][()] for k in g["measurements"]}
-            for k in ("type", "stations"):
-                out["measurements"][k] = read_str(g["measurements"][k])
+                    out[which] = _history(c, f"team/{which}", n, m, nx)
+            mb = "team/measurements"
+            k = c.num(f"{mb}/index", (None,), integer=True).shape[0]
+            meas: dict[str, Any] = {}
+            for name in g["measurements"]:
+                full = f"{mb}/{name}"
+                if name in ("type", "stations"):
+                    meas[name] = c.strs(full, k)
+                else:
+                    meas[name] = c.num(full, (k,), integer=name in ("index", "tracking", "used"))
+            out["measurements"] = meas
             preds = []
             if "predictions" in g:
                 for name in sorted(g["predictions"]):
                     q = g["predictions"][name]
+                    base = f"team/predictions/{name}"
                     preds.append(
                         {
                             "from_index": int(q.attrs["from_index"]),
                             "status": int(q.attrs.get("status", 0)),
-                            "time_from_s": float(q["time_from_s"][()]),
-                            "time_to_s": float(q["time_to_s"][()]),
-                            "assumed": q["assumed"][()],
-                            "true": q["true"][()] if "true" in q else None,
+                            "time_from_s": c.scalar(f"{base}/time_from_s"),
+                            "time_to_s": c.scalar(f"{base}/time_to_s"),
+                            "assumed": c.num(f"{base}/assumed", (None, None)),
+                            "true": c.num(f"{base}/true", (None, None)) if "true" in q else None,
                         }
                     )
             out["predictions"] = preds
             psd = []
             if "psd_events" in g:
-                pp = g["psd_events"]
+                idx = c.num("team/psd_events/index", (None,), integer=True)
+                j = idx.shape[0]
                 psd = list(
                     zip(
-                        pp["index"][()].tolist(),
-                        read_str(pp["event"]),
-                        read_str(pp["which"]),
-                        pp["min_eigenvalue"][()].tolist(),
+                        idx.tolist(),
+                        c.strs("team/psd_events/event", j),
+                        c.strs("team/psd_events/which", j),
+                        c.num("team/psd_events/min_eigenvalue", (j,)).tolist(),
                     )
                 )
             out["psd_problems"] = psd
@@ -213,7 +283,14 @@ def read_team_results(path: str | os.PathLike) -> dict[str, Any]:
 
 def write_punch(path: str | os.PathLike, res: TeamProduct, indices: list[int] | None = None) -> None:
     """Punch knowledge covariances at schedule ``indices`` (default: the punch events) for a
-    later TEAM run (or TSIM)."""
+    later TEAM run (or TSIM), atomically; an OS failure is a one-line ResultsFileError."""
+    try:
+        _write_punch(path, res, indices)
+    except OSError as exc:
+        raise ResultsFileError(f"{path}: cannot write the punch file: {exc.strerror or exc}") from None
+
+
+def _write_punch(path: str | os.PathLike, res: TeamProduct, indices: list[int] | None) -> None:
     idx = res.punch_indices if indices is None else indices
     n = sum(r != "noise_state" for r in res.roles)  # PDOT's noise states are not punched
     nx = res.n_state
@@ -235,27 +312,53 @@ def write_punch(path: str | os.PathLike, res: TeamProduct, indices: list[int] | 
         write_provenance(f, res.provenance)
 
 
-def read_punch(path: str | os.PathLike, source: str = "<deck>") -> dict[str, Any]:
-    """The last punched covariance of a punch file (DeckError if missing or not a punch file)."""
+def read_punch(path: str | os.PathLike, source: str = "<deck>", *, verify: bool = True) -> dict[str, Any]:
+    """The last punched covariance of a punch file.
+
+    Checked like the results file: dtypes, the covariance square over the state and
+    parameter labels, finite and symmetric, and (``verify``, schema 2) SHA-256 checksums.
+    DeckError (one line naming the deck, the file and the dataset) if missing, not a punch
+    file or damaged."""
     p = Path(path)
+    head = f'{source}: a_priori.from_punch = "{path}"'
     if not p.exists():
-        raise DeckError(f'{source}: a_priori.from_punch = "{path}": no such file')
+        raise DeckError(f"{head}: no such file")
+
+    class _PunchError(DeckError):
+        def __init__(self, msg: str):
+            super().__init__(f"{source}: a_priori.from_punch: {msg}")
+
     try:
         with h5py.File(p, "r") as f:
-            if f.attrs.get("file_kind") != "fracas-punch":
-                raise DeckError(f'{source}: a_priori.from_punch = "{path}": not a fracas punch file')
+            if attr_text(f, "file_kind") != "fracas-punch":
+                raise DeckError(f"{head}: not a fracas punch file")
+            version = _version(f, p, PUNCH_SCHEMA, _PunchError, "punch file")
+            c = Checked(f, p, _PunchError, verify=verify, require_checksum=version >= 2)
             keys = sorted(k for k in f if k.startswith("punch_"))
             if not keys:
-                raise DeckError(f'{source}: a_priori.from_punch = "{path}": holds no punched covariance')
-            g = f[keys[-1]]
+                raise DeckError(f"{head}: holds no punched covariance")
+            k = keys[-1]
+            labels = c.strs(f"{k}/labels")
+            n = len(labels)
+            if f"{k}/state_labels" in f:
+                n += len(c.strs(f"{k}/state_labels"))
+            else:
+                n += 7
             out = {
-                "time_s": float(g["time_s"][()]),
-                "labels": read_str(g["labels"]),
-                "assumed": g["assumed"][()],
-                "trajectory_hash": f.attrs.get("trajectory_hash", ""),
+                "time_s": c.scalar(f"{k}/time_s"),
+                "labels": labels,
+                "assumed": c.num(f"{k}/assumed", (n, n), finite=True),
+                "trajectory_hash": attr_text(f, "trajectory_hash") or "",
             }
-            if "true" in g:
-                out["true"] = g["true"][()]
+            if f"{k}/state" in f:
+                c.num(f"{k}/state", (7,), finite=True)
+            if "true" in f[k]:
+                out["true"] = c.num(f"{k}/true", (n, n), finite=True)
+            for which in ("assumed", "true"):
+                if which in out and not np.allclose(out[which], out[which].T, rtol=1e-10, atol=0.0):
+                    raise c.fail(f"{k}/{which}", "not symmetric, expected a covariance matrix")
             return out
-    except OSError as exc:
-        raise DeckError(f'{source}: a_priori.from_punch = "{path}": cannot read ({exc})') from None
+    except DeckError:
+        raise
+    except (OSError, KeyError, ValueError, TypeError) as exc:
+        raise DeckError(f"{head}: cannot read ({exc})") from None

@@ -18,17 +18,18 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
 
 import h5py
 import numpy as np
 
 from fracas.errors import StmFileError
 from fracas.io.hdf5 import (
+    Checked,
     atomic_h5,
+    attr_int,
     attr_strs,
+    attr_text,
     read_provenance,
-    read_str,
     set_attr,
     write,
     write_provenance,
@@ -38,7 +39,7 @@ from fracas.products import SensitivityData, TrajectoryData  # the products this
 from fracas.status import PROPAGATION_STATUSES, STATUS_TEXT, status_text  # noqa: F401  (STATUS_TEXT re-exported)
 
 FORMAT = "fracas-trajectory"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: every dataset carries data_sha256; 1 (no checksums) is still read
 
 
 __all__ = [
@@ -148,67 +149,84 @@ def write_trajectory_file(path: str | os.PathLike, data: TrajectoryData) -> Path
     return dest
 
 
-def _scalar(ds: h5py.Dataset) -> Any:
-    return ds[()].item() if hasattr(ds[()], "item") else ds[()]
+def read_trajectory_file(path: str | os.PathLike, *, verify: bool = True) -> TrajectoryData:
+    """Read a file written by :func:`write_trajectory_file`.
 
-
-def read_trajectory_file(path: str | os.PathLike) -> TrajectoryData:
-    """Read a file written by :func:`write_trajectory_file`."""
+    Every dataset is checked (dtype, shapes consistent with ``t_s``, an integer status)
+    and, with ``verify`` and a schema-2 file, its SHA-256 checksum.
+    One-line StmFileError naming the file and the dataset."""
     src = Path(path)
     if not src.exists():
         raise StmFileError(f"{src}: no such file")
+    if src.is_dir():
+        raise StmFileError(f"{src}: is a directory, expected a fracas trajectory file (HDF5)")
     try:
         with h5py.File(src, "r") as f:
-            fmt = f.attrs.get("format", "")
-            if isinstance(fmt, bytes):
-                fmt = fmt.decode()
+            fmt = attr_text(f, "format") or ""
             if fmt != FORMAT or "trajectory" not in f:
                 raise StmFileError(
                     f"{src}: not a fracas trajectory file (format attribute = {fmt!r}, expected {FORMAT!r})"
                 )
-            version = int(f.attrs.get("schema_version", -1))
-            if version > SCHEMA_VERSION:
-                raise StmFileError(f"{src}: schema_version = {version}: this fracas reads up to {SCHEMA_VERSION}")
+            raw = f.attrs.get("schema_version")
+            version = attr_int(
+                f,
+                "schema_version",
+                StmFileError(f"{src}: attribute schema_version is {type(raw).__name__} ({raw!r}), expected an integer"),
+            )
+            if version is None or not 1 <= version <= SCHEMA_VERSION:
+                raise StmFileError(f"{src}: schema_version = {version}: this fracas reads 1 to {SCHEMA_VERSION}")
+            c = Checked(f, src, StmFileError, verify=verify, require_checksum=version >= 2)
             g = f["trajectory"]
             bodies = tuple(attr_strs(f, "bodies"))
-            prim = read_str(g["primary"])
-            prim = tuple([prim] if isinstance(prim, str) else prim)
-            n = g["t_s"].shape[0]
+            t = c.num("trajectory/t_s", (None,))  # NaN after an early stop
+            n = t.shape[0]
+            prim = c.strs("trajectory/primary")
+            if len(prim) < n:
+                raise c.fail("trajectory/primary", f"shape ({len(prim)},), expected ({n},)")
+            c.num("trajectory/primary_index", (None,), integer=True)
+            status = c.scalar("trajectory/status", integer=True)
+            # an unknown code is kept: status_text() names it "unknown status N"
             sens = None
             if "sensitivities" in f:
                 h = f["sensitivities"]
+                par = c.num("sensitivities/par", (n, 7, None))
+                n_p = par.shape[-1]
+                if "sensitivities/t_s" in f:
+                    c.num("sensitivities/t_s", (n,))
                 sens = SensitivityData(
-                    stm=h["stm"][()],
-                    stm_step=h["stm_step"][()],
-                    par=h["par"][()],
-                    par_step=h["par_step"][()],
-                    param_labels=tuple(attr_strs(h["par"], "col_labels")) if h["par"].shape[-1] else (),
-                    param_units=tuple(attr_strs(h["par"], "col_units")) if h["par"].shape[-1] else (),
+                    stm=c.num("sensitivities/stm", (n, 7, 7)),
+                    stm_step=c.num("sensitivities/stm_step", (n, 7, 7)),
+                    par=par,
+                    par_step=c.num("sensitivities/par_step", (n, 7, n_p)),
+                    param_labels=tuple(attr_strs(h["par"], "col_labels")) if n_p else (),
+                    param_units=tuple(attr_strs(h["par"], "col_units")) if n_p else (),
                 )
-            epoch_tdb = g.attrs.get("epoch_tdb", "")
+                if len(sens.param_labels) != n_p:
+                    raise c.fail("sensitivities/par", f"{len(sens.param_labels)} col_labels, expected {n_p}")
+            epoch_tdb = attr_text(g, "epoch_tdb") or ""
             return TrajectoryData(
-                epoch_et_s=float(_scalar(g["epoch_et_s"])),
-                t_s=g["t_s"][()],
-                r_km=g["r_km"][()],
-                v_km_s=g["v_km_s"][()],
-                mass_kg=g["mass_kg"][()],
-                primary=prim[:n],
+                epoch_et_s=c.scalar("trajectory/epoch_et_s"),
+                t_s=t,
+                r_km=c.num("trajectory/r_km", (n, 3)),
+                v_km_s=c.num("trajectory/v_km_s", (n, 3)),
+                mass_kg=c.num("trajectory/mass_kg", (n,)),
+                primary=tuple(prim[:n]),
                 bodies=bodies,
-                t_final_s=float(_scalar(g["t_final_s"])),
-                r_final_km=g["r_final_km"][()],
-                v_final_km_s=g["v_final_km_s"][()],
-                mass_final_kg=float(_scalar(g["mass_final_kg"])),
-                primary_final=read_str(g["primary_final"]),
-                status=int(_scalar(g["status"])),
-                n_steps=int(_scalar(g["n_steps"])),
-                n_rect=int(_scalar(g["n_rect"])),
-                centre=str(f.attrs.get("centre", "")),
-                title=str(f.attrs.get("title", "")),
-                epoch_tdb=epoch_tdb.decode() if isinstance(epoch_tdb, bytes) else str(epoch_tdb),
+                t_final_s=c.scalar("trajectory/t_final_s", finite=False),
+                r_final_km=c.num("trajectory/r_final_km", (3,)),
+                v_final_km_s=c.num("trajectory/v_final_km_s", (3,)),
+                mass_final_kg=c.scalar("trajectory/mass_final_kg", finite=False),
+                primary_final=c.text("trajectory/primary_final"),
+                status=status,
+                n_steps=c.scalar("trajectory/n_steps", integer=True),
+                n_rect=c.scalar("trajectory/n_rect", integer=True),
+                centre=attr_text(f, "centre") or "",
+                title=attr_text(f, "title") or "",
+                epoch_tdb=epoch_tdb,
                 sensitivities=sens,
                 provenance=read_provenance(f),
             )
     except StmFileError:
         raise
-    except (OSError, KeyError, ValueError) as exc:
+    except (OSError, KeyError, ValueError, TypeError) as exc:
         raise StmFileError(f"{src}: unreadable or incomplete trajectory file: {exc}") from None

@@ -452,8 +452,6 @@ def plot_team(r: dict, png: str | Path) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
-    import os
-    import tempfile
 
     import matplotlib.pyplot as plt
 
@@ -482,15 +480,12 @@ def plot_team(r: dict, png: str | Path) -> Path:
         a.legend(fontsize=8)
     fig.suptitle(f"TEAM knowledge: {r['attrs']['title']}")
     fig.tight_layout()
+    from fracas.io.atomic import savefig_atomic
+
     png = Path(png)
     png.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{png.name}.", suffix=".tmp", dir=png.parent)
-    os.close(fd)
     try:
-        fig.savefig(tmp, dpi=110, format="png")
-        os.replace(tmp, png)
+        savefig_atomic(fig, png, dpi=110, format="png")  # atomic, with the user's normal permissions
     finally:
         plt.close(fig)
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return png

@@ -142,7 +142,9 @@ def plot_trajectory(data: TrajectoryData, png: str | Path, dpi: int = 120) -> Pa
         ax2.set_ylim(float(m[0]) - 1.0, float(m[0]) + 1.0)
     fig.suptitle(data.title or "trajectory")
 
+    from fracas.io.atomic import savefig_atomic
+
     out = Path(png)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=dpi)
+    savefig_atomic(fig, out, dpi=dpi)  # a kill mid-write never leaves a partial PNG or damages the old one
     return out

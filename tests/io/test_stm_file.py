@@ -49,8 +49,12 @@ UNITS = ["km^3/s^2", "1", "1", "s"]
 
 
 def _data(n: int = 6, n_par: int = 3, seed: int = 0, t0: float = 0.0) -> StmData:
-    """Random but well-conditioned step matrices (I + 0.1 N(0,1)) on a 600 s grid."""
+    """Random but well-conditioned step matrices (I + 0.1 N(0,1); I and 0 at t = 0) on a 600 s grid."""
     rng = np.random.default_rng(seed)
+    stm_step = np.eye(7) + 0.1 * rng.normal(size=(n, 7, 7))
+    par_step = rng.normal(size=(n, 7, n_par))
+    if t0 == 0.0:  # Phi(0, 0) = I, Theta(0, 0) = 0 (read_stm_file checks)
+        stm_step[0], par_step[0] = np.eye(7), 0.0
     events = ["initial"] + [["measurement", "propagation", "grid"][i % 3] for i in range(n - 2)] + ["final"]
     return StmData(
         times_s=t0 + 600.0 * np.arange(n),
@@ -58,8 +62,8 @@ def _data(n: int = 6, n_par: int = 3, seed: int = 0, t0: float = 0.0) -> StmData
         event_types=events[:n],
         states=rng.normal(size=(n, 7)) * 1e3,
         primary=["earth"] * n,
-        stm_step=np.eye(7) + 0.1 * rng.normal(size=(n, 7, 7)),
-        par_step=rng.normal(size=(n, 7, n_par)),
+        stm_step=stm_step,
+        par_step=par_step,
         param_labels=LABELS[:n_par],
         param_units=UNITS[:n_par],
         param_values=rng.normal(size=n_par),
@@ -284,7 +288,7 @@ def test_describe(leo_run):
         "mu[earth]",
         "km^3/s^2",
         "j2[earth]",
-        "schema_version 1",
+        f"schema_version {SCHEMA_VERSION}",
         "KiB",
     ):
         assert part in text, part
@@ -384,13 +388,13 @@ def test_refusals_name_the_file_and_the_problem(tmp_path):
     write_stm_file(schema, _data(4, 2))
     with h5py.File(schema, "r+") as f:
         f.attrs["schema_version"] = 99
-    _refuses(schema, r"schema_version = 99, this fracas reads 1")
+    _refuses(schema, rf"schema_version = 99, this fracas reads {SCHEMA_VERSION}: regenerate with fracas stm build")
 
     broken = tmp_path / "broken.h5"
     write_stm_file(broken, _data(4, 2))
     with h5py.File(broken, "r+") as f:
         del f["stm/stm_step"]
-    _refuses(broken, r"unreadable or incomplete STM file")
+    _refuses(broken, r"stm/stm_step: missing, expected a dataset")
     with pytest.raises(StmFileError, match=re.escape(str(tmp_path / "nope.h5"))):
         describe(tmp_path / "nope.h5")
 

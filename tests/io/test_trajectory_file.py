@@ -17,6 +17,7 @@ from fracas.io import hdf5
 from fracas.io.hdf5 import atomic_h5, provenance
 from fracas.io.trajectory_file import (
     FORMAT,
+    SCHEMA_VERSION,
     SensitivityData,
     TrajectoryData,
     read_trajectory_file,
@@ -122,7 +123,7 @@ def test_every_dataset_has_units_and_layout(tmp_path):
     missing = []
     with h5py.File(path, "r") as f:
         assert f.attrs["format"] == FORMAT
-        assert int(f.attrs["schema_version"]) == 1
+        assert int(f.attrs["schema_version"]) == SCHEMA_VERSION == 2
         assert {"trajectory", "sensitivities", "provenance"} <= set(f)
 
         def visit(name, obj):

@@ -1,0 +1,213 @@
+"""Atomic output files: complete or absent, with the user's normal permissions.
+
+Every fracas output (HDF5 files, PNG plots) is built under a temporary name in the
+destination folder, flushed and ``fsync``-ed, given the permissions a plain ``open()``
+would give it (``0o666 & ~umask``), then moved over the destination with ``os.replace``
+(atomic on POSIX within one filesystem).  A failure, or a kill, at any point leaves the
+previous file at the destination untouched: readers never see a partial file.
+
+Temporary files are named ``.<name>.<pid>-<host>.<random>.tmp`` in the destination folder
+(``<host>``: 8 hex digits identifying this machine and PID namespace, :func:`host_tag`;
+``<random>``: 8 characters of ``tempfile``'s alphabet), so they can be recognised.  A
+killed run leaves one behind; the next write to that folder removes those of this pattern
+whose process is gone (judged only for temporaries of this host: on a shared filesystem
+another machine's pid means nothing here) or that are older than an hour
+(:func:`remove_stale_temps`), nothing else.
+
+:func:`check_output_path` checks an output path before a run starts, creating nothing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import hashlib
+import os
+import re
+import socket
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from fracas.errors import OutputPathError
+
+__all__ = [
+    "STALE_AGE_S",
+    "TEMP_PATTERN",
+    "atomic_path",
+    "check_output_path",
+    "file_mode",
+    "host_tag",
+    "remove_stale_temps",
+    "savefig_atomic",
+    "temp_prefix",
+]
+
+STALE_AGE_S = 3600.0  # a temporary file older than this is stale even if its pid is alive (pid reuse)
+TEMP_PATTERN = re.compile(r"^\.(?P<name>.+)\.(?P<pid>[0-9]+)-(?P<host>[0-9a-f]{8})\.(?P<rand>[a-z0-9_]{8})\.tmp$")
+
+
+@functools.cache
+def host_tag() -> str:
+    """8 hex digits naming this machine and PID namespace (hostname, ``/proc/self/ns/pid``)."""
+    try:
+        ns = os.readlink("/proc/self/ns/pid")
+    except OSError:
+        ns = ""
+    return hashlib.sha256(f"{socket.gethostname()}\0{ns}".encode()).hexdigest()[:8]
+
+
+def _umask() -> int:
+    """The process umask, read without changing it where possible (Linux ``/proc``)."""
+    with contextlib.suppress(OSError, ValueError):
+        with open("/proc/self/status", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    old = os.umask(0o022)  # elsewhere: set and restore at once
+    os.umask(old)
+    return old
+
+
+def file_mode() -> int:
+    """Permissions of a new file for this user: ``0o666 & ~umask``."""
+    return 0o666 & ~_umask()
+
+
+def temp_prefix(name: str) -> str:
+    """``.<name>.<pid>-<host>.``: the start of this process's temporary names for ``name``."""
+    return f".{name}.{os.getpid()}-{host_tag()}."
+
+
+def _pid_alive(pid: int) -> bool:
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, another user's
+        return True
+    except OSError:
+        return False
+    return True
+
+
+def remove_stale_temps(folder: str | os.PathLike, max_age_s: float = STALE_AGE_S) -> list[Path]:
+    """Remove this module's temporary files in ``folder`` whose process is gone (temporaries
+    of this host only) or that are older than ``max_age_s``; only plain files matching
+    :data:`TEMP_PATTERN`.  Returns them."""
+    removed: list[Path] = []
+    now = time.time()
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    for entry in entries:
+        m = TEMP_PATTERN.match(entry.name)
+        if m is None:
+            continue
+        try:
+            if not entry.is_file(follow_symlinks=False):
+                continue
+            age = now - entry.stat(follow_symlinks=False).st_mtime
+        except OSError:
+            continue
+        pid, here = int(m.group("pid")), m.group("host") == host_tag()
+        if here and pid == os.getpid() and age <= max_age_s:
+            continue  # possibly a write in progress in another thread of this process
+        if age > max_age_s or (here and not _pid_alive(pid)):
+            with contextlib.suppress(OSError):
+                os.unlink(entry.path)
+                removed.append(Path(entry.path))
+    return removed
+
+
+def _fsync_dir(folder: Path) -> None:
+    with contextlib.suppress(OSError):  # best effort: not every filesystem allows it
+        dfd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """``with atomic_path(dest) as tmp:`` write ``tmp``; on success it becomes ``dest``.
+
+    ``tmp`` is an empty file ``.<name>.<pid>-<host>.<random>.tmp`` in ``dest``'s folder (created
+    if needed); the writer may truncate or recreate it.  On leaving the block normally it is
+    fsync-ed, given mode ``0o666 & ~umask`` and renamed over ``dest``; on any exception it
+    is removed and the exception propagates, ``dest`` untouched.  Stale temporary files of
+    killed runs in the folder are removed first (:func:`remove_stale_temps`).
+    """
+    dest = Path(path)
+    folder = dest.parent
+    folder.mkdir(parents=True, exist_ok=True)
+    remove_stale_temps(folder)
+    fd, name = tempfile.mkstemp(prefix=temp_prefix(dest.name), suffix=".tmp", dir=folder)
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        yield tmp
+        with open(tmp, "rb+") as fh:
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, file_mode())
+        os.replace(tmp, dest)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    _fsync_dir(folder)
+
+
+def savefig_atomic(fig: Any, path: str | os.PathLike, **kwargs: Any) -> Path:
+    """``fig.savefig`` into ``path`` atomically (:func:`atomic_path`); returns the path.
+
+    The format is ``kwargs["format"]`` or the suffix of ``path`` (``png`` without one);
+    other keyword arguments go to ``savefig``.  The figure is not closed.
+    """
+    dest = Path(path)
+    fmt = kwargs.pop("format", None) or (dest.suffix[1:].lower() or "png")
+    with atomic_path(dest) as tmp:
+        fig.savefig(tmp, format=fmt, **kwargs)
+    return dest
+
+
+def check_output_path(path: str | os.PathLike, what: str) -> Path:
+    """The output ``path`` as a Path, or a one-line :class:`fracas.errors.OutputPathError`
+    if it cannot be written: empty or ``.``, an existing directory (or a name ending in
+    ``/``), an existing non-regular file, or a folder that is a file, cannot be created or
+    is not writable.  Creates nothing.  ``what`` names the output in the message ("results
+    file", "plot", ...)."""
+    text = os.fspath(path)
+    if isinstance(text, bytes):
+        text = os.fsdecode(text)
+    if text.strip() in ("", ".", ".."):
+        raise OutputPathError(f"{what}: output path {text!r} is not a file name, expected e.g. out/{_example(what)}")
+    dest = Path(text).expanduser()
+    if text.endswith(("/", os.sep)) or dest.is_dir():
+        raise OutputPathError(f"{dest}: {what} is a directory, expected a file name inside it")
+    if dest.exists() and not dest.is_file():
+        raise OutputPathError(f"{dest}: {what} exists and is not a regular file")
+    folder = dest.parent
+    probe = folder
+    while not probe.exists():  # the nearest existing ancestor decides whether mkdir can work
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        raise OutputPathError(f"{dest}: {what}: folder {probe} is a file, expected a directory")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        if probe == folder:
+            raise OutputPathError(f"{dest}: {what}: folder {folder} is not writable")
+        raise OutputPathError(f"{dest}: {what}: cannot create folder {folder} ({probe} is not writable)")
+    return dest
+
+
+def _example(what: str) -> str:
+    return "plot.png" if "plot" in what else "out.h5"

@@ -225,6 +225,8 @@ def check_path(path: str | Path) -> tuple[str | None, list[str]]:
         return kind, list(exc.problems)
     if mode == "team":
         return mode, _team_problems(deck)
+    if mode == "sweep":
+        return mode, check_path(deck.resolve(deck.sweep.study))[1]
     return mode, _trajectory_problems(deck)
 
 

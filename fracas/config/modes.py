@@ -1,8 +1,9 @@
 """Which mode a deck asks for (its ``mode`` line) and the validated deck of that mode.
 
-``mode = "team"`` (TEAM covariance analysis) or ``mode = "propagate"`` (a trajectory deck;
-the default, so every trajectory deck stays valid as written).  TOM, TSIM and sweeps will
-add ``"tom"``, ``"tsim"``, ``"sweep"``.  TEAM decks written before ``mode`` existed are
+``mode = "team"`` (TEAM covariance analysis), ``mode = "sweep"`` (a TEAM study run with
+fields varied, :mod:`fracas.config.sweep`) or ``mode = "propagate"`` (a trajectory deck;
+the default, so every trajectory deck stays valid as written).  TOM and TSIM will add
+``"tom"``, ``"tsim"``.  TEAM decks written before ``mode`` existed are
 still recognised by their ``[ertraj]`` table.
 """
 
@@ -15,8 +16,8 @@ from fracas.errors import DeckError
 
 __all__ = ["MODES", "PLANNED_MODES", "deck_mode", "parse_any", "load_any"]
 
-MODES = ("propagate", "team")
-PLANNED_MODES = ("tom", "tsim", "sweep")
+MODES = ("propagate", "team", "sweep")
+PLANNED_MODES = ("tom", "tsim")
 
 
 def deck_mode(text: str, source: str = "<deck>") -> str:
@@ -36,8 +37,12 @@ def deck_mode(text: str, source: str = "<deck>") -> str:
 
 
 def parse_any(text: str, source: str = "<deck>"):
-    """The validated deck of whatever mode ``text`` asks for (TrajectoryDeck or TeamDeck)."""
+    """The validated deck of whatever mode ``text`` asks for (TrajectoryDeck, TeamDeck or SweepDeck)."""
     mode = deck_mode(text, source)
+    if mode == "sweep":
+        from fracas.config.sweep import parse_sweep_deck
+
+        return parse_sweep_deck(text, source)
     if mode == "team":
         from fracas.config.team import parse_team_deck
 

@@ -863,6 +863,7 @@ def _named_mode(data: dict) -> str | None:
 _KIND_NAMES = {
     "propagate": ("a trajectory deck", "fracas propagate"),
     "team": ("a TEAM deck", "fracas run"),
+    "sweep": ("a sweep deck", "fracas sweep"),
 }
 
 

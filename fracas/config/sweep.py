@@ -1,0 +1,248 @@
+"""The sweep deck: one TEAM study run many times with some of its fields varied (no JAX here).
+
+Layout (``mode = "sweep"``; see docs/sweep.md)::
+
+    mode = "sweep"
+    title = "thrust noise sweep"
+    [sweep]        study = "team_deck.toml"   (a TEAM deck, relative to this file)
+                   combine = "grid" | "zip"   (every combination, or the i-th value of each)
+                   outputs = ["position_rss_km", "velocity_rss_km_s", "sigma[thrust_scale]", ...]
+                   stm_file = "stm_files/x.h5"  (optional: one STM file every study reuses;
+                                                 built once first if missing)
+                   keep_results = false, results_folder = "out/sweep_results"
+                   max_studies = 10000
+    [[sweep.vary]] field = "thrust_noise.proportionality.sigma"   (a TeamDeck field path,
+                   list entries by index: "tracking[0].sigma")
+                   values = [...]  |  start, stop, num, spacing = "linear" | "log"
+    [output]       table = "out/sweep.h5"  (and out/sweep.csv), plot = "out/sweep.png"
+
+Outputs (final values of each study, after its last event):
+``position_rss_km`` / ``velocity_rss_km_s`` (assumed 1σ RSS of position / velocity),
+``true_position_rss_km`` / ``true_velocity_rss_km_s`` (generalized covariance; the study
+must have [gencov]), ``sigma[LABEL]`` (the assumed final 1σ of any covariance label, e.g.
+``sigma[thrust_scale]``, ``sigma[x]``) and ``true_sigma[LABEL]``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import types
+import typing
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, Field, model_validator
+
+from fracas.config.team import TeamDeck
+from fracas.config.trajectory import FieldProblem, SourcedDeck, _Section, parse_sourced, read_deck_text
+
+__all__ = [
+    "SweepDeck",
+    "Vary",
+    "parse_sweep_deck",
+    "load_sweep_deck",
+    "parse_field_path",
+    "check_field_path",
+    "check_output_name",
+    "FIXED_OUTPUTS",
+    "DEFAULT_OUTPUTS",
+]
+
+#: output name -> unit
+FIXED_OUTPUTS = {
+    "position_rss_km": "km",
+    "velocity_rss_km_s": "km/s",
+    "true_position_rss_km": "km",
+    "true_velocity_rss_km_s": "km/s",
+}
+DEFAULT_OUTPUTS = ("position_rss_km", "velocity_rss_km_s")
+_SIGMA_OUTPUT = re.compile(r"^(true_)?sigma\[([^\]]+)\]$")
+_PART = re.compile(r"^([A-Za-z_][A-Za-z_0-9]*)((?:\[[0-9]+\])*)$")
+MAX_STUDIES = 1_000_000
+Scalar = float | int | bool | str
+
+
+def parse_field_path(path: str) -> tuple[str | int, ...]:
+    """``"tracking[0].sigma"`` -> ``("tracking", 0, "sigma")``; ValueError if malformed."""
+    if not isinstance(path, str) or not path.strip():
+        raise ValueError("a field path must be a non-empty string like thrust_noise.proportionality.sigma")
+    out: list[str | int] = []
+    for part in path.strip().split("."):
+        m = _PART.match(part)
+        if m is None:
+            raise ValueError(f'malformed field path (at "{part}"), expected e.g. tracking[0].sigma')
+        out.append(m.group(1))
+        out.extend(int(i) for i in re.findall(r"\[([0-9]+)\]", m.group(2)))
+    return tuple(out)
+
+
+def _strip(ann: Any) -> Any:
+    while True:
+        origin = typing.get_origin(ann)
+        if origin is Annotated:
+            ann = typing.get_args(ann)[0]
+        elif origin in (typing.Union, types.UnionType):
+            args = [a for a in typing.get_args(ann) if a is not type(None)]
+            if len(args) != 1:
+                return ann
+            ann = args[0]
+        else:
+            return ann
+
+
+def check_field_path(path: str) -> tuple[str | int, ...]:
+    """The parts of ``path`` if it names a field of :class:`TeamDeck`'s schema, else ValueError
+    (saying where it goes wrong).  List entries need an index; dict entries take any key."""
+    parts = parse_field_path(path)
+    cur: Any = TeamDeck
+    done = ""
+    for part in parts:
+        cur = _strip(cur)
+        origin = typing.get_origin(cur)
+        here = f"{done}[{part}]" if isinstance(part, int) else (f"{done}.{part}" if done else part)
+        if origin is list:
+            if not isinstance(part, int):
+                raise ValueError(f"{done} is a list: give an index, e.g. {done}[0]")
+            cur = typing.get_args(cur)[0]
+        elif origin is dict:
+            cur = typing.get_args(cur)[1]
+        elif isinstance(part, str) and isinstance(cur, type) and issubclass(cur, BaseModel):
+            if part not in cur.model_fields or part in ("mode",):
+                known = ", ".join(k for k in cur.model_fields if k != "mode")
+                raise ValueError(f"unknown field {here} (expected one of: {known})")
+            cur = cur.model_fields[part].annotation
+        else:
+            raise ValueError(f"{done or '<deck>'} has no part {part!r}")
+        done = here
+    cur = _strip(cur)
+    if isinstance(cur, type) and issubclass(cur, BaseModel):
+        raise ValueError(f"{path} is a table; vary one of its fields, e.g. {path}.{next(iter(cur.model_fields))}")
+    return parts
+
+
+def check_output_name(name: str) -> str:
+    if name in FIXED_OUTPUTS or _SIGMA_OUTPUT.match(name):
+        return name
+    raise ValueError(
+        f"unknown output {name!r} (expected one of: {', '.join(FIXED_OUTPUTS)}, sigma[LABEL], true_sigma[LABEL])"
+    )
+
+
+class Vary(_Section):
+    """One varied field: its values, or ``num`` values from ``start`` to ``stop``."""
+
+    field: str
+    values: Annotated[list[Scalar], Field(min_length=1)] | None = None
+    start: float | None = None
+    stop: float | None = None
+    num: Annotated[int, Field(ge=1, le=MAX_STUDIES)] | None = None
+    spacing: Literal["linear", "log"] = "linear"
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Vary:
+        try:
+            check_field_path(self.field)
+        except ValueError as exc:
+            raise FieldProblem("field", self.field, str(exc)) from None
+        rng = (self.start, self.stop, self.num)
+        if self.values is not None and any(v is not None for v in rng):
+            raise FieldProblem((), None, "give values, or start + stop + num, not both")
+        if self.values is None:
+            if any(v is None for v in rng):
+                raise FieldProblem((), None, "give values, or start + stop + num")
+            if self.spacing == "log" and (self.start <= 0 or self.stop <= 0):
+                raise FieldProblem("start", self.start, 'start and stop must be > 0 for spacing = "log"')
+        elif self.spacing != "linear":
+            raise FieldProblem("spacing", self.spacing, "only with start + stop + num")
+        return self
+
+    def points(self) -> list[Scalar]:
+        """The values, in order (``numpy.linspace`` / ``logspace`` semantics, plain floats)."""
+        if self.values is not None:
+            return list(self.values)
+        import numpy as np
+
+        if self.spacing == "log":
+            pts = np.logspace(math.log10(self.start), math.log10(self.stop), self.num)
+        else:
+            pts = np.linspace(self.start, self.stop, self.num)
+        return [float(p) for p in pts]
+
+
+class SweepSection(_Section):
+    study: str
+    vary: Annotated[list[Vary], Field(min_length=1)]
+    combine: Literal["grid", "zip"] = "grid"
+    outputs: Annotated[list[str], Field(min_length=1)] = list(DEFAULT_OUTPUTS)
+    stm_file: str | None = None
+    keep_results: bool = False
+    results_folder: str | None = None
+    max_studies: Annotated[int, Field(ge=1, le=MAX_STUDIES)] = 10_000
+
+    @model_validator(mode="after")
+    def _consistent(self) -> SweepSection:
+        for k, name in enumerate(self.outputs):
+            try:
+                check_output_name(name)
+            except ValueError as exc:
+                raise FieldProblem(("outputs", k), name, str(exc)) from None
+        if len(set(self.outputs)) != len(self.outputs):
+            raise FieldProblem("outputs", self.outputs, "outputs must be unique")
+        fields = [v.field for v in self.vary]
+        for k, f in enumerate(fields):
+            if f in fields[:k]:
+                raise FieldProblem(("vary", k, "field"), f, f"repeats vary[{fields.index(f)}]")
+        lengths = [len(v.points()) if v.values is not None else v.num for v in self.vary]
+        if self.combine == "zip" and len(set(lengths)) != 1:
+            raise FieldProblem(
+                "combine", "zip", f"zip needs the same number of values in each vary entry, got {lengths}"
+            )
+        n = lengths[0] if self.combine == "zip" else math.prod(lengths)
+        if n > self.max_studies:
+            raise FieldProblem("vary", None, f"gives {n} studies (limit {self.max_studies}, sweep.max_studies)")
+        return self
+
+
+class SweepOutput(_Section):
+    table: str | None = None
+    plot: str | None = None
+
+
+class SweepDeck(SourcedDeck):
+    """A whole sweep deck (frozen)."""
+
+    mode: Literal["sweep"] = "sweep"
+    title: str = ""
+    sweep: SweepSection
+    output: SweepOutput = SweepOutput()
+
+    def resolve(self, rel: str) -> Path:
+        """A path named in the deck, relative to the deck's folder."""
+        p = Path(rel)
+        if p.is_absolute() or self._source_path is None:
+            return p
+        return Path(self._source_path).parent / p
+
+    def studies(self) -> list[tuple[Scalar, ...]]:
+        """The varied values of every study, in order (grid: the last field varies fastest)."""
+        import itertools
+
+        pts = [v.points() for v in self.sweep.vary]
+        if self.sweep.combine == "zip":
+            return [tuple(p) for p in zip(*pts)]
+        return [tuple(p) for p in itertools.product(*pts)]
+
+    @property
+    def fields(self) -> tuple[str, ...]:
+        return tuple(v.field for v in self.sweep.vary)
+
+
+def parse_sweep_deck(text: str, source: str = "<deck>") -> SweepDeck:
+    """Validate sweep-deck TOML text; any problem -> one-line DeckError."""
+    return parse_sourced(text, source, SweepDeck)
+
+
+def load_sweep_deck(path: str | Path) -> SweepDeck:
+    """Read and validate a sweep deck; every failure is a one-line DeckError."""
+    return parse_sweep_deck(read_deck_text(path), str(path))

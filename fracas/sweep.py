@@ -1,0 +1,533 @@
+"""Sweeps: one TEAM study run many times with some of its fields varied (docs/sweep.md).
+
+``vary(deck, field, value)`` builds a study's TeamDeck in memory (no TOML written);
+``run_sweep(cfg)`` runs every study (in this process, on a Dask LocalCluster or on an
+existing Dask scheduler), appends each finished row to the table file (HDF5 + CSV, written
+whole and atomically each time) and skips, on a restart, the studies already in it;
+``sweep_main`` is the command line's ``fracas sweep``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import shutil
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tomllib
+
+from fracas import pipeline
+from fracas.config.modes import deck_mode
+from fracas.config.sweep import (
+    FIXED_OUTPUTS,
+    SweepDeck,
+    check_field_path,
+    load_sweep_deck,
+    parse_field_path,
+)
+from fracas.config.team import TeamDeck, load_team_deck
+from fracas.config.trajectory import read_deck_text
+from fracas.errors import DeckError, FracasError
+from fracas.io.atomic import check_output_path
+
+__all__ = [
+    "vary",
+    "vary_many",
+    "run_sweep",
+    "sweep_main",
+    "summary_text",
+    "parse_vary",
+    "study_key",
+    "base_hash",
+    "outputs_of",
+    "run_one",
+    "SweepResult",
+]
+
+Progress = Callable[[int, int], None]
+
+
+# ----------------------------------------------------------------------------- varying a deck
+def _set(data: Any, parts: tuple, value: Any, field: str) -> Any:
+    """``data`` (a dump) with the element at ``parts`` set to ``value`` (copies along the path)."""
+    if not parts:
+        return value
+    head, rest = parts[0], parts[1:]
+    if isinstance(head, int):
+        if not isinstance(data, list) or not -len(data) <= head < len(data):
+            n = len(data) if isinstance(data, list) else 0
+            raise DeckError(f"{field}: index [{head}] is out of range (the study has {n} entries)")
+        out = list(data)
+        out[head] = _set(data[head], rest, value, field)
+        return out
+    out = dict(data) if isinstance(data, dict) else {}
+    out[head] = (
+        _set(out.get(head) if isinstance(out.get(head), (dict, list)) else {}, rest, value, field) if rest else value
+    )
+    return out
+
+
+def vary(deck: TeamDeck, field: str, value: Any) -> TeamDeck:
+    """``deck`` with ``field`` (a dotted path, list entries by index: ``tracking[0].sigma``)
+    set to ``value``, validated again (every validator runs); the base deck's
+    ``source_path``/``source_text`` are kept so relative paths resolve as before.  A refused
+    value is a one-line DeckError naming the field."""
+    return vary_many(deck, {field: value})
+
+
+def vary_many(deck: TeamDeck, values: dict[str, Any]) -> TeamDeck:
+    """:func:`vary` for several fields at once (validated once, after all are set)."""
+    from pydantic import ValidationError
+
+    from fracas.config.trajectory import deck_error, validation_problems
+
+    data = deck.model_dump(mode="python", exclude_unset=True)
+    for field, value in values.items():
+        try:
+            parts = check_field_path(field)
+        except ValueError as exc:
+            raise DeckError(f"{deck.source_path or '<deck>'}: vary {field}: {exc}") from None
+        if isinstance(value, np.generic):
+            value = value.item()
+        data = _set(data, parts, value, f"{deck.source_path or '<deck>'}: vary {field}")
+    src = f"{deck.source_path or '<deck>'} (varied {', '.join(f'{k} = {v!r}' for k, v in values.items())})"
+    try:
+        new = TeamDeck.model_validate(data)
+    except ValidationError as exc:
+        raise deck_error(validation_problems(exc, src, TeamDeck, data)) from None
+    new._source_path = deck._source_path
+    new._source_text = deck._source_text
+    return new
+
+
+def _get(deck: TeamDeck, parts: tuple) -> Any:
+    cur: Any = deck.model_dump(mode="python")
+    for p in parts:
+        cur = cur[p]
+    return cur
+
+
+# ----------------------------------------------------------------------------- keys, units, outputs
+def base_hash(deck: TeamDeck) -> str:
+    """SHA-256 (hex) of the base study's deck text and of its trajectory deck's text."""
+    h = hashlib.sha256((deck.source_text or json.dumps(deck.model_dump(mode="json"), sort_keys=True)).encode())
+    try:
+        h.update(b"\0" + read_deck_text(deck.resolve(deck.ertraj.deck)).encode())
+    except DeckError:
+        pass
+    return h.hexdigest()
+
+
+def study_key(base: str, fields: tuple[str, ...], values: tuple) -> str:
+    """16 hex digits naming one study: the base hash and the varied values."""
+    text = json.dumps([base, list(fields), [_plain(v) for v in values]])
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _plain(v: Any) -> Any:
+    return v.item() if isinstance(v, np.generic) else v
+
+
+_SUFFIX_UNITS = (
+    ("_km_s", "km/s"),
+    ("_km", "km"),
+    ("_kg", "kg"),
+    ("_days", "d"),
+    ("_hours", "h"),
+    ("_deg", "deg"),
+    ("_s", "s"),
+)
+
+
+def input_unit(deck: TeamDeck, field: str) -> str:
+    """The unit of a varied field as the deck writes it (from its name; a tracking sigma from
+    its type; "deck" where the unit is the parameter label's, e.g. a parameter sigma)."""
+    from fracas.config.team import SIGMA_UNITS
+
+    parts = parse_field_path(field)
+    names = [p for p in parts if isinstance(p, str)]
+    last = names[-1]
+    if len(parts) >= 3 and parts[0] == "tracking" and last == "sigma" and isinstance(parts[1], int):
+        if parts[1] < len(deck.tracking):
+            return str(SIGMA_UNITS[deck.tracking[parts[1]].type][0])
+    if len(names) >= 2 and names[-2] == "proportionality" and last == "sigma":
+        return "1"
+    for n in reversed(names):
+        for suf, unit in _SUFFIX_UNITS:
+            if n.endswith(suf):
+                return unit
+    return "deck"
+
+
+def _final_sigma(hist, labels, label: str) -> float:
+    if label not in labels:
+        raise FracasError(f"output sigma[{label}]: no covariance label {label!r} (the study has: {', '.join(labels)})")
+    return float(hist.sigma[-1, labels.index(label)])
+
+
+def outputs_of(product, names: list[str]) -> tuple[dict[str, float], dict[str, str]]:
+    """The named outputs of a TeamProduct (final values) and their units."""
+    vals, units = {}, {}
+    for name in names:
+        true = name.startswith("true_")
+        hist = product.true if true else product.assumed
+        if hist is None:
+            raise FracasError(f"output {name}: the study has no generalized covariance ([gencov])")
+        s = np.asarray(hist.sigma[-1], dtype=np.float64)
+        base = name[5:] if true else name
+        if base == "position_rss_km":
+            vals[name], units[name] = float(math.sqrt(float(np.sum(s[0:3] ** 2)))), "km"
+        elif base == "velocity_rss_km_s":
+            vals[name], units[name] = float(math.sqrt(float(np.sum(s[3:6] ** 2)))), "km/s"
+        else:
+            label = base[len("sigma[") : -1]
+            vals[name] = _final_sigma(hist, list(product.labels), label)
+            units[name] = product.units[list(product.labels).index(label)]
+    return vals, units
+
+
+def _one_line(exc: BaseException) -> str:
+    if isinstance(exc, FracasError):
+        text = str(exc)
+    else:
+        text = f"{type(exc).__name__}: {exc}"
+    return " ".join(text.split())
+
+
+# ----------------------------------------------------------------------------- one study (a task)
+def run_one(
+    base: TeamDeck,
+    index: int,
+    fields: tuple[str, ...],
+    values: tuple,
+    outputs: list[str],
+    key: str,
+    stm: str | None = None,
+    results: str | None = None,
+) -> dict[str, Any]:
+    """Run study ``index`` (``fields`` set to ``values``) and return its row; never raises:
+    a failure is a row with status "failed", its one-line error and NaN outputs."""
+    t0 = time.perf_counter()
+    row: dict[str, Any] = {"index": int(index), "key": key}
+    row.update({f: _plain(v) for f, v in zip(fields, values)})
+    row.update(dict.fromkeys(outputs, float("nan")))
+    tmp = None
+    try:
+        cfg = vary_many(base, dict(zip(fields, values)))
+        # studies share no side outputs: no per-study STM build, no punch file
+        upd: dict[str, Any] = {}
+        if cfg.errcon.build_stm:
+            upd["errcon"] = cfg.errcon.model_copy(update={"build_stm": False})
+        if cfg.punch is not None:
+            upd["punch"] = None
+        if upd:
+            src, text = cfg._source_path, cfg._source_text
+            cfg = cfg.model_copy(update=upd)
+            cfg._source_path, cfg._source_text = src, text
+        if results is None:
+            tmp = tempfile.mkdtemp(prefix="fracas-sweep-")
+            out = Path(tmp) / "study.h5"
+        else:
+            out = Path(results)
+        product, _, _ = pipeline.run_team(cfg, stm=stm, output=out)
+        vals, units = outputs_of(product, outputs)
+        row.update(vals)
+        row.update(status="ok", error="", units=units)
+    except Exception as exc:  # noqa: BLE001 - every failure becomes the study's row
+        row.update(status="failed", error=_one_line(exc), units={})
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+    row["wall_s"] = time.perf_counter() - t0
+    return row
+
+
+# ----------------------------------------------------------------------------- the sweep
+class SweepResult:
+    """What :func:`run_sweep` did: ``rows`` (every row of the table, by index), ``ran``
+    (indices run this time), ``skipped`` (already in the table), ``table`` (path or None),
+    ``wall_s``."""
+
+    def __init__(self, rows, ran, skipped, table, wall_s, fields, outputs, units):
+        self.rows, self.ran, self.skipped, self.table = rows, ran, skipped, table
+        self.wall_s, self.fields, self.outputs, self.units = wall_s, fields, outputs, units
+
+    @property
+    def failed(self) -> list[dict[str, Any]]:
+        return [r for r in self.rows if r["status"] != "ok"]
+
+
+class _WorkerSetup:
+    """Dask worker plugin: one XLA host device per worker, before any task touches JAX."""
+
+    name = "fracas-worker-setup"
+
+    def setup(self, worker=None):
+        from fracas._jax import worker_setup
+
+        worker_setup(1)
+
+
+def _plugin():
+    from distributed import WorkerPlugin
+
+    class FracasWorker(_WorkerSetup, WorkerPlugin):
+        pass
+
+    return FracasWorker()
+
+
+def _table_path(cfg: SweepDeck) -> Path:
+    if cfg.output.table:
+        return cfg.resolve(cfg.output.table)
+    return pipeline.default_output(cfg.source_path)
+
+
+def run_sweep(
+    cfg: SweepDeck,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    resume: bool = True,
+    progress: Progress | None = None,
+    table: str | Path | None = None,
+    base: TeamDeck | None = None,
+) -> SweepResult:
+    """Run every study of the sweep ``cfg``; returns a :class:`SweepResult`.
+
+    ``workers=0``: in this process, one study after another (no Dask); ``workers=N`` (default:
+    the CPU count): a Dask LocalCluster of N processes with one thread and one XLA host device
+    each; ``scheduler="tcp://host:port"``: an existing Dask cluster (``workers`` ignored).
+    ``resume``: studies already in the table file with status "ok" (same key: base deck hash
+    and varied values) are skipped; failed ones run again.  ``progress(done, total)`` after
+    each study (total: the studies to run this time).  ``table``: the table path (default the
+    deck's ``[output] table``, else ``out/<deck stem>.h5``); ``base``: the study TeamDeck
+    (default: read ``sweep.study``).  A failed study is a row with its one-line error.
+    """
+    from fracas.io.sweep_table import read_sweep_table, write_sweep_table
+
+    t0 = time.perf_counter()
+    sw = cfg.sweep
+    base = base if base is not None else load_team_deck(cfg.resolve(sw.study))
+    if not base.errcon.analysis:
+        raise DeckError(f"{base.source_path}: errcon.analysis = false: a sweep needs the analysis of each study")
+    fields = cfg.fields
+    for k, f in enumerate(fields):  # every path must exist in the base study (list indices included)
+        try:
+            _get(base, parse_field_path(f))
+        except (KeyError, IndexError, TypeError):
+            raise DeckError(
+                f"{cfg.source_path or '<deck>'}: sweep.vary[{k}].field = {f!r}: not in the study {base.source_path} "
+                "(a list index beyond its entries, or a table the study does not have)"
+            ) from None
+    outputs = list(sw.outputs)
+    out = check_output_path(table if table is not None else _table_path(cfg), "sweep table")
+    plot = check_output_path(cfg.resolve(cfg.output.plot), "plot") if cfg.output.plot else None
+    bh = base_hash(base)
+    studies = cfg.studies()
+    keys = [study_key(bh, fields, v) for v in studies]
+    units: dict[str, str] = {f: input_unit(base, f) for f in fields}
+    units.update({n: FIXED_OUTPUTS[n] for n in outputs if n in FIXED_OUTPUTS})
+    rows: dict[int, dict[str, Any]] = {}
+    if resume and out.exists():
+        old = read_sweep_table(out)
+        by_key = {r["key"]: r for r in old.rows() if r["status"] == "ok"}
+        units.update({k: v for k, v in old.units.items() if k in outputs})
+        for i, k in enumerate(keys):
+            if k in by_key:
+                rows[i] = dict(by_key[k], index=i)
+    skipped = sorted(rows)
+    todo = [i for i in range(len(studies)) if i not in rows]
+
+    stm = None
+    if sw.stm_file:
+        stm_path = cfg.resolve(sw.stm_file)
+        if not stm_path.exists() and todo:
+            pipeline.build_stm(base, stm_path)
+        stm = str(stm_path)
+    res_dir = None
+    if sw.keep_results:
+        res_dir = cfg.resolve(sw.results_folder) if sw.results_folder else out.parent / f"{out.stem}_results"
+        res_dir.mkdir(parents=True, exist_ok=True)
+    attrs = {"title": cfg.title, "base_hash": bh, "study": str(base.source_path), "combine": sw.combine}
+
+    def results_for(i: int) -> str | None:
+        return None if res_dir is None else str(res_dir / f"study_{i:05d}_{keys[i]}.h5")
+
+    def record(row: dict[str, Any]) -> None:
+        units.update(row.pop("units", {}) or {})
+        rows[row["index"]] = row
+        write_sweep_table(out, list(rows.values()), list(fields), outputs, units, attrs)
+        if progress is not None:
+            progress(len(rows) - len(skipped), len(todo))
+
+    args = lambda i: (base, i, fields, studies[i], outputs, keys[i], stm, results_for(i))  # noqa: E731
+    if todo and workers == 0 and scheduler is None:
+        for i in todo:
+            record(run_one(*args(i)))
+    elif todo:
+        _run_dask(todo, args, record, workers, scheduler)
+    elif rows:
+        write_sweep_table(out, list(rows.values()), list(fields), outputs, units, attrs)
+    ordered = [rows[i] for i in sorted(rows)]
+    if plot is not None and ordered:
+        from fracas.report.sweep import plot_sweep
+
+        plot_sweep(out, plot)
+    return SweepResult(ordered, todo, skipped, out, time.perf_counter() - t0, fields, outputs, units)
+
+
+def _run_dask(todo, args, record, workers, scheduler) -> None:
+    import os
+
+    from distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler is None:
+        n = workers if workers is not None else (os.cpu_count() or 1)
+        cluster = LocalCluster(
+            n_workers=max(1, min(n, len(todo))),
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=None,
+        )
+    client = Client(cluster if cluster is not None else scheduler)
+    try:
+        client.register_plugin(_plugin())
+        futures = {client.submit(run_one, *args(i), pure=False): i for i in todo}
+        for fut in as_completed(futures):
+            i = futures[fut]
+            try:
+                row = fut.result()
+            except Exception as exc:  # noqa: BLE001 - a lost worker, a pickling error
+                a = args(i)
+                row = {"index": i, "key": a[5], **dict(zip(a[2], a[3])), **dict.fromkeys(a[4], float("nan"))}
+                row.update(status="failed", error=_one_line(exc), wall_s=float("nan"))
+            record(row)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+# ----------------------------------------------------------------------------- command line
+def _value(text: str) -> Any:
+    """One command-line value as TOML reads it (1e-3 -> float, true -> bool, "x" -> str);
+    a bare word that is not TOML is a string."""
+    try:
+        return tomllib.loads(f"v = {text.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text.strip()
+
+
+def parse_vary(spec: str) -> dict[str, Any]:
+    """``FIELD=VALUES`` -> a ``[[sweep.vary]]`` table: ``a=1,2,3`` (values), ``a=0.1:1:5``
+    (start:stop:num, linear), ``a=log:1e-3:1e-1:5`` (logarithmic).  DeckError if malformed."""
+    if "=" not in spec:
+        raise DeckError(f"--vary {spec!r}: expected FIELD=VALUES, e.g. thrust_noise.proportionality.sigma=0.01,0.02")
+    field, _, rhs = spec.partition("=")
+    field, rhs = field.strip(), rhs.strip()
+    if not rhs:
+        raise DeckError(f"--vary {spec!r}: no values after '='")
+    if ":" in rhs and not rhs.startswith(("'", '"')):
+        parts = rhs.split(":")
+        spacing = "linear"
+        if parts[0].strip().lower() in ("log", "lin", "linear"):
+            spacing = "log" if parts[0].strip().lower() == "log" else "linear"
+            parts = parts[1:]
+        if len(parts) != 3:
+            raise DeckError(f"--vary {spec!r}: a range is start:stop:num or log:start:stop:num")
+        try:
+            start, stop, num = float(parts[0]), float(parts[1]), int(parts[2])
+        except ValueError:
+            raise DeckError(f"--vary {spec!r}: start and stop must be numbers, num an integer") from None
+        return {"field": field, "start": start, "stop": stop, "num": num, "spacing": spacing}
+    return {"field": field, "values": [_value(v) for v in rhs.split(",") if v.strip()]}
+
+
+def _with_vary(cfg: SweepDeck, specs: list[str]) -> SweepDeck:
+    """``cfg`` with the command line's ``--vary`` entries (replacing entries of the same field)."""
+    from pydantic import ValidationError
+
+    from fracas.config.trajectory import deck_error, validation_problems
+
+    if not specs:
+        return cfg
+    new = [parse_vary(s) for s in specs]
+    named = {v["field"] for v in new}
+    data = cfg.model_dump(mode="python", exclude_unset=True)
+    data["sweep"]["vary"] = [v for v in data["sweep"].get("vary", []) if v["field"] not in named] + new
+    src = f"{cfg.source_path or '<deck>'} (with --vary)"
+    try:
+        out = SweepDeck.model_validate(data)
+    except ValidationError as exc:
+        raise deck_error(validation_problems(exc, src, SweepDeck, data)) from None
+    out._source_path, out._source_text = cfg._source_path, cfg._source_text
+    return out
+
+
+def _deck_for(deck_path: str | Path, specs: list[str]) -> SweepDeck:
+    """The sweep deck of ``deck_path``: a sweep deck (``--vary`` adds or replaces fields) or a
+    TEAM deck swept over the ``--vary`` fields (at least one)."""
+    path = Path(deck_path)
+    mode = deck_mode(read_deck_text(path), str(path))
+    if mode == "sweep":
+        return _with_vary(load_sweep_deck(path), specs)
+    if mode != "team":
+        raise DeckError(f'{path}: a sweep runs a TEAM deck or a sweep deck (mode = "sweep"), not mode = "{mode}"')
+    if not specs:
+        raise DeckError(f"{path}: a TEAM deck: give the fields to vary with --vary FIELD=VALUES")
+    from pydantic import ValidationError
+
+    from fracas.config.trajectory import deck_error, validation_problems
+
+    data = {
+        "mode": "sweep",
+        "sweep": {"study": path.name, "vary": [parse_vary(s) for s in specs]},
+        "output": {"table": f"out/{path.stem}_sweep.h5"},
+    }
+    src = f"{path} (--vary)"
+    try:
+        cfg = SweepDeck.model_validate(data)
+    except ValidationError as exc:
+        raise deck_error(validation_problems(exc, src, SweepDeck, data)) from None
+    cfg._source_path = str(path)
+    return cfg
+
+
+def summary_text(res: SweepResult) -> str:
+    """A few lines: how many studies ran, skipped and failed, the table, each failure."""
+    n_ok = sum(r["status"] == "ok" for r in res.rows)
+    lines = [
+        f"sweep: {len(res.rows)} studies ({len(res.ran)} run, {len(res.skipped)} already in the table), "
+        f"{n_ok} ok, {len(res.failed)} failed, {res.wall_s:.1f} s",
+        f"table: {res.table} (and {Path(res.table).with_suffix('.csv')})",
+    ]
+    for r in res.failed:
+        vals = ", ".join(f"{f} = {r[f]!r}" for f in res.fields)
+        lines.append(f"  study {r['index']} ({vals}): {r['error']}")
+    return "\n".join(lines)
+
+
+def sweep_main(
+    deck_path: str | Path,
+    vary: list[str] | tuple[str, ...] = (),
+    workers: int | None = None,
+    scheduler: str | None = None,
+    resume: bool = True,
+    out: str | Path | None = None,
+    progress: Progress | None = None,
+) -> tuple[Path, str]:
+    """``fracas sweep DECK [--vary FIELD=VALUES ...]``: everything; returns (table path,
+    summary text).  ``out``: the table path (default the deck's ``[output] table``, else
+    ``out/<deck stem>.h5``; for a TEAM deck ``out/<stem>_sweep.h5`` next to it)."""
+    cfg = _deck_for(deck_path, list(vary))
+    res = run_sweep(cfg, workers=workers, scheduler=scheduler, resume=resume, progress=progress, table=out)
+    return Path(res.table), summary_text(res)

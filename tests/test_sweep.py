@@ -1,0 +1,231 @@
+"""Sweeps (fracas.sweep): the deck schema, vary(), in-process and Dask runs, resume, failures."""
+
+from __future__ import annotations
+
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fracas import pipeline
+from fracas.config.modes import parse_any
+from fracas.config.sweep import SweepDeck, parse_sweep_deck
+from fracas.config.team import load_team_deck
+from fracas.errors import DeckError
+from fracas.io.sweep_table import csv_path, read_sweep_table, write_sweep_table
+from fracas.sweep import parse_vary, run_sweep, sweep_main, vary
+
+DATA = Path(__file__).parent / "data"
+FIELD = "thrust_noise.proportionality.sigma"
+VALUES = [0.005, 0.01, 0.02, 0.04]
+OUTPUTS = ["position_rss_km", "velocity_rss_km_s", "sigma[thrust_scale]", "true_position_rss_km"]
+
+
+def sweep_text(values, table="sweep.h5", extra=""):
+    return f"""mode = "sweep"
+title = "proportionality sweep"
+[sweep]
+study = "team_small.toml"
+outputs = {OUTPUTS!r}
+{extra}
+[[sweep.vary]]
+field = "{FIELD}"
+values = {values!r}
+[output]
+table = "{table}"
+"""
+
+
+@pytest.fixture(scope="module")
+def study_dir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("sweep")
+    for name in ("team_small.toml", "team_small_traj.toml"):
+        shutil.copy(DATA / name, d / name)
+    return d
+
+
+def make_deck(d: Path, values, table="sweep.h5", name="sweep.toml", extra="") -> SweepDeck:
+    p = d / name
+    p.write_text(sweep_text(values, table, extra))
+    return parse_sweep_deck(p.read_text(), str(p))
+
+
+@pytest.fixture(scope="module")
+def serial(study_dir):
+    """The 4-study sweep in this process (workers=0), timed."""
+    cfg = make_deck(study_dir, VALUES, table="serial.h5", name="serial.toml")
+    t0 = time.perf_counter()
+    res = run_sweep(cfg, workers=0)
+    return cfg, res, time.perf_counter() - t0
+
+
+# ----------------------------------------------------------------------------- schema
+@pytest.mark.parametrize(
+    "vary_table, needle",
+    [
+        (
+            'field = "thrust_noise.proportionality.sgma"\nvalues = [1.0]',
+            "unknown field thrust_noise.proportionality.sgma",
+        ),
+        ('field = "tracking.sigma"\nvalues = [1.0]', "give an index"),
+        ('field = "no_such_section"\nvalues = [1.0]', "unknown field no_such_section"),
+        ('field = "thrust_noise"\nvalues = [1.0]', "is a table"),
+        ('field = "a..b"\nvalues = [1.0]', "malformed field path"),
+        (f'field = "{FIELD}"\nvalues = []', "values"),
+        (f'field = "{FIELD}"', "give values, or start + stop + num"),
+        (f'field = "{FIELD}"\nvalues = [1.0]\nstart = 1.0', "not both"),
+        (f'field = "{FIELD}"\nstart = 0.0\nstop = 1.0\nnum = 3\nspacing = "log"', "must be > 0"),
+        (f'field = "{FIELD}"\nstart = 0.0\nstop = 1.0\nnum = 0', "num"),
+        (f'field = "{FIELD}"\nvalues = [[1.0]]', "values"),
+    ],
+)
+def test_schema_refusals(vary_table, needle):
+    text = f'mode = "sweep"\n[sweep]\nstudy = "x.toml"\n[[sweep.vary]]\n{vary_table}\n'
+    with pytest.raises(DeckError) as exc:
+        parse_sweep_deck(text, "s.toml")
+    msg = str(exc.value)
+    assert "\n" not in msg and msg.startswith("s.toml: ") and needle in msg, msg
+
+
+def test_schema_outputs_combine_and_modes():
+    base = 'mode = "sweep"\n[sweep]\nstudy = "x.toml"\n'
+    two = (
+        '[[sweep.vary]]\nfield = "filter.stop_days"\nvalues = [3.0, 4.0]\n'
+        '[[sweep.vary]]\nfield = "tracking[0].sigma"\nstart = 0.5\nstop = 2.0\nnum = 3\n'
+    )
+    with pytest.raises(DeckError, match="zip needs the same number of values"):
+        parse_sweep_deck(base + 'combine = "zip"\n' + two, "s.toml")
+    with pytest.raises(DeckError, match="unknown output 'rss'"):
+        parse_sweep_deck(base + 'outputs = ["rss"]\n' + two, "s.toml")
+    with pytest.raises(DeckError, match="gives 6 studies"):
+        parse_sweep_deck(base + "max_studies = 5\n" + two, "s.toml")
+    cfg = parse_any(base + two, "s.toml")
+    assert isinstance(cfg, SweepDeck)
+    assert cfg.studies() == [(a, b) for a in (3.0, 4.0) for b in (0.5, 1.25, 2.0)]
+    assert parse_vary("a.b=log:1e-3:1e-1:3") == {"field": "a.b", "start": 1e-3, "stop": 0.1, "num": 3, "spacing": "log"}
+    assert parse_vary("a.b=1,2.5,true") == {"field": "a.b", "values": [1, 2.5, True]}
+    with pytest.raises(DeckError, match="expected FIELD=VALUES"):
+        parse_vary("a.b")
+
+
+def test_vary_refuses_bad_values_and_missing_entries(study_dir):
+    base = load_team_deck(study_dir / "team_small.toml")
+    with pytest.raises(DeckError, match=r"thrust_noise.proportionality.sigma = 2.0: must be <= 1"):
+        vary(base, FIELD, 2.0)
+    with pytest.raises(DeckError, match=r"index \[7\] is out of range"):
+        vary(base, "tracking[7].sigma", 1.0)
+    cfg = make_deck(study_dir, [1.0], name="bad_index.toml").model_dump(mode="python", exclude_unset=True)
+    cfg["sweep"]["vary"][0]["field"] = "tracking[9].sigma"
+    deck = SweepDeck.model_validate(cfg)
+    deck._source_path = str(study_dir / "bad_index.toml")
+    with pytest.raises(DeckError, match=r"sweep.vary\[0\].field = 'tracking\[9\].sigma': not in the study"):
+        run_sweep(deck, workers=0)
+
+
+# ----------------------------------------------------------------------------- vary
+def test_vary_equals_the_deck_edited_by_hand(study_dir, tmp_path):
+    base = load_team_deck(study_dir / "team_small.toml")
+    v = vary(base, "tracking[1].sigma", 1.5)
+    assert v.tracking[1].sigma == 1.5 and base.tracking[1].sigma == 1.0
+    assert v.source_path == base.source_path and v.source_text == base.source_text
+    text = (study_dir / "team_small.toml").read_text()
+    marker = 'stations = ["madrid"]\nstart_days = 0.0\nstop_days = 3.0\ninterval_hours = 4.0\nsigma = 1.0'
+    assert text.count(marker) == 1
+    edited = tmp_path / "team_small.toml"
+    edited.write_text(text.replace(marker, marker[: -len("1.0")] + "1.5"))
+    shutil.copy(study_dir / "team_small_traj.toml", tmp_path / "team_small_traj.toml")
+    hand = load_team_deck(edited)
+    assert hand.model_dump() == v.model_dump()
+    pa, _, _ = pipeline.run_team(v, output=tmp_path / "a.h5")
+    pb, _, _ = pipeline.run_team(hand, output=tmp_path / "b.h5")
+    for name in ("P_plus", "P_minus", "sigma"):
+        assert np.array_equal(getattr(pa.assumed, name), getattr(pb.assumed, name))
+        assert np.array_equal(getattr(pa.true, name), getattr(pb.true, name))
+
+
+# ----------------------------------------------------------------------------- running
+def _numbers(rows):
+    return [(r["index"], r["key"], r[FIELD], *(r[o] for o in OUTPUTS), r["status"]) for r in rows]
+
+
+def test_serial_sweep_equals_the_studies_run_one_by_one(serial, study_dir, tmp_path):
+    cfg, res, _ = serial
+    assert [r["status"] for r in res.rows] == ["ok"] * 4 and res.ran == [0, 1, 2, 3]
+    base = load_team_deck(study_dir / "team_small.toml")
+    for r, value in zip(res.rows, VALUES):
+        product, _, _ = pipeline.run_team(vary(base, FIELD, value), output=tmp_path / "one.h5")
+        s = product.assumed.sigma[-1]
+        assert r["position_rss_km"] == float(np.sqrt(np.sum(s[:3] ** 2)))
+        assert r["velocity_rss_km_s"] == float(np.sqrt(np.sum(s[3:6] ** 2)))
+        assert r["sigma[thrust_scale]"] == float(s[product.labels.index("thrust_scale")])
+        assert r["true_position_rss_km"] == float(np.sqrt(np.sum(product.true.sigma[-1][:3] ** 2)))
+    t = read_sweep_table(res.table)
+    assert _numbers(t.rows()) == _numbers(res.rows)
+    assert t.units[FIELD] == "1" and t.units["position_rss_km"] == "km" and t.units["velocity_rss_km_s"] == "km/s"
+    head = csv_path(res.table).read_text().splitlines()[0]
+    assert head.startswith("index,key,thrust_noise.proportionality.sigma [1],position_rss_km [km]")
+
+
+@pytest.mark.slow
+def test_local_cluster_gives_the_same_numbers(serial, study_dir):
+    cfg, res0, _ = serial
+    cfg2 = make_deck(study_dir, VALUES, table="cluster.h5", name="cluster.toml")
+    seen = []
+    t0 = time.perf_counter()
+    res = run_sweep(cfg2, workers=2, progress=lambda done, total: seen.append((done, total)))
+    wall = time.perf_counter() - t0
+    assert seen[-1] == (4, 4) and len(seen) == 4
+    assert _numbers(res.rows) == _numbers(res0.rows)
+    print(f"\n2 workers: {len(res.rows)} studies in {wall:.1f} s (cluster start included)")
+
+
+def test_resume_runs_only_the_missing_studies(serial, study_dir, monkeypatch):
+    cfg, res0, _ = serial
+    half = make_deck(study_dir, VALUES, table="resume.h5", name="resume.toml")
+    table = half.resolve(half.output.table)
+    rows = [dict(r) for r in res0.rows if r["index"] in (1, 3)]
+    units = read_sweep_table(res0.table).units
+    write_sweep_table(table, rows, [FIELD], OUTPUTS, units, {"title": "partial"})
+    calls = []
+    real = pipeline.run_team
+    monkeypatch.setattr(pipeline, "run_team", lambda cfg, **kw: calls.append(1) or real(cfg, **kw))
+    res = run_sweep(half, workers=0)
+    assert len(calls) == 2 and res.ran == [0, 2] and res.skipped == [1, 3]
+    assert _numbers(read_sweep_table(table).rows()) == _numbers(res0.rows)
+    calls.clear()
+    run_sweep(half, workers=0)  # everything is in the table now
+    assert calls == []
+
+
+def test_a_failed_study_is_recorded_and_the_others_complete(study_dir):
+    cfg = make_deck(study_dir, [0.01, 2.0, 0.02], table="fail.h5", name="fail.toml")
+    res = run_sweep(cfg, workers=0)
+    assert [r["status"] for r in res.rows] == ["ok", "failed", "ok"]
+    bad = res.rows[1]
+    assert "thrust_noise.proportionality.sigma = 2.0: must be <= 1" in bad["error"] and "\n" not in bad["error"]
+    assert all(np.isnan(bad[o]) for o in OUTPUTS)
+    t = read_sweep_table(res.table)
+    assert t.status == ["ok", "failed", "ok"] and t.error[1] == bad["error"]
+
+
+def test_sweep_main_on_a_team_deck_with_vary(study_dir, tmp_path):
+    out = tmp_path / "cli" / "table.h5"
+    path, text = sweep_main(
+        study_dir / "team_small.toml", [f"{FIELD}=0.01,2.0"], workers=0, scheduler=None, resume=True, out=out
+    )
+    assert path == out and out.exists() and csv_path(out).exists()
+    assert "2 studies" in text and "1 ok, 1 failed" in text and "must be <= 1" in text
+
+
+def test_plot_of_two_fields(study_dir, tmp_path):
+    from fracas.report.sweep import plot_sweep
+
+    rows = [
+        {"index": i, "key": f"k{i}", "a": a, "b": b, "y": a * b, "status": "ok", "error": "", "wall_s": 0.1}
+        for i, (a, b) in enumerate((a, b) for a in (1.0, 2.0, 3.0) for b in (0.1, 0.2))
+    ]
+    table = write_sweep_table(tmp_path / "t.h5", rows, ["a", "b"], ["y"], {"a": "d", "b": "h", "y": "km"}, {})
+    png = plot_sweep(table, tmp_path / "t.png")
+    assert png.stat().st_size > 1000

@@ -257,6 +257,9 @@ def run(
         from fracas.errors import DeckError
 
         mode = deck_mode(read_deck_text(deck), str(deck))
+        if mode == "sweep":
+            _run_sweep(deck, (), None, None, True, output)
+            return
         if mode == "propagate":
             if stm_file is not None:
                 raise DeckError(f'{deck}: --stm is for TEAM decks (mode = "team"); this is a trajectory deck')
@@ -364,6 +367,63 @@ def report(
             click.echo(json.dumps({**data.summary_dict(), "file": str(file)}))
         else:
             print_summary(data, file, width=width)
+
+
+@main.command()
+@click.argument("deck", type=click.Path(dir_okay=True, path_type=Path))
+@click.option(
+    "--vary",
+    multiple=True,
+    metavar="FIELD=VALUES",
+    help="Vary a TEAM-deck field: F=1,2,3 | F=start:stop:num | F=log:start:stop:num (repeatable).",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(0, 256),
+    default=None,
+    help="Dask LocalCluster worker processes (0: in this process; default: one per core).",
+)
+@click.option("--scheduler", metavar="ADDRESS", default=None, help="Run on an existing Dask cluster (tcp://...).")
+@click.option("--resume/--no-resume", default=True, show_default=True, help="Skip the studies already in the table.")
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Sweep table to write (HDF5, with a CSV beside it).",
+)
+@click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
+@click.pass_context
+def sweep(
+    ctx: click.Context,
+    deck: Path,
+    vary: tuple[str, ...],
+    workers: int | None,
+    scheduler: str | None,
+    resume: bool,
+    output: Path | None,
+    debug: bool,
+) -> None:
+    """Run a parametric sweep: a sweep DECK (mode = "sweep"), or a TEAM DECK with --vary."""
+    debug = debug or bool((ctx.obj or {}).get("debug"))
+    with _errors(debug):
+        _run_sweep(deck, vary, workers, scheduler, resume, output)
+
+
+def _run_sweep(deck: Path, vary, workers, scheduler, resume: bool, output: Path | None) -> None:
+    from fracas.sweep import sweep_main
+
+    with _progress(True) as stage:
+        table, summary = sweep_main(
+            deck,
+            list(vary),
+            workers,
+            scheduler,
+            resume,
+            output,
+            progress=lambda done, total: stage(f"studies {done} of {total}"),
+        )
+    click.echo(summary)
+    click.echo(f"written: {table}")
 
 
 @main.command()

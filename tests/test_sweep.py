@@ -229,3 +229,33 @@ def test_plot_of_two_fields(study_dir, tmp_path):
     table = write_sweep_table(tmp_path / "t.h5", rows, ["a", "b"], ["y"], {"a": "d", "b": "h", "y": "km"}, {})
     png = plot_sweep(table, tmp_path / "t.png")
     assert png.stat().st_size > 1000
+
+
+def test_sweep_command_in_process(tmp_path):
+    """``fracas sweep TEAM_DECK --vary F=V --workers 0``: exit 0, the summary line, a table
+    whose rows equal the values asked for, in order."""
+    from click.testing import CliRunner
+
+    from fracas.cli import main
+    from fracas.io.sweep_table import read_sweep_table
+
+    out = tmp_path / "cli_sweep.h5"
+    small = Path(__file__).resolve().parent / "data" / "team_small.toml"
+    r = CliRunner().invoke(
+        main,
+        [
+            "sweep",
+            str(small),
+            "--vary",
+            "thrust_noise.proportionality.sigma=0.01,0.02",
+            "--workers",
+            "0",
+            "-o",
+            str(out),
+        ],
+    )
+    assert r.exit_code == 0, r.output
+    assert "2 studies" in r.stdout and f"written: {out}" in r.stdout
+    t = read_sweep_table(out)
+    np.testing.assert_array_equal(t.inputs["thrust_noise.proportionality.sigma"], [0.01, 0.02])
+    assert t.status == ["ok", "ok"]

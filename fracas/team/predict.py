@@ -4,7 +4,9 @@ When the target time (and every thrust switch on the way) is a reference time, t
 transitions are composed; otherwise the reference is integrated afresh from the stored
 state at the event time (the STM file's trajectory deck when the study reads one), with breaks at the thrust switches in
 between so DYNO's Q̃ never straddles one; assumed and true covariances are mapped with
-PROP eq. 1 over each piece.
+PROP eq. 1 over each piece.  With the fixed-cell noise model (``errcon.process_noise =
+"grid"``, fracas.team.transitions.grid_noise) the noise comes from the study's noise cells,
+the first one clipped to start at the event time.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from fracas.filters import covariance as cov
 from fracas.integrate.propagate import propagate_with_sensitivities
 from fracas.status import RunStatus
 from fracas.team.reference import Reference
-from fracas.team.transitions import augmented_transitions, interval_noise
+from fracas.team.transitions import augmented_transitions, grid_noise, interval_noise
 
 __all__ = ["predictions", "predict_from"]
 
@@ -59,7 +61,10 @@ def predict_from(res, k: int, t_to: float):
         prim = [bodies[int(i)] for i in np.asarray(traj.primary)]
         sub = Reference(t_out, np.array(traj.x), prim, phi, theta, labels, "prediction")
     phis = augmented_transitions(study, sub)
-    Qa, Qt = interval_noise(study, t_out, sub.states, prim, phi)
+    if study.noise_model == "interval":
+        Qa, Qt = interval_noise(study, t_out, sub.states, prim, phi)
+    else:  # the fixed noise cells, clipped to start at t_k
+        Qa, Qt = grid_noise(study, t_out, ref.states[k])
     n = study.layout.n  # PDOT's noise states (appended last) are dropped: DYNO's Q̃ stands for them
     Pa = res.Pa_plus[k][:n, :n]
     Pt = res.Pt_plus[k][:n, :n] if res.Pt_plus is not None else None

@@ -51,7 +51,9 @@ class Study:
     observations[j], true_sigma[j]: tracking entry j, its observation and the real-world
     noise sigma (km, km/s or rad); thrust_switches_s: the thrust on/off times of the
     trajectory (sorted, s); trajectory_end_s: where the reference trajectory ends (s);
-    pdot_step_s: the largest RK4 step of PDOT propagation (s); source: where the study came
+    pdot_step_s: the largest RK4 step of PDOT propagation (s); noise_model: PHI mode's
+    thrust-noise model, "grid" (DYNO on fixed cells of noise_step_s, s) or "interval"
+    (FRACAS's DYNO per schedule interval; fracas.team.transitions); source: where the study came
     from (a deck path, for messages); user_gain_spec: the "module:function" of a user gain.
     """
 
@@ -85,6 +87,8 @@ class Study:
     thrust_switches_s: tuple[float, ...] = ()
     trajectory_end_s: float = 0.0
     pdot_step_s: float = 3600.0
+    noise_model: str = "grid"
+    noise_step_s: float = 3600.0
     user_gain_spec: str = ""
     trajectory_hash: str = ""
     trajectory_source: str = ""

@@ -1,6 +1,26 @@
 """Event inputs of the TEAM filter (numpy): augmented transitions and DYNO's effective
 process noise over the schedule's intervals (FRACAS PTRAN, PROP eq. 3, DYNO).
 
+Two thrust-noise models for PHI mode (``errcon.process_noise``, ``Study.noise_model``):
+
+- ``"interval"`` (FRACAS): DYNO's Q̃ over each schedule interval (:func:`interval_noise`).
+  DYNO's Q̃ is not additive over sub-intervals (Q̃(a, c) != Φ(c, b) Q̃(a, b) Φᵀ + Q̃(b, c)),
+  so every event time (eigenvector, prediction, print) changes the answer (by ~1e-3 in σ
+  on tests/data/team_small.toml).
+- ``"grid"`` (default; :func:`grid_noise`): the noise is computed once on fixed *noise
+  cells* that do not depend on the events: a grid of ``noise_step_s`` anchored at the epoch
+  (t = 0), cut at the thrust switches and at the schedule's first and last times.  Each
+  cell's DYNO Q̃_c is injected at the cell's end b and mapped to the event times with the
+  reference transitions, so the noise over a schedule interval (t_{k-1}, t_k] is
+  Q_k = sum over cells ending in it of Φ(t_k, b) Q̃_c Φ(t_k, b)ᵀ.  That sum composes
+  exactly (Φ(t_c, t_b) Q(t_a, t_b) Φᵀ + Q(t_b, t_c) = Q(t_a, t_c)), so adding event times
+  changes the covariances only at integration round-off (tests/team/test_noise_invariance.py).
+  The reference, Φ and h are integrated in line at the union of the cell ends and the
+  event times.  Between cell ends the covariance lacks the current cell's noise (at most
+  one ``noise_step_s`` of it).  Chosen over carrying the three noise states through the PHI
+  filter (exact, as PDOT does) because it keeps the filter's state, layout and products
+  unchanged; PDOT remains the exact model (``errcon.propagation = "pdot"``).
+
 Shared by the PHI engine, PDOT and prediction events; jitted kernels are compiled once
 per padded size (see :func:`bucket`).
 """
@@ -13,6 +33,7 @@ import numpy as np
 
 from fracas import _jax  # noqa: F401
 from fracas.filters.process_noise import dyno_q
+from fracas.integrate.propagate import propagate_with_sensitivities
 from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at
 from fracas.team.study import Study
 
@@ -23,6 +44,7 @@ __all__ = [
     "noise_partials",
     "primary_index",
     "interval_noise",
+    "grid_noise",
     "process_noise",
     "EPS_T",
 ]
@@ -113,9 +135,90 @@ def interval_noise(study: Study, t: np.ndarray, states: np.ndarray, primary: lis
     return out[0], out[1]
 
 
+def _noise_cells(study: Study, t0: float, t1: float) -> np.ndarray:
+    """The noise-cell ends in [t0, t1]: t0, the grid m * noise_step_s, the thrust switches, t1."""
+    step = float(study.noise_step_s)
+    m0, m1 = int(np.floor(t0 / step)) + 1, int(np.ceil(t1 / step)) - 1
+    pts = [t0, t1] + [m * step for m in range(m0, m1 + 1)] + [s for s in study.thrust_switches_s if t0 < s < t1]
+    pts = np.array(sorted(p for p in pts if t0 <= p <= t1))
+    keep = np.concatenate([[True], np.diff(pts) > TIME_MERGE_S])
+    out = pts[keep]
+    out[-1] = t1
+    return out
+
+
+TIME_MERGE_S = 1e-6  # s: a cell end and an event time closer than this are one point
+
+
+def grid_noise(study: Study, t: np.ndarray, x0: np.ndarray):
+    """Q (K, nx, nx) over each interval (t_{k-1}, t_k] of the fixed-cell model (element 0 is
+    zero), assumed and true: every cell's DYNO Q̃ mapped from its end to t_k (module docstring).
+
+    ``x0`` (7,): the reference state at t[0]; the reference is integrated afresh from it over
+    the union of the cell ends and ``t`` (NaN where that integration fails).
+    """
+    t = np.asarray(t, dtype=np.float64)
+    K, nx = len(t), study.nx
+    zeros = np.zeros((K, nx, nx))
+    if not study.has_noise or K < 2:
+        return zeros, zeros.copy()
+    cells = _noise_cells(study, float(t[0]), float(t[-1]))
+    near = np.abs(t[:, None] - cells[None, :]).min(axis=1) <= TIME_MERGE_S
+    U = np.array(sorted(set(cells.tolist()) | set(t[~near].tolist())))
+    pr = study.problem
+    M = len(U)
+    Up = np.concatenate([U, np.repeat(U[-1:], bucket(M) - M)])  # a few sizes share one compile
+    traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, x0, Up, ())
+    step_phi = np.array(sens.stm_step)[:M, :nx, :nx]
+    xs = np.asarray(traj.x)[:M]
+    prim = np.asarray(traj.primary)[:M].astype(np.int32)
+    iu = {float(u): i for i, u in enumerate(U)}
+    ic = np.array([iu[float(c)] for c in cells])
+    # DYNO over every cell (a, b]: Φ(b, a) from the union steps, h just inside the ends
+    nc = len(cells) - 1
+    phic = np.broadcast_to(np.eye(nx), (nc, nx, nx)).copy()
+    for j in range(nc):
+        for i in range(ic[j] + 1, ic[j + 1] + 1):
+            phic[j] = step_phi[i] @ phic[j]
+    dt = np.diff(cells)
+    e = np.minimum(EPS_T, dt / 2)
+    t_nodes = np.concatenate([cells[:-1] + e, cells[1:] - e])
+    x_nodes = np.concatenate([xs[ic[:-1]], xs[ic[1:]]])
+    p_nodes = np.concatenate([prim[ic[:-1]], prim[ic[1:]]])
+    h = noise_partials(study, t_nodes, x_nodes, p_nodes)
+    mp = bucket(nc)
+    pad = lambda a: np.concatenate([a, np.zeros((mp - nc,) + a.shape[1:])]) if mp > nc else a  # noqa: E731
+    args = (pad(phic), pad(h[:nc]), pad(h[nc:]))
+    out = []
+    cell_end = {int(i) for i in ic[1:]}
+    sched = {}
+    for k, tk in enumerate(t):
+        sched[int(np.argmin(np.abs(U - tk)))] = k
+    for sig, tau in (
+        (study.noise_sigma_assumed, study.noise_tau_assumed),
+        (study.noise_sigma_true, study.noise_tau_true),
+    ):
+        qc = np.asarray(_dyno_batch(*args, jnp.asarray(sig), jnp.asarray(tau), jnp.asarray(pad(dt))))[:nc]
+        qc_at = {int(ic[j + 1]): qc[j] for j in range(nc)}
+        Q = zeros.copy()
+        acc = np.zeros((nx, nx))
+        for i in range(1, len(U)):
+            acc = step_phi[i] @ acc @ step_phi[i].T
+            if i in cell_end:
+                acc = acc + qc_at[i]
+            if i in sched:
+                Q[sched[i]] = 0.5 * (acc + acc.T)
+                acc = np.zeros((nx, nx))
+        out.append(Q)
+    return out[0], out[1]
+
+
 def process_noise(study: Study, ref) -> tuple[np.ndarray, np.ndarray]:
-    """DYNO's Q̃ over the schedule's intervals, assumed and true levels."""
-    return interval_noise(study, ref.times_s, ref.states, ref.primary, ref.phi)
+    """The effective process noise over the schedule's intervals, assumed and true levels:
+    the fixed-cell model (``study.noise_model == "grid"``) or FRACAS's per-interval DYNO."""
+    if study.noise_model == "interval":
+        return interval_noise(study, ref.times_s, ref.states, ref.primary, ref.phi)
+    return grid_noise(study, ref.times_s, ref.states[0])
 
 
 _bucket = bucket  # old private name

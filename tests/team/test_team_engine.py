@@ -376,6 +376,7 @@ def test_pdot_and_phi_position_sigmas(base):
     _, ref, _ = base
     d = small_dict()
     del d["event"][1]
+    d["errcon"] = {"process_noise": "interval"}  # FRACAS's per-interval DYNO (the numbers above)
     phi, pdot = _pdot_pair(ref, d)
     n = phi.study.layout.n
     assert pdot.Pa_plus.shape[-1] == n + 3 and pdot.labels[n:] == [

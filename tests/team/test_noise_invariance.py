@@ -1,10 +1,10 @@
 """Diagnostic events must not change the answer (issue 9 item 8; fracas.team.transitions).
 
-PHI mode's default thrust-noise model (``errcon.process_noise = "grid"``) computes DYNO's
+PHI mode's fixed-cell thrust-noise model (``errcon.process_noise = "grid"``) computes DYNO's
 Q̃ on fixed noise cells and maps it to the event times, so adding eigenvector and
 prediction events leaves every covariance at the common schedule times unchanged up to
-integration round-off.  FRACAS's per-interval DYNO (``"interval"``) does not: it is the
-negative control.  Also PDOT's step accuracy and 4th-order convergence.
+integration round-off.  FRACAS's per-interval DYNO (``"interval"``, still the default) does
+not: it is the negative control.  Also PDOT's step accuracy and 4th-order convergence.
 
 Measured on tests/data/team_small.toml with eigenvector events at 0.37 and 1.91 d and a
 prediction event at 2.23 d: grid 3.5e-12 (scaled, Pa+, Pa-, Pt+), interval 3.0e-3.
@@ -69,12 +69,12 @@ def grid_pair():
     return _pair("grid")
 
 
-def test_grid_noise_is_default_and_invariant_to_events(grid_pair):
+def test_grid_noise_is_invariant_to_events(grid_pair):
     """Every covariance (assumed and true, before and after each update) at the common
     schedule times is unchanged by the extra events: measured 3.5e-12 scaled (integration
     round-off at the extra output times); tolerance 1e-10."""
     a, b = grid_pair
-    assert a.study.noise_model == "grid" and study_of(small_dict()).noise_model == "grid"
+    assert a.study.noise_model == "grid" and study_of(small_dict()).noise_model == "interval"  # FRACAS default
     assert a.study.has_noise and np.any(a.Q_assumed[1:] != 0)
     e = _max_diff(a, b)
     print(f"grid: max scaled difference with/without extra events {e:.2e}")

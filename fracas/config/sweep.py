@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import math
 import re
-import types
 import typing
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -35,7 +34,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, Field, model_validator
 
 from fracas.config.team import TeamDeck
-from fracas.config.trajectory import FieldProblem, SourcedDeck, _Section, parse_sourced, read_deck_text
+from fracas.config.trajectory import FieldProblem, SourcedDeck, _Section, _strip, parse_sourced, read_deck_text
 
 __all__ = [
     "SweepDeck",
@@ -75,20 +74,6 @@ def parse_field_path(path: str) -> tuple[str | int, ...]:
         out.append(m.group(1))
         out.extend(int(i) for i in re.findall(r"\[([0-9]+)\]", m.group(2)))
     return tuple(out)
-
-
-def _strip(ann: Any) -> Any:
-    while True:
-        origin = typing.get_origin(ann)
-        if origin is Annotated:
-            ann = typing.get_args(ann)[0]
-        elif origin in (typing.Union, types.UnionType):
-            args = [a for a in typing.get_args(ann) if a is not type(None)]
-            if len(args) != 1:
-                return ann
-            ann = args[0]
-        else:
-            return ann
 
 
 def check_field_path(path: str) -> tuple[str | int, ...]:

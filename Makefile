@@ -23,6 +23,7 @@ demo: $(STAMP)
 	$(BIN)/fracas stm info stm_files/mercury_approach.h5
 	$(BIN)/fracas run namelists/mercury_approach_team.toml --stm stm_files/mercury_approach.h5
 	$(BIN)/fracas report out/earth_mars_team.h5 --quiet
+	$(BIN)/fracas sweep namelists/earth_mars_sweep.toml --workers 0
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -226,7 +226,10 @@ def check_path(path: str | Path) -> tuple[str | None, list[str]]:
     if mode == "team":
         return mode, _team_problems(deck)
     if mode == "sweep":
-        return mode, check_path(deck.resolve(deck.sweep.study))[1]
+        study = deck.resolve(deck.sweep.study)
+        if not study.is_file():
+            return mode, [f'{src}: sweep.study = "{cut(deck.sweep.study)}": no such TEAM deck ({cut(str(study))})']
+        return mode, check_path(study)[1]
     return mode, _trajectory_problems(deck)
 
 

@@ -114,7 +114,7 @@ def test_mutants_give_one_line_errors(deck, tmp_path):
     rng = random.Random(f"{SEED}-{deck.name}")
     original = deck.read_text(encoding="utf-8")
     # the TEAM decks' trajectory decks, copied beside the mutant (sometimes mutated too)
-    traj_names = re.findall(r'^deck\s*=\s*"([^"]+)"', original, flags=re.M)
+    traj_names = re.findall(r'^(?:deck|study)\s*=\s*"([^"]+)"', original, flags=re.M)
     for name in traj_names:
         shutil.copy(deck.parent / name, tmp_path / name)
     target = tmp_path / deck.name

@@ -42,7 +42,13 @@ class ResultsFileError(FracasError):
 
 
 class OutputPathError(FracasError):
-    """An output path cannot be written (a directory, an unwritable or impossible folder, empty)."""
+    """An output path cannot be written (a directory, an unwritable or impossible folder, empty).
+
+    ``reason``: the cause alone, without the path (for callers that name the deck field)."""
+
+    def __init__(self, *args, reason: str = "", **kw):
+        super().__init__(*args, **kw)
+        self.reason = reason or (str(args[0]) if args else "")
 
 
 class ConvergenceError(FracasError):

@@ -22,7 +22,6 @@ deck: about 5-20 ms per bundled deck in a warm process on the 2-core development
 from __future__ import annotations
 
 import importlib
-import os
 import types
 from pathlib import Path
 
@@ -31,7 +30,8 @@ from fracas.config.limits import team_size_problems
 from fracas.config.modes import deck_mode, parse_any
 from fracas.config.team import TeamDeck
 from fracas.config.trajectory import TrajectoryDeck, cut, load_deck, read_deck_text, trajectory_hash
-from fracas.errors import FracasError
+from fracas.errors import FracasError, OutputPathError
+from fracas.io.atomic import check_output_path
 from fracas.measurements.kinds import check_measurement_label, is_measurement_label
 from fracas.params import parse_label
 
@@ -70,18 +70,11 @@ def _label_problem(label: str, model, stations, src: str, field: str, dynamic_on
 
 
 def _output_problem(path: Path, src: str, field: str, rel: str) -> str | None:
-    """A file a run will write: not a directory; its folder exists or can be made, writable."""
-    if path.is_dir():
-        return _line(src, field, rel, f"is a directory ({path}); expected a file name")
-    parent = path.parent
-    while not parent.exists():
-        if parent == parent.parent:
-            break
-        parent = parent.parent
-    if parent.exists() and not parent.is_dir():
-        return _line(src, field, rel, f"cannot create its folder: {parent} is a file")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        return _line(src, field, rel, f"cannot write there: {parent} is not writable")
+    """A file a run will write, checked as the run will check it (:func:`fracas.io.atomic.check_output_path`)."""
+    try:
+        check_output_path(path, field)
+    except OutputPathError as exc:
+        return _line(src, field, rel, exc.reason)
     return None
 
 

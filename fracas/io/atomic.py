@@ -191,9 +191,14 @@ def check_output_path(path: str | os.PathLike, what: str) -> Path:
         raise OutputPathError(f"{what}: output path {text!r} is not a file name, expected e.g. out/{_example(what)}")
     dest = Path(text).expanduser()
     if text.endswith(("/", os.sep)) or dest.is_dir():
-        raise OutputPathError(f"{dest}: {what} is a directory, expected a file name inside it")
+        raise OutputPathError(
+            f"{dest}: {what} is a directory, expected a file name inside it",
+            reason=f"is a directory ({dest}); expected a file name",
+        )
     if dest.exists() and not dest.is_file():
-        raise OutputPathError(f"{dest}: {what} exists and is not a regular file")
+        raise OutputPathError(
+            f"{dest}: {what} exists and is not a regular file", reason=f"exists and is not a regular file ({dest})"
+        )
     folder = dest.parent
     probe = folder
     while not probe.exists():  # the nearest existing ancestor decides whether mkdir can work
@@ -201,11 +206,15 @@ def check_output_path(path: str | os.PathLike, what: str) -> Path:
             break
         probe = probe.parent
     if not probe.is_dir():
-        raise OutputPathError(f"{dest}: {what}: folder {probe} is a file, expected a directory")
+        raise OutputPathError(
+            f"{dest}: {what}: folder {probe} is a file, expected a directory",
+            reason=f"cannot create its folder: {probe} is a file",
+        )
     if not os.access(probe, os.W_OK | os.X_OK):
+        why = f"cannot write there: {probe} is not writable"
         if probe == folder:
-            raise OutputPathError(f"{dest}: {what}: folder {folder} is not writable")
-        raise OutputPathError(f"{dest}: {what}: cannot create folder {folder} ({probe} is not writable)")
+            raise OutputPathError(f"{dest}: {what}: folder {folder} is not writable", reason=why)
+        raise OutputPathError(f"{dest}: {what}: cannot create folder {folder} ({probe} is not writable)", reason=why)
     return dest
 
 

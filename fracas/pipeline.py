@@ -233,10 +233,14 @@ def run_team(
     output: str | Path | None = None,
     on_stage: Stage | None = None,
     plot: str | Path | None = None,
+    write_results: bool = True,
 ):
     """``fracas run`` on a TEAM deck (path or TeamDeck): case -> reference (STM file or in
     line) -> filter -> TeamProduct -> results file (and punch file).  Every output (results,
     punch, an STM file to build, the ``plot`` the caller will draw) is checked before any work.
+
+    ``write_results=False`` (sweeps, in-memory callers) returns the product without writing the
+    results file (the path returned is then None); punch files are still written.
 
     Returns (TeamProduct or None when ``errcon.analysis = false``, results path, reference source).
     """
@@ -258,7 +262,8 @@ def run_team(
         else (cfg.resolve(cfg.output.results) if cfg.output.results else default_output(cfg.source_path))
     )
     if ec.analysis:
-        check_output_path(out, "results file")
+        if write_results:
+            check_output_path(out, "results file")
         if cfg.punch is not None:
             check_output_path(cfg.resolve(cfg.punch.file), "punch file")
         if plot is not None:
@@ -309,8 +314,11 @@ def run_team(
         },
         provenance=provenance(cfg.source_text, study.source),
     )
-    say("writing the results file")
-    write_team_results(out, product)
+    if write_results:
+        say("writing the results file")
+        write_team_results(out, product)
+    else:
+        out = None
     if cfg.punch is not None:
         write_punch(cfg.resolve(cfg.punch.file), product)
     product.timing["total_s"] = time.perf_counter() - t0

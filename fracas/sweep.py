@@ -12,8 +12,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import shutil
-import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -217,7 +215,6 @@ def run_one(
     row: dict[str, Any] = {"index": int(index), "key": key}
     row.update({f: _plain(v) for f, v in zip(fields, values)})
     row.update(dict.fromkeys(outputs, float("nan")))
-    tmp = None
     try:
         cfg = vary_many(base, dict(zip(fields, values)))
         # studies share no side outputs: no per-study STM build, no punch file
@@ -230,20 +227,13 @@ def run_one(
             src, text = cfg._source_path, cfg._source_text
             cfg = cfg.model_copy(update=upd)
             cfg._source_path, cfg._source_text = src, text
-        if results is None:
-            tmp = tempfile.mkdtemp(prefix="fracas-sweep-")
-            out = Path(tmp) / "study.h5"
-        else:
-            out = Path(results)
-        product, _, _ = pipeline.run_team(cfg, stm=stm, output=out)
+        out = None if results is None else Path(results)
+        product, _, _ = pipeline.run_team(cfg, stm=stm, output=out, write_results=out is not None)
         vals, units = outputs_of(product, outputs)
         row.update(vals)
         row.update(status="ok", error="", units=units)
     except Exception as exc:  # noqa: BLE001 - every failure becomes the study's row
         row.update(status="failed", error=_one_line(exc), units={})
-    finally:
-        if tmp is not None:
-            shutil.rmtree(tmp, ignore_errors=True)
     row["wall_s"] = time.perf_counter() - t0
     return row
 

@@ -290,13 +290,12 @@ def run_team(
     if not ec.analysis:
         return None, None, ref.source
     res = run_study(study, ref, say)
-    for k, stats in res.prediction_status.items():
-        for t_to, s in zip(study.schedule.predict_to_s[k], stats):
-            if s:
-                raise NumericalError(
-                    f"{study.source}: prediction from {res.times_s[k] / DAY_S:.6g} d to "
-                    f"{t_to / DAY_S:.6g} d: the integration stopped (status {int(s)})"
-                )
+    failed = [
+        (k, t_to)
+        for k, stats in res.prediction_status.items()
+        for t_to, s in zip(study.schedule.predict_to_s[k], stats)
+        if s
+    ]
     t3 = time.perf_counter()
     res.timing.update({"setup_s": t1 - t0, "reference_s": t2 - t1, "analysis_s": t3 - t2})
     tdeck = case.traj_deck
@@ -322,4 +321,11 @@ def run_team(
     if cfg.punch is not None:
         write_punch(cfg.resolve(cfg.punch.file), product)
     product.timing["total_s"] = time.perf_counter() - t0
+    if failed:  # the run and its file stand; the failed prediction is the user's one-line error
+        k, t_to = failed[0]
+        written = f"; results written to {out}" if out is not None else ""
+        raise NumericalError(
+            f"{study.source}: prediction from {res.times_s[k] / DAY_S:.6g} d to {t_to / DAY_S:.6g} d: the "
+            f"integration stopped before the target (status {int(RunStatus.OUTSIDE_TRAJECTORY)}){written}"
+        )
     return product, out, ref.source

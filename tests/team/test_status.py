@@ -60,3 +60,27 @@ def test_pipeline_turns_the_status_into_one_line(monkeypatch):
     monkeypatch.setattr(pl, "load_team", stopped)
     with pytest.raises(NumericalError, match=r"team_small_traj\.toml: the reference trajectory stopped before t = "):
         pl.run_team(SMALL, output=None)
+
+
+def test_failed_prediction_still_writes_the_results_file(monkeypatch, tmp_path):
+    """A prediction that reports OUTSIDE_TRAJECTORY (patched in: the deck validators refuse
+    a target beyond the trajectory) does not cost the run: the results file is written,
+    records the prediction's status and the run's, and the edge's one-line error says so."""
+    import fracas.team.result as result
+    from fracas.errors import NumericalError
+    from fracas.io.team_results import read_team_results
+    from fracas.pipeline import run_team
+
+    real = result.predictions
+
+    def failing(res):
+        out, status = real(res)
+        return out, {k: [int(RunStatus.OUTSIDE_TRAJECTORY)] * len(v) for k, v in status.items()}
+
+    monkeypatch.setattr(result, "predictions", failing)
+    out = tmp_path / "pred.h5"
+    with pytest.raises(NumericalError, match=rf"prediction from .* results written to {out}"):
+        run_team(SMALL, output=out)
+    r = read_team_results(out)
+    assert [p["status"] for p in r["predictions"]] == [int(RunStatus.OUTSIDE_TRAJECTORY)]
+    assert int(r["attrs"]["status"]) == RunStatus.OUTSIDE_TRAJECTORY

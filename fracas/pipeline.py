@@ -154,10 +154,10 @@ def load_team(deck):
     return build_case(cfg, punched)
 
 
-def _reference_failed(case, ref) -> NumericalError:
+def _reference_failed(case, failed_at_s: float, integrator_status: int) -> NumericalError:
     return NumericalError(
-        f"{case.traj_deck.source_path}: the reference trajectory stopped before t = {ref.failed_at_s / DAY_S:.6g} d "
-        f"(status {ref.integrator_status}); the study's times must lie on the trajectory"
+        f"{case.traj_deck.source_path}: the reference trajectory stopped before t = {failed_at_s / DAY_S:.6g} d "
+        f"(status {int(integrator_status)}); the study's times must lie on the trajectory"
     )
 
 
@@ -175,10 +175,7 @@ def stm_product(case):
     labels = stm_file_labels(case)
     traj, sens, status, failed_at = run_reference(study.problem, times, labels)
     if status != RunStatus.OK:
-        raise NumericalError(
-            f"{case.traj_deck.source_path}: the reference trajectory stopped before t = {failed_at / DAY_S:.6g} d "
-            f"(status {int(traj.status)}); the study's times must lie on the trajectory"
-        )
+        raise _reference_failed(case, failed_at, traj.status)
     sched = study.schedule
     ev = []
     for t in times:
@@ -285,7 +282,7 @@ def run_team(
         say("integrating the reference and its sensitivities")
         ref = integrate_reference(study)
         if ref.status != RunStatus.OK:
-            raise _reference_failed(case, ref)
+            raise _reference_failed(case, ref.failed_at_s, ref.integrator_status)
     t2 = time.perf_counter()
     if not ec.analysis:
         return None, None, ref.source

@@ -31,12 +31,24 @@ def _gain(kind, user_gain, layout, Pa, Pnc, H, R):
 
 
 @partial(jax.jit, static_argnames=("layout", "kind", "gencov", "square_root", "user_gain"))
-def _scan(P0a, P0t, phi_aug, Qa, Qt, H, Ra, Rt, *, layout, kind, gencov, square_root, user_gain=None):
+def _scan(P0a, P0t, phi_aug, Qa, Qt, H, Ra, Rt, Xa=None, Xt=None, *, layout, kind, gencov, square_root, user_gain=None):
+    """One pass of the filter over K events.  Xa / Xt (K, nx, nx), optional: maneuver
+    execution-error covariance added to the assumed / true knowledge after the event's
+    measurement update (guidance events, GUIDM); the ``P_plus`` outputs include it."""
     n_est = layout.n_est
+    eye_n = jnp.eye(layout.n)
+    if Xa is None:
+        Xa = jnp.zeros_like(Qa)
+    if Xt is None:
+        Xt = jnp.zeros_like(Qt)
+    nx = Qa.shape[-1]
+
+    def add_exec(P, x):
+        return P.at[:nx, :nx].add(x)
 
     def step(carry, ev):
         A, T, Pnc = carry
-        phi, qa, qt, h, ra, rt = ev
+        phi, qa, qt, h, ra, rt, xa, xt = ev
         if kind == "wls":
             Pnc = cov.wls_time_update(Pnc, phi, layout)
         if square_root:
@@ -46,23 +58,23 @@ def _scan(P0a, P0t, phi_aug, Qa, Qt, H, Ra, Rt, *, layout, kind, gencov, square_
                 K = sqr.sqrt_kalman_schmidt_gain(Wa, h, ra, layout)
             else:
                 K, Pnc = _gain(kind, user_gain, layout, Pa_m, Pnc, h, ra)
-            Wa1 = sqr.sqrt_joseph_update(Wa, h, ra, K)
+            Wa1 = sqr.sqrt_time_update(sqr.sqrt_joseph_update(Wa, h, ra, K), eye_n, xa)
             Pa_p = Wa1 @ Wa1.T
             A1 = Wa1
         else:
             Pa_m = cov.time_update(A, phi, qa)
             K, Pnc = _gain(kind, user_gain, layout, Pa_m, Pnc, h, ra)
-            Pa_p = cov.joseph_update(Pa_m, h, ra, K)
+            Pa_p = add_exec(cov.joseph_update(Pa_m, h, ra, K), xa)
             A1 = Pa_p
         _, J = cov.innovation(Pa_m, h, ra)
         if gencov:
             if square_root:
                 Wt = sqr.sqrt_time_update(T, phi, qt)
-                Wt1 = sqr.sqrt_joseph_update(Wt, h, rt, K)
+                Wt1 = sqr.sqrt_time_update(sqr.sqrt_joseph_update(Wt, h, rt, K), eye_n, xt)
                 Pt_m, Pt_p, T1 = Wt @ Wt.T, Wt1 @ Wt1.T, Wt1
             else:
                 Pt_m = cov.time_update(T, phi, qt)
-                Pt_p = cov.joseph_update(Pt_m, h, rt, K)
+                Pt_p = add_exec(cov.joseph_update(Pt_m, h, rt, K), xt)
                 T1 = Pt_p
         else:
             Pt_m = Pt_p = T1 = T
@@ -73,7 +85,7 @@ def _scan(P0a, P0t, phi_aug, Qa, Qt, H, Ra, Rt, *, layout, kind, gencov, square_
     else:
         A0, T0 = P0a, P0t
     Pnc0 = P0a[:n_est, :n_est]
-    _, outs = jax.lax.scan(step, (A0, T0, Pnc0), (phi_aug, Qa, Qt, H, Ra, Rt))
+    _, outs = jax.lax.scan(step, (A0, T0, Pnc0), (phi_aug, Qa, Qt, H, Ra, Rt, Xa, Xt))
     return outs
 
 
@@ -91,12 +103,28 @@ def _pad_events(K: int, Kp: int, arrays):
     return out
 
 
-def run_filter(study: Study, phi_aug, Qa, Qt, meas):
-    """Run the jitted scan over the schedule (padded to a bucket size); numpy outputs."""
+def run_filter(study: Study, phi_aug, Qa, Qt, meas, Xa=None, Xt=None):
+    """Run the jitted scan over the schedule (padded to a bucket size); numpy outputs.
+
+    Xa / Xt (K, nx, nx): execution-error covariances of guidance events (zero elsewhere;
+    default none), added to the assumed / true knowledge after the event."""
     K = study.schedule.n
     Kp = bucket(K)
-    phi_aug, Qa, Qt, H, Ra, Rt = _pad_events(
-        K, Kp, [("phi", phi_aug), ("Q", Qa), ("Q", Qt), ("H", meas.H), ("R", meas.R_assumed), ("R", meas.R_true)]
+    Xa = np.zeros_like(Qa) if Xa is None else Xa
+    Xt = np.zeros_like(Qt) if Xt is None else Xt
+    phi_aug, Qa, Qt, H, Ra, Rt, Xa, Xt = _pad_events(
+        K,
+        Kp,
+        [
+            ("phi", phi_aug),
+            ("Q", Qa),
+            ("Q", Qt),
+            ("H", meas.H),
+            ("R", meas.R_assumed),
+            ("R", meas.R_true),
+            ("Q", Xa),
+            ("Q", Xt),
+        ],
     )
     try:
         outs = _scan(
@@ -108,6 +136,8 @@ def run_filter(study: Study, phi_aug, Qa, Qt, meas):
             jnp.asarray(H),
             jnp.asarray(Ra),
             jnp.asarray(Rt),
+            jnp.asarray(Xa),
+            jnp.asarray(Xt),
             layout=study.layout,
             kind=study.filter_kind,
             gencov=study.gencov,

@@ -211,6 +211,12 @@ def build_stm(deck, output: str | Path | None = None, on_stage: Stage | None = N
 
 def reference_from_stm(study, stm_path: str | Path):
     """STMRDR: a study's columns and times from an STM file, checked against its trajectory."""
+    return read_reference(study, stm_path)[0]
+
+
+def read_reference(study, stm_path: str | Path):
+    """STMRDR: (the study's Reference, the file's ReferenceTrajectory with the study's
+    columns), checked against its trajectory; guidance reads cutoff and target times from it."""
     from fracas.io.stm_file import check_trajectory, read_stm_file
     from fracas.team.reference import reference_from_product
 
@@ -221,7 +227,7 @@ def reference_from_stm(study, stm_path: str | Path):
         epoch_et_s=float(study.problem.epoch_et_s),
     )  # within 1e-6 s, absolute
     check_trajectory(data, study.trajectory_hash, stm_path, study.trajectory_source)
-    return reference_from_product(study, data, str(stm_path))
+    return reference_from_product(study, data, str(stm_path)), data
 
 
 def run_team(
@@ -277,8 +283,9 @@ def run_team(
                 f"{cfg.source_path or 'DECK'} -o {stm_path})"
             )
         say("reading the STM file")
-        ref = reference_from_stm(study, stm_path)
+        ref, product = read_reference(study, stm_path)
     else:
+        product = None
         say("integrating the reference and its sensitivities")
         ref = integrate_reference(study)
         if ref.status != RunStatus.OK:
@@ -286,7 +293,7 @@ def run_team(
     t2 = time.perf_counter()
     if not ec.analysis:
         return None, None, ref.source
-    res = run_study(study, ref, say)
+    res = run_study(study, ref, say, product=product)
     failed = [
         (k, t_to)
         for k, stats in res.prediction_status.items()

@@ -28,6 +28,9 @@ from fracas.status import status_text
 __all__ = [
     "ReferenceTrajectory",
     "TeamProduct",
+    "GuidanceEvent",
+    "ControlHistory",
+    "ErrorBudget",
     "TrajectoryData",
     "SensitivityData",
     "chain",
@@ -265,6 +268,71 @@ class Prediction:
     status: int = 0
 
 
+@dataclass
+class GuidanceEvent:
+    """One TEAM guidance event's results (GUIDM's printout, digest B.10).
+
+    index: schedule index of time_s (guidance epoch or initiation, s); cutoff_s, target_time_s
+    (s); target_body; estimate_model: the P̃ model; rank: of the targeting matrix; targets
+    (m) and controls (M) with units (impulsive: dv_x, dv_y, dv_z in km/s); psi (m, n): Ψ at
+    the cutoff; gamma (M, n): the guidance law δU = −Γ δX̂; target_cov_before / after /
+    knowledge (m, m): the dispersion before and after the correction and the knowledge
+    mapped to the target; correction_cov, execution_cov (M, M); mean, 99 % and RMS |ΔV| km/s
+    (low thrust: of the arc's ΔV change); propellant_sigma_kg (low thrust); status."""
+
+    name: str
+    type: str
+    index: int
+    time_s: float
+    cutoff_s: float
+    target_time_s: float
+    target_body: str
+    estimate_model: str
+    rank: int
+    target_names: list[str]
+    target_units: list[str]
+    control_labels: list[str]
+    control_units: list[str]
+    psi: np.ndarray
+    gamma: np.ndarray
+    target_cov_before: np.ndarray
+    target_cov_after: np.ndarray
+    target_cov_knowledge: np.ndarray
+    correction_cov: np.ndarray
+    execution_cov: np.ndarray
+    dv_mean_km_s: float = float("nan")
+    dv_99_km_s: float = float("nan")
+    dv_rms_km_s: float = float("nan")
+    propellant_sigma_kg: float = float("nan")
+    status: int = 0
+
+
+@dataclass
+class ControlHistory:
+    """The control covariance (actual − reference, GUIDM's P_c) over the schedule: P_plus
+    (K, n, n) after each event, sigma (K, n), epoch_index (K,) the schedule index of its last
+    reset (a guidance event), a_priori (n, n) the initial control covariance."""
+
+    P_plus: np.ndarray
+    sigma: np.ndarray
+    epoch_index: np.ndarray
+    a_priori: np.ndarray
+
+
+@dataclass
+class ErrorBudget:
+    """outputs / units (n_out,); sources (n_src,); variance (n_out, n_src): each source's
+    contribution to each output's variance (unit²); total (n_out,): the full run's
+    variance; sum_check: max |Σ_s variance − total| / total (fracas.team.budget)."""
+
+    outputs: list[str]
+    units: list[str]
+    sources: list[str]
+    variance: np.ndarray
+    total: np.ndarray
+    sum_check: float
+
+
 @dataclass(frozen=True)
 class TeamProduct:
     """The result of one TEAM run, labelled and self-contained (no deck, no engine state).
@@ -303,6 +371,9 @@ class TeamProduct:
     settings: dict[str, Any] = field(default_factory=dict)
     timing: dict[str, float] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)
+    guidance: list[GuidanceEvent] = field(default_factory=list)
+    control: ControlHistory | None = None
+    budget: ErrorBudget | None = None
 
     @property
     def n_events(self) -> int:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fracas.build.guidance import control_a_priori, guidance_specs, guidance_times
 from fracas.build.trajectory import Problem, build_propagation
 from fracas.config.limits import check_team_sizes
 from fracas.config.team import SIGMA_UNITS, APriori, TeamDeck, ThrustNoise
@@ -262,6 +263,9 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
                     "must be after every time of the prediction event",
                 )
         events.append((e.type, ts, None if e.predict_to_days is None else e.predict_to_days * DAY_S))
+    guid = guidance_specs(deck, tdeck, src)
+    if guid:
+        events.append(("guidance", guidance_times(guid)[0], None))
     switches = []
     for arc in tdeck.thrust_arc:
         switches += [(arc.start_days * DAY_S, "thrust_on"), (arc.stop_days * DAY_S, "thrust_off")]
@@ -318,6 +322,11 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
         trajectory_hash=trajectory_hash(tdeck),
         trajectory_source=tdeck.source_path or "",
         punched=punched,
+        guidance=guid,
+        guidance_model=deck.errcon.guidance_model,
+        P0_control=control_a_priori(deck.control, src, nx, P0t, _state_sigmas),
+        budget=bool(deck.budget.enabled and deck.errcon.propagation == "phi"),
+        budget_at_s=tuple(t * DAY_S for t in deck.budget.at_days),
     )
     return TeamCase(deck, tdeck, study)
 
@@ -333,7 +342,8 @@ def stm_file_times(case: TeamCase) -> np.ndarray:
     grid = np.zeros(0)
     if case.deck.stm.grid_hours:
         grid = range_times(0.0, dur, case.deck.stm.grid_hours * 3600.0)
-    t = merge_times([0.0], study.schedule.times_s, grid, list(study.thrust_switches_s), [dur])
+    extra = guidance_times(study.guidance)[1] if study.guidance else []
+    t = merge_times([0.0], study.schedule.times_s, grid, list(study.thrust_switches_s), [dur], extra)
     return t[(t >= 0) & (t <= dur + 1e-6)]
 
 

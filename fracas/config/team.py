@@ -7,7 +7,9 @@ Layout (only ``[ertraj]`` is required)::
     title = "Mercury approach"
     [errcon]       build_stm = false, analysis = true,       ($ERRCON)
                    propagation = "phi" | "pdot",  stm_file = "stm_files/x.h5"
-                   process_noise = "grid" | "interval",  noise_step_hours = 1.0
+                   process_noise = "grid" | "interval",  noise_step_hours = 1.0,
+                   guidance_model = "report" | "orthogonal" | "tsim"  (the estimated-deviation
+                   covariance that sizes corrections: P_c, P_c − P_k, P_c + P_k)
                    (PHI mode's thrust-noise model: DYNO on a fixed grid, default, or
                    FRACAS's DYNO per schedule interval; fracas.team.transitions)
     [ertraj]       deck = "trajectory.toml"   (relative to this file)      ($ERTRAJ)
@@ -34,6 +36,14 @@ Layout (only ``[ertraj]`` is required)::
     [gencov]       enabled = true, a_priori = {...}, [[gencov.parameter]] (true sigma of a study
                    parameter, or a new role = "ignore" one), thrust_noise = {...},
                    measurement_sigma = {type = sigma}                         ($GENCOV)
+    [control]      the initial control covariance (actual − reference: injection dispersions),
+                   as [a_priori]; default the true a-priori
+    [[guidance]]   name, type = "impulsive" | "primary" | "vernier" | "none", time_days,
+                   targets = ["b_dot_t", ...], target_time_days, target_body, arc,
+                   controls = ["proportionality", "alpha", "beta", "t_on", "t_off"],
+                   weights, tolerances, execution = {proportionality, pointing_mrad,
+                   resolution_mm_s}                              (GUIDM, XGUID; §3.2)
+    [budget]       enabled = true, at_days = [..]   (error budget by source)
     [output]       results = "out/x_team.h5", plot = "out/x_team.png"
     [limits]       max_measurements, max_events, ... (fracas.config.limits.Limits)
 
@@ -157,6 +167,7 @@ class ErrCon(_Section):
     # cell ends even when an STM file is given (Mercury via its STM file: 13 s instead of
     # 5.2 s cold); it becomes the default once STM files carry the noise-cell times.
     process_noise: Literal["grid", "interval"] = "interval"
+    guidance_model: Literal[GUIDANCE_MODELS] = "report"  # type: ignore[valid-type]
     noise_step_hours: PositiveFloat = 1.0
 
 
@@ -334,6 +345,110 @@ class Event(_Section):
         return sorted(set(out))
 
 
+from fracas.guidance.target_kinds import LOW_THRUST_CONTROLS, TARGET_KINDS  # noqa: E402  (jax-free catalogue)
+
+GUIDANCE_TYPES = ("impulsive", "primary", "vernier", "none")
+GUIDANCE_MODELS = ("report", "orthogonal", "tsim")
+
+
+class GuidanceExecution(_Section):
+    """Execution errors of a guidance event (App. 9.1 high-thrust defaults, report L2722).
+
+    Impulsive: proportionality (fraction of |ΔV|), two pointing angles of pointing_mrad each,
+    resolution_mm_s (isotropic); low thrust: proportionality is the fractional 1σ error of
+    each control correction (a fracas choice: the report gives no low-thrust model)."""
+
+    proportionality: Annotated[float, Field(ge=0, le=1)] = 0.01
+    pointing_mrad: Annotated[float, Field(ge=0, le=1000)] = 7.0
+    resolution_mm_s: Annotated[float, Field(ge=0, le=1e6)] = 0.01
+
+
+class Guidance(_Section):
+    """One [[guidance]] event (GUIDM §5.3.6, XGUID §5.3.25), computed statistically.
+
+    type: "impulsive" (ΔV at time_days), "primary" (low-thrust correction of thrust arc
+    ``arc`` from time_days to the arc's end, the cutoff), "vernier" (a later update of a
+    primary on the same arc), "none" (target covariance only).  targets: names of
+    :data:`fracas.guidance.target_kinds.TARGET_KINDS` at target_time_days (default: the
+    reference trajectory's end) about target_body (default: the central body there).
+    controls (low thrust): a subset of proportionality, alpha, beta, t_on, t_off.
+    weights: one per control (impulsive: per ΔV component); tolerances: one per target.
+    """
+
+    name: Annotated[str, Field(pattern=r"^[A-Za-z][A-Za-z0-9_\-]*$", max_length=32)]
+    type: Literal[GUIDANCE_TYPES]  # type: ignore[valid-type]
+    time_days: NonNeg
+    targets: list[str]
+    target_time_days: PositiveFloat | None = None
+    target_body: str | None = None
+    arc: Annotated[int, Field(ge=0)] | None = None
+    controls: list[str] = ["proportionality", "alpha", "beta"]
+    weights: list[PositiveFloat] | None = None
+    tolerances: list[PositiveFloat] | None = None
+    execution: GuidanceExecution = GuidanceExecution()
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Guidance:
+        problems = []
+        if not self.targets and self.type != "none":
+            problems.append(FieldProblem("targets", [], "give at least one target"))
+        for j, t in enumerate(self.targets):
+            if t not in TARGET_KINDS:
+                problems.append(
+                    FieldProblem(("targets", j), t, f"unknown target (expected one of: {', '.join(TARGET_KINDS)})")
+                )
+        if len(set(self.targets)) != len(self.targets):
+            problems.append(FieldProblem("targets", self.targets, "targets must not repeat"))
+        low = self.type in ("primary", "vernier")
+        if low:
+            if self.arc is None:
+                problems.append(FieldProblem("arc", None, f'required for type "{self.type}" (the thrust arc it corrects)'))
+            if not self.controls:
+                problems.append(FieldProblem("controls", [], "give at least one control"))
+            for j, c in enumerate(self.controls):
+                if c not in LOW_THRUST_CONTROLS:
+                    problems.append(
+                        FieldProblem(
+                            ("controls", j), c, f"unknown control (expected one of: {', '.join(LOW_THRUST_CONTROLS)})"
+                        )
+                    )
+            if len(set(self.controls)) != len(self.controls):
+                problems.append(FieldProblem("controls", self.controls, "controls must not repeat"))
+            if self.type == "vernier" and "t_on" in self.controls:
+                problems.append(FieldProblem("controls", self.controls, "a vernier cannot move the arc's start (t_on)"))
+        elif self.arc is not None:
+            problems.append(FieldProblem("arc", self.arc, "only for low-thrust guidance (primary, vernier)"))
+        n_controls = len(self.controls) if low else 3
+        if self.weights is not None and len(self.weights) != n_controls:
+            problems.append(
+                FieldProblem(
+                    "weights",
+                    self.weights,
+                    f"expected {n_controls} values (one per {'control' if low else 'ΔV component'})",
+                )
+            )
+        if self.tolerances is not None and len(self.tolerances) != len(self.targets):
+            problems.append(
+                FieldProblem("tolerances", self.tolerances, f"expected {len(self.targets)} values (one per target)")
+            )
+        raise_problems(problems)
+        return self
+
+    @property
+    def n_controls(self) -> int:
+        return len(self.controls) if self.type in ("primary", "vernier") else 3
+
+
+class BudgetSection(_Section):
+    """[budget]: the error budget (contribution of each error source, exact by linearity).
+
+    enabled: compute it (one extra covariance pass per source); at_days: epochs (within the
+    study) whose position and velocity σ are budgeted besides the final time."""
+
+    enabled: bool = True
+    at_days: list[NonNeg] = []
+
+
 class PrintSection(_Section):
     every: Annotated[int, Field(ge=1)] = 1
     correlations: bool = True
@@ -398,6 +513,9 @@ class TeamDeck(SourcedDeck):
     print: PrintSection = PrintSection()
     punch: Punch | None = None
     gencov: GenCov | None = None
+    control: APriori | None = None
+    guidance: list[Guidance] = []
+    budget: BudgetSection = BudgetSection()
     output: OutputSection = OutputSection()
     limits: Limits = Limits()
 
@@ -448,8 +566,66 @@ class TeamDeck(SourcedDeck):
                         s,
                         f"unknown station (expected one of: {', '.join(sorted(known))})",
                     )
+        self._check_guidance()
         self._check_sizes()
         return self
+
+    def _check_guidance(self) -> None:
+        """Guidance events: unique names, times inside the study, one-per-time, PHI only,
+        verniers after a primary on the same arc, a control a-priori only with guidance."""
+        problems = []
+        seen: dict[str, int] = {}
+        times: dict[float, int] = {}
+        primaries: dict[int, float] = {}
+        if self.guidance and self.errcon.propagation == "pdot":
+            problems.append(
+                FieldProblem(
+                    ("errcon", "propagation"),
+                    "pdot",
+                    "guidance events need propagation = \"phi\" in this release",
+                )
+            )
+        stop = self.filter.stop_days
+        for k, g in enumerate(self.guidance):
+            if g.name in seen:
+                problems.append(FieldProblem(("guidance", k, "name"), g.name, f"repeats guidance[{seen[g.name]}]"))
+            seen[g.name] = k
+            if g.time_days < self.filter.start_days or (stop is not None and g.time_days > stop):
+                problems.append(
+                    FieldProblem(
+                        ("guidance", k, "time_days"),
+                        g.time_days,
+                        f"outside the study ({self.filter.start_days:g} to "
+                        f"{'the trajectory end' if stop is None else f'{stop:g}'} d)",
+                    )
+                )
+            if g.time_days in times:
+                problems.append(
+                    FieldProblem(
+                        ("guidance", k, "time_days"), g.time_days, f"guidance[{times[g.time_days]}] is at the same time"
+                    )
+                )
+            times[g.time_days] = k
+            if g.type == "primary":
+                primaries[int(g.arc)] = g.time_days
+            if g.type == "vernier" and (g.arc not in primaries or primaries[g.arc] >= g.time_days):
+                problems.append(
+                    FieldProblem(
+                        ("guidance", k, "type"),
+                        "vernier",
+                        f"needs an earlier primary on arc {g.arc} (list guidance events in time order)",
+                    )
+                )
+            if g.target_time_days is not None and g.target_time_days < g.time_days:
+                problems.append(
+                    FieldProblem(("guidance", k, "target_time_days"), g.target_time_days, "before the guidance time")
+                )
+        order = [g.time_days for g in self.guidance]
+        if order != sorted(order):
+            problems.append(FieldProblem("guidance", order, "list guidance events in time order"))
+        if self.control is not None and self.control.from_punch is None and not self.guidance:
+            problems.append(FieldProblem("control", None, "a control a-priori needs [[guidance]] events"))
+        raise_problems(problems)
 
     def _check_sizes(self) -> None:
         """The sizes the deck alone implies (observations, event times) against ``[limits]``."""

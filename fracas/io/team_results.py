@@ -14,7 +14,7 @@ import numpy as np
 
 from fracas.errors import DeckError, ResultsFileError
 from fracas.io.hdf5 import Checked, atomic_h5, attr_int, attr_text, write, write_provenance, write_strings
-from fracas.products import CovarianceHistory, TeamProduct
+from fracas.products import CovarianceHistory, GuidanceEvent, TeamProduct
 from fracas.status import status_text
 
 __all__ = ["write_team_results", "read_team_results", "write_punch", "read_punch", "RESULTS_SCHEMA", "PUNCH_SCHEMA"]
@@ -52,6 +52,68 @@ def _write_history(h: h5py.Group, c: CovarianceHistory) -> None:
         write(eg, "velocity_eigenvalues", e.velocity_eigenvalues, "km^2/s^2")
         write(eg, "velocity_eigenvectors", e.velocity_eigenvectors, "1", description="columns")
         write(eg, "correlations", e.correlations, "1")
+
+
+_GUIDANCE_MATRICES = (
+    ("psi", "targets x labels/units", "target variation matrix at the cutoff (TARMAT)"),
+    ("gamma", "controls x labels/units", "guidance law: correction = -gamma @ estimated deviation"),
+    ("target_cov_before", "target units^2", "target covariance of the dispersion before the correction"),
+    ("target_cov_after", "target units^2", "target covariance after the correction"),
+    ("target_cov_knowledge", "target units^2", "knowledge covariance mapped to the target"),
+    ("correction_cov", "control units^2", "covariance of the correction (dV km^2/s^2, or controls)"),
+    ("execution_cov", "control units^2", "execution-error covariance"),
+)
+_GUIDANCE_SCALARS = ("dv_mean_km_s", "dv_99_km_s", "dv_rms_km_s", "propellant_sigma_kg")
+
+
+def _write_guidance(g: h5py.Group, events: list[GuidanceEvent]) -> None:
+    gg = g.create_group("guidance")
+    for i, e in enumerate(events):
+        q = gg.create_group(f"{i:03d}")
+        for k in ("name", "type", "target_body", "estimate_model"):
+            q.attrs[k] = getattr(e, k)
+        q.attrs["index"] = int(e.index)
+        q.attrs["rank"] = int(e.rank)
+        q.attrs["status"] = int(e.status)
+        for k in ("time_s", "cutoff_s", "target_time_s"):
+            write(q, k, float(getattr(e, k)), "s")
+        write_strings(q, "target_names", e.target_names)
+        write_strings(q, "target_units", e.target_units)
+        write_strings(q, "control_labels", e.control_labels)
+        write_strings(q, "control_units", e.control_units)
+        for k, units, desc in _GUIDANCE_MATRICES:
+            write(q, k, np.asarray(getattr(e, k), dtype=np.float64), units, description=desc)
+        for k in _GUIDANCE_SCALARS:
+            write(q, k, float(getattr(e, k)), "km/s" if k.endswith("km_s") else "kg")
+
+
+def _read_guidance(c: Checked, g: h5py.Group, n: int) -> list[dict[str, Any]]:
+    out = []
+    for name in sorted(g["guidance"]):
+        q = g["guidance"][name]
+        base = f"team/guidance/{name}"
+        d: dict[str, Any] = {k: str(q.attrs[k]) for k in ("name", "type", "target_body", "estimate_model")}
+        d.update(index=int(q.attrs["index"]), rank=int(q.attrs["rank"]), status=int(q.attrs.get("status", 0)))
+        for k in ("time_s", "cutoff_s", "target_time_s"):
+            d[k] = c.scalar(f"{base}/{k}")
+        for k in ("target_names", "target_units", "control_labels", "control_units"):
+            d[k] = c.strs(f"{base}/{k}")
+        m, mc = len(d["target_names"]), len(d["control_labels"])
+        shapes = {
+            "psi": (m, n),
+            "gamma": (mc, n),
+            "target_cov_before": (m, m),
+            "target_cov_after": (m, m),
+            "target_cov_knowledge": (m, m),
+            "correction_cov": (mc, mc),
+            "execution_cov": (mc, mc),
+        }
+        for k, _, _ in _GUIDANCE_MATRICES:
+            d[k] = c.num(f"{base}/{k}", shapes[k])
+        for k in _GUIDANCE_SCALARS:
+            d[k] = c.scalar(f"{base}/{k}", finite=False)
+        out.append(d)
+    return out
 
 
 def write_team_results(path: str | os.PathLike, res: TeamProduct) -> None:
@@ -137,6 +199,24 @@ def _write_team_results(path: str | os.PathLike, res: TeamProduct) -> None:
             write_strings(pp, "event", [e for _, e, _, _ in res.psd_problems])
             write_strings(pp, "which", [w for _, _, w, _ in res.psd_problems])
             write(pp, "min_eigenvalue", np.array([e for _, _, _, e in res.psd_problems]), "mixed")
+        if res.guidance:
+            _write_guidance(g, res.guidance)
+        if res.control is not None:
+            cg = g.create_group("control")
+            ct = res.control
+            write(cg, "P_plus", ct.P_plus, "labels/units x labels/units", description="control covariance after the event")
+            write(cg, "sigma", ct.sigma, "labels/units", description="1-sigma of the control covariance")
+            write(cg, "epoch_index", np.asarray(ct.epoch_index, dtype=np.int64), "1", description="last reset")
+            write(cg, "a_priori", ct.a_priori, "labels/units x labels/units", description="initial control covariance")
+        if res.budget is not None:
+            b = res.budget
+            bg = g.create_group("budget")
+            write_strings(bg, "outputs", b.outputs)
+            write_strings(bg, "units", b.units)
+            write_strings(bg, "sources", b.sources)
+            write(bg, "variance", np.asarray(b.variance, dtype=np.float64), "units^2", description="outputs x sources")
+            write(bg, "total", np.asarray(b.total, dtype=np.float64), "units^2", description="the full run's variance")
+            bg.attrs["sum_check"] = float(b.sum_check)
         write_provenance(f, res.provenance)
 
 
@@ -274,6 +354,26 @@ def read_team_results(path: str | os.PathLike, *, verify: bool = True) -> dict[s
                     )
                 )
             out["psd_problems"] = psd
+            if "guidance" in g:
+                out["guidance"] = _read_guidance(c, g, m)
+            if "control" in g:
+                out["control"] = {
+                    "P_plus": c.num("team/control/P_plus", (n, m, m)),
+                    "sigma": c.num("team/control/sigma", (n, m)),
+                    "epoch_index": c.num("team/control/epoch_index", (n,), integer=True),
+                    "a_priori": c.num("team/control/a_priori", (m, m)),
+                }
+            if "budget" in g:
+                outs = c.strs("team/budget/outputs")
+                srcs = c.strs("team/budget/sources")
+                out["budget"] = {
+                    "outputs": outs,
+                    "units": c.strs("team/budget/units", len(outs)),
+                    "sources": srcs,
+                    "variance": c.num("team/budget/variance", (len(outs), len(srcs))),
+                    "total": c.num("team/budget/total", (len(outs),)),
+                    "sum_check": float(g["budget"].attrs.get("sum_check", float("nan"))),
+                }
         return out
     except ResultsFileError:
         raise

@@ -43,8 +43,13 @@ __all__ = [
 ]
 
 
-def run_study(study: Study, ref: Reference, progress=None) -> TeamResult:
-    """The whole TEAM run on a prepared study and reference (PHI or PDOT propagation)."""
+def run_study(study: Study, ref: Reference, progress=None, product=None) -> TeamResult:
+    """The whole TEAM run on a prepared study and reference (PHI or PDOT propagation).
+
+    Guidance events (``study.guidance``, PHI only) run after a first filter pass and feed
+    their execution errors back into it (:mod:`fracas.team.guidance`); ``product``: the
+    reference product (STM file contents) the study's reference came from, used for the
+    guidance's transitions to cutoff and target times (None: integrated)."""
     stage = progress or (lambda _t: None)
     tm = {}
     t0 = time.perf_counter()
@@ -63,10 +68,33 @@ def run_study(study: Study, ref: Reference, progress=None) -> TeamResult:
     tm["noise_transitions_s"] = time.perf_counter() - t1
     t2 = time.perf_counter()
     stage("filtering")
-    Pa_m, Pa_p, Pt_m, Pt_p, sig = run_filter(study, phi_aug, Qa, Qt, meas)
+    grun = span = None
+    if study.guidance:
+        from fracas.team.guidance import ReferenceSpan, run_guidance
+
+        span = ReferenceSpan(study, product)
+
+        def filt(xa, xt):
+            return run_filter(study, phi_aug, Qa, Qt, meas, xa, xt)
+
+        stage("guidance events")
+        grun = run_guidance(study, phi_aug, Qt, filt, span)
+        outs = grun.outs
+    else:
+        outs = run_filter(study, phi_aug, Qa, Qt, meas)
+    Pa_m, Pa_p, Pt_m, Pt_p, sig = outs
     tm["filter_s"] = time.perf_counter() - t2
     res = TeamResult(
         study, ref, meas, Pa_m, Pa_p, Pt_m if study.gencov else None, Pt_p if study.gencov else None, Qa, Qt, sig
     )
+    if grun is not None:
+        res.control, res.control_epoch, res.guidance = grun.control, grun.control_epoch, grun.outcomes
+    if study.budget:
+        from fracas.team.budget import error_budget
+
+        stage("error budget")
+        t3 = time.perf_counter()
+        res.budget = error_budget(study, phi_aug, Qa, Qt, meas, outs, grun, span)
+        tm["budget_s"] = time.perf_counter() - t3
     finish(res, tm)
     return res

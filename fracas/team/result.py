@@ -18,7 +18,7 @@ import numpy as np
 
 from fracas import _jax  # noqa: F401
 from fracas.filters import covariance as cov
-from fracas.products import CovarianceHistory, EigenEvents, MeasurementLog, Prediction, TeamProduct
+from fracas.products import ControlHistory, CovarianceHistory, EigenEvents, MeasurementLog, Prediction, TeamProduct
 from fracas.status import RunStatus
 from fracas.team.eigen import eigen_summary
 from fracas.team.measure import MeasurementSet
@@ -67,6 +67,10 @@ class TeamResult:
     timing: dict[str, float] = field(default_factory=dict)
     noise_states: bool = False  # PDOT: the three Gauss-Markov states follow the parameters
     prediction_status: dict[int, list[int]] = field(default_factory=dict)
+    control: np.ndarray | None = None  # (K, n, n) control covariance after each event (guidance)
+    control_epoch: np.ndarray | None = None  # (K,) schedule index of its last reset
+    guidance: list = field(default_factory=list)  # fracas.team.guidance.GuidanceOutcome, in time order
+    budget: object | None = None  # fracas.team.budget.ErrorBudget
 
     @property
     def status(self) -> RunStatus:
@@ -236,7 +240,14 @@ def team_product(
         "reference": reference_source,
         "min_elevation_deg": float(st.min_elevation_deg),
     }
+    if st.guidance:
+        sett["guidance_model"] = st.guidance_model
     sett.update(settings or {})
+    control = None
+    if res.control is not None:
+        pc0 = st.P0_control if st.P0_control is not None else st.P0_true
+        sg = np.sqrt(np.clip(np.diagonal(res.control, axis1=1, axis2=2), 0.0, None))
+        control = ControlHistory(res.control, sg, np.asarray(res.control_epoch, dtype=np.int64), np.asarray(pc0))
     return TeamProduct(
         title=st.title,
         source=st.source,
@@ -260,4 +271,7 @@ def team_product(
         settings=sett,
         timing=dict(res.timing),
         provenance=dict(provenance or {}),
+        guidance=list(res.guidance),
+        control=control,
+        budget=res.budget,
     )

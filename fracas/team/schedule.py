@@ -22,6 +22,7 @@ EVENT_ORDER = (
     "thrust_off",
     "propagation",
     "measurement",
+    "guidance",
     "eigenvector",
     "prediction",
     "punch",
@@ -75,6 +76,7 @@ class Schedule:
     def primary_type(self, k: int) -> str:
         """The main event type at index k (for the results file and printout)."""
         for kind in (
+            "guidance",
             "measurement",
             "thrust_on",
             "thrust_off",

@@ -20,7 +20,7 @@ from fracas.measurements.stations import Station
 from fracas.params import STATE_LABELS, STATE_UNITS
 from fracas.team.schedule import Schedule
 
-__all__ = ["Study", "TrackingSpec", "NOISE_COMPONENTS"]
+__all__ = ["Study", "TrackingSpec", "GuidanceSpec", "NOISE_COMPONENTS"]
 
 NOISE_COMPONENTS = ("proportionality", "in_plane", "out_of_plane")  # Gauss-Markov thrust errors, in this order
 
@@ -36,6 +36,44 @@ class TrackingSpec:
     stations: tuple[str, ...]
     body: str | None = None
     star_unit: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class GuidanceSpec:
+    """One guidance event (GUIDM §5.3.6, XGUID §5.3.25) in canonical units.
+
+    type: "impulsive" | "primary" | "vernier" | "none"; time_s: guidance epoch t_G or
+    initiation t_I (s); cutoff_s: t_c (the corrected arc's end for low thrust, = time_s
+    otherwise); target_time_s: t_f where the targets are evaluated; targets: names of
+    :data:`fracas.guidance.target_kinds.TARGET_KINDS`; target_body: "" for the central body
+    at t_f; arc: the corrected thrust arc (low thrust); controls / control_labels /
+    control_units: low-thrust controls and the parameter labels they vary; weights (per
+    control or ΔV component) and tolerances (per target), None for ones; sigma_p (fraction),
+    sigma_pointing_rad (each of two angles), sigma_res_km_s: execution errors;
+    verniers_follow: a later vernier corrects the same arc (GUIDM's reset rule).
+    """
+
+    name: str
+    type: str
+    time_s: float
+    cutoff_s: float
+    target_time_s: float
+    targets: tuple[str, ...]
+    target_body: str = ""
+    arc: int = -1
+    controls: tuple[str, ...] = ()
+    control_labels: tuple[str, ...] = ()
+    control_units: tuple[str, ...] = ()
+    weights: tuple[float, ...] | None = None
+    tolerances: tuple[float, ...] | None = None
+    sigma_p: float = 0.01
+    sigma_pointing_rad: float = 7.0e-3
+    sigma_res_km_s: float = 1.0e-5
+    verniers_follow: bool = False
+
+    @property
+    def low_thrust(self) -> bool:
+        return self.type in ("primary", "vernier")
 
 
 @dataclass
@@ -93,6 +131,11 @@ class Study:
     trajectory_hash: str = ""
     trajectory_source: str = ""
     punched: dict | None = None
+    guidance: tuple[GuidanceSpec, ...] = ()
+    guidance_model: str = "report"
+    P0_control: np.ndarray | None = None
+    budget: bool = False
+    budget_at_s: tuple[float, ...] = ()
 
     @property
     def nx(self) -> int:

@@ -1,0 +1,456 @@
+"""Guidance events in TEAM: the control covariance and the statistical corrections
+(FRACAS GUIDM §5.3.6, XGUID §5.3.25, TARMAT §5.4.9; digest ``tom-tsim-guidance.md`` Part B).
+
+The **control covariance** P_c = cov(actual − reference) is carried beside the knowledge:
+P_c(t_k) = Φ_k P_c(t_{k-1}) Φ_kᵀ + Q̃_k (digest (G-1), the filter's own augmented Φ and
+true process noise; no measurement touches it), from ``Study.P0_control`` (the injection
+dispersions; default the true a-priori).  At each guidance event, in time order:
+
+* Ψ (TARMAT, digest (G-2)): the targets' variation with respect to the augmented state at
+  the event, Ψ = A_T [Φ(t_f, t) Θ(t_f, t)] with A_T = ∂T/∂X_f of the osculating-conic targets
+  about the target body (:mod:`fracas.guidance.targets`); Φ and Θ from the STM file when it
+  holds t and t_f, else integrated;
+* the estimated-deviation covariance P̃ of ``Study.guidance_model`` (digest (G-0), P-B1:
+  ``report`` P̃ = P_c, the default as GUIDM writes it; ``orthogonal`` P_c − P_k; ``tsim``
+  P_c + P_k, the one to compare with TSIM), with P_k the TRUE knowledge (P-B3);
+* **impulsive**: Γ, P_ΔV = Γ P̃ Γᵀ, Gates execution errors Σ_ex, P_c⁺ (G-3..G-8), mean and
+  99 % |ΔV| (G-9); Σ_ex is added to the knowledge as well (the navigator does not see it);
+* **primary / vernier** (low thrust, digest B.7-B.8): S = ∂x(t_c)/∂U, K = Ψ(t_c) S,
+  Λ = Ψ(t_c) Φ(t_c, t_I), Γ_U = K^{+W} Λ, P_U = Γ_U P̃ Γ_Uᵀ, the ΔV and propellant σ of the
+  correction (L-4), execution errors S Σ_U Sᵀ at the cutoff.  ``report``: the control
+  covariance restarts at t_I from the knowledge (state and state-parameter blocks; the
+  parameter block keeps P_c,pp, P-B2) and propagates open loop (no measurement updates,
+  P-B4) — GUIDM's "knowledge at initiation" with verniers to follow and, propagated, its
+  "knowledge at termination" without; other models: the exact δX(t_c)⁺ = [Φ − SΓ_U]δX +
+  SΓ_U e + w written as a reset at t_I with G = Φ⁻¹ S Γ_U;
+* **none**: the target covariance only.
+
+Each event changes the knowledge only through its execution errors, so the filter is run
+once more after each event (the same compiled scan, :func:`fracas.team.scan.run_filter`
+with ``Xa``/``Xt``).  ``assumed_exec`` fixes the assumed side's execution covariances
+(the error budget's single-source runs keep the full run's gains).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from fracas.dynamics.parameters import get_values
+from fracas.errors import ConfigError
+from fracas.guidance import impulsive as imp
+from fracas.guidance import statistics as dvstats
+from fracas.guidance.target_kinds import TARGET_KINDS
+from fracas.products import GuidanceEvent, ReferenceTrajectory, chain, time_indices
+from fracas.team.study import GuidanceSpec, Study
+from fracas.team.transitions import EPS_T, interval_noise
+
+GuidanceOutcome = GuidanceEvent  # the product is what the core makes
+
+__all__ = ["GuidanceOutcome", "ReferenceSpan", "GuidanceRun", "run_guidance", "Z99"]
+
+Z99 = 2.5758293035489004  # the 99 % point of |N(0, 1)|: a one-dimensional |δΔV| quantile
+_VEL = slice(3, 6)
+
+
+@dataclass
+class GuidanceRun:
+    """The filter outputs with every event's execution errors, and the control history."""
+
+    outs: tuple
+    control: np.ndarray  # (K, n, n) after each event
+    control_epoch: np.ndarray  # (K,) schedule index of the last reset
+    outcomes: list[GuidanceOutcome]
+    Xa: np.ndarray
+    Xt: np.ndarray
+
+
+class ReferenceSpan:
+    """The reference at any times: states and transitions between two times (7-state Φ and
+    Θ for the study's dynamic labels), from a reference product when it holds the times,
+    else integrated in line (cached)."""
+
+    def __init__(self, study: Study, product: ReferenceTrajectory | None = None):
+        self.study = study
+        self.product = product
+        self._cache: dict[tuple, tuple] = {}
+        self.memo: dict[tuple, object] = {}  # Ψ, S and thrust levels, reused by budget runs
+
+    def _integrated(self, times: tuple[float, ...]):
+        from fracas.team.reference import run_reference
+
+        if times not in self._cache:
+            t_out = np.array(sorted(set((0.0,) + times)))
+            traj, sens, status, failed = run_reference(self.study.problem, t_out, self.study.dynamic_labels)
+            if status != 0:
+                raise ConfigError(
+                    f"{self.study.source}: guidance: the reference ends before {failed / 86400.0:.6g} d "
+                    "(a guidance, cutoff or target time lies beyond the trajectory)"
+                )
+            bodies = self.study.problem.model.bodies
+            self._cache[times] = (t_out, np.asarray(traj.x), np.asarray(traj.primary), sens, bodies)
+        return self._cache[times]
+
+    def _from_product(self, times):
+        if self.product is None:
+            return None
+        try:
+            time_indices(self.product, list(times))
+        except Exception:  # noqa: BLE001  (a time the file lacks: integrate instead)
+            return None
+        return True
+
+    def state(self, t_s: float) -> tuple[np.ndarray, str]:
+        """(7,) state relative to the central body and that body's name at t_s."""
+        if self._from_product([t_s]):
+            i = int(time_indices(self.product, [t_s])[0])
+            return np.asarray(self.product.states[i], dtype=np.float64), self.product.primary[i]
+        t_out, x, prim, _, bodies = self._integrated((float(t_s),))
+        i = int(np.argmin(np.abs(t_out - t_s)))
+        p = int(prim[i])
+        return x[i].astype(np.float64), bodies[p] if 0 <= p < len(bodies) else ""
+
+    def transition(self, t_to: float, t_from: float) -> tuple[np.ndarray, np.ndarray]:
+        """Φ(t_to, t_from) (7, 7) and Θ(t_to, t_from) (7, n_dyn)."""
+        n_dyn = len(self.study.dynamic_labels)
+        if abs(t_to - t_from) < 1e-9:
+            return np.eye(7), np.zeros((7, n_dyn))
+        if self._from_product([t_from, t_to]):
+            phi, theta = chain(self.product, [t_from, t_to])
+            return np.asarray(phi[1]), np.asarray(theta[1])
+        t_out, _, _, sens, _ = self._integrated((float(t_from), float(t_to)))
+        i0 = int(np.argmin(np.abs(t_out - t_from)))
+        i1 = int(np.argmin(np.abs(t_out - t_to)))
+        stm = np.asarray(sens.stm)
+        par = np.asarray(sens.par)
+        inv0 = np.linalg.inv(stm[i0])
+        phi = stm[i1] @ inv0
+        theta = par[i1] - phi @ par[i0]
+        return phi, theta
+
+
+def augment(study: Study, phi7: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """The augmented transition (n, n) of PROP eq. 3 from Φ (7, 7) and Θ (7, n_dyn)."""
+    n, nx = study.layout.n, study.nx
+    out = np.eye(n)
+    out[:nx, :nx] = phi7[:nx, :nx]
+    j = 0
+    for i, d in enumerate(study.dynamic):
+        if d:
+            out[:nx, nx + i] = theta[:nx, j]
+            j += 1
+    return out
+
+
+def _embed(study: Study, x: np.ndarray) -> np.ndarray:
+    n = study.layout.n
+    out = np.zeros((n, n))
+    k = x.shape[0]
+    out[:k, :k] = x
+    return out
+
+
+def _target_psi(study: Study, span: ReferenceSpan, g: GuidanceSpec, t_s: float):
+    """Ψ (m, n) of g's targets with respect to the augmented state at t_s; the body used."""
+    key = ("psi", g.name, g.target_time_s, t_s, tuple(g.targets), g.target_body)
+    if key not in span.memo:
+        span.memo[key] = _target_psi_uncached(study, span, g, t_s)
+    return span.memo[key]
+
+
+def _target_psi_uncached(study: Study, span: ReferenceSpan, g: GuidanceSpec, t_s: float):
+    from fracas.guidance.targets import target_jacobian
+
+    x_f, body_f = span.state(g.target_time_s)
+    body = g.target_body or body_f
+    if body != body_f:
+        raise ConfigError(
+            f"{study.source}: guidance {g.name}: target_body = {body!r}, but the reference's central body at "
+            f"{g.target_time_s / 86400.0:.6g} d is {body_f!r} (targets are evaluated about the central body)"
+        )
+    mu = float(np.asarray(get_values(study.problem.params, [f"mu[{body}]"], study.problem.model))[0])
+    a_t = np.asarray(target_jacobian(tuple(g.targets), x_f[:6], float(g.target_time_s), mu))
+    phi, theta = span.transition(g.target_time_s, t_s)
+    nx = study.nx
+    return a_t[:, :nx] @ augment(study, phi, theta)[:nx, :], body
+
+
+def _post(p_c, p_k, g_mat, mode, nx):
+    """P_c⁺ for a correction δX⁺ = (I − G)δX + G e (digest (G-7) with BΓ → G); ``report``:
+    the reset to the knowledge (state and state-parameter blocks, P-B2)."""
+    if mode == "report":
+        out = p_c.copy()
+        out[:nx, :] = p_k[:nx, :]
+        out[:, :nx] = p_k[:, :nx]
+        return out
+    c = np.asarray(imp.cross_covariance(p_c, p_k, mode))
+    a = np.eye(p_c.shape[0]) - g_mat
+    cross = a @ c @ g_mat.T
+    return a @ p_c @ a.T + g_mat @ p_k @ g_mat.T + cross + cross.T
+
+
+def _sym(p):
+    return 0.5 * (p + p.T)
+
+
+def _thrust_at(study: Study, t_s: float, x: np.ndarray, body: str) -> tuple[float, float]:
+    """(thrust acceleration km/s², thrust kg km/s²) at t_s from the mass rate: T = −c ṁ."""
+    from fracas.integrate.variational import state_derivative
+
+    pr = study.problem
+    c = float(np.asarray(get_values(pr.params, ["exhaust_velocity_km_s"], pr.model))[0])
+    prim = pr.model.bodies.index(body)
+    xd = np.asarray(state_derivative(pr.model, pr.params, pr.ephem, pr.epoch_et_s, float(t_s), x, prim))
+    thrust = -c * float(xd[6])
+    return thrust / float(x[6]), thrust
+
+
+def _noise_between(study: Study, span: ReferenceSpan, t_a: float, t_b: float) -> np.ndarray:
+    """True DYNO Q̃ (nx, nx) accumulated from t_a to t_b, split at the thrust switches."""
+    nx = study.nx
+    if not study.has_noise or t_b <= t_a:
+        return np.zeros((nx, nx))
+    cuts = [t_a] + [s for s in study.thrust_switches_s if t_a + EPS_T < s < t_b - EPS_T] + [t_b]
+    t = np.array(cuts)
+    states, prim, phis = [], [], [np.eye(7)]
+    for i, ti in enumerate(t):
+        x, b = span.state(ti)
+        states.append(x)
+        prim.append(b)
+        if i:
+            phis.append(span.transition(ti, t[i - 1])[0])
+    _, qt = interval_noise(study, t, np.array(states), prim, np.array(phis))
+    q = np.zeros((nx, nx))
+    for i in range(1, len(t)):
+        ph = phis[i][:nx, :nx]
+        q = ph @ q @ ph.T + qt[i]
+    return q
+
+
+def _impulsive(study, span, g, k, p_c, p_k):
+    nx, mode = study.nx, study.guidance_model
+    psi, body = _target_psi(study, span, g, g.time_s)
+    gm = imp.guidance_matrix(psi, g.weights, g.tolerances)
+    gamma = np.asarray(gm.gamma)
+    p_tilde = np.asarray(imp.estimate_deviation_covariance(p_c, p_k, mode))
+    p_dv = _sym(gamma @ p_tilde @ gamma.T)
+    sig_ex = np.asarray(
+        imp.execution_error_covariance(
+            np.zeros(3), p_dv, g.sigma_p, g.sigma_pointing_rad, g.sigma_pointing_rad, g.sigma_res_km_s
+        )
+    )
+    b = np.zeros((study.layout.n, 3))
+    b[_VEL, :] = np.eye(3)
+    p_plus = _sym(_post(p_c, p_k, b @ gamma, mode, nx) + b @ sig_ex @ b.T)
+    x_exec = np.zeros((nx, nx))
+    x_exec[_VEL, _VEL] = sig_ex
+    out = GuidanceOutcome(
+        name=g.name,
+        type=g.type,
+        index=k,
+        time_s=g.time_s,
+        cutoff_s=g.time_s,
+        target_time_s=g.target_time_s,
+        target_body=body,
+        estimate_model=mode,
+        rank=int(gm.rank),
+        target_names=list(g.targets),
+        target_units=[TARGET_KINDS[t].unit for t in g.targets],
+        control_labels=["dv_x", "dv_y", "dv_z"],
+        control_units=["km/s"] * 3,
+        psi=psi,
+        gamma=gamma,
+        target_cov_before=_sym(psi @ p_c @ psi.T),
+        target_cov_after=_sym(psi @ p_plus @ psi.T),
+        target_cov_knowledge=_sym(psi @ p_k @ psi.T),
+        correction_cov=p_dv,
+        execution_cov=sig_ex,
+        dv_mean_km_s=dvstats.mean_dv_magnitude(p_dv),
+        dv_99_km_s=dvstats.dv_magnitude_quantile(p_dv, 0.99),
+        dv_rms_km_s=dvstats.rms_dv_magnitude(p_dv),
+    )
+    return out, p_plus, [(g.time_s, x_exec)]
+
+
+def _low_thrust(study, span, g, k, p_c, p_k):
+    from fracas.guidance.low_thrust import (
+        control_sensitivity,
+        correction_cost_jacobians,
+        execution_covariance,
+        weighted_correction_matrix,
+    )
+
+    nx, n, mode = study.nx, study.layout.n, study.guidance_model
+    t_i, t_c = g.time_s, g.cutoff_s
+    key = ("S", g.name, t_i, t_c, tuple(g.control_labels))
+    if key not in span.memo:
+        span.memo[key] = np.asarray(control_sensitivity(study.problem, t_i, t_c, list(g.control_labels))[0])
+    s7 = span.memo[key]
+    phi, theta = span.transition(t_c, t_i)
+    phi_aug = augment(study, phi, theta)
+    psi_c, body = _target_psi(study, span, g, t_c)
+    k_mat = psi_c[:, :nx] @ s7[:nx]
+    lam = psi_c @ phi_aug
+    gamma_u, rank = weighted_correction_matrix(k_mat, lam, g.weights, g.tolerances)
+    gamma_u = np.asarray(gamma_u)
+    p_tilde = np.asarray(imp.estimate_deviation_covariance(p_c, p_k, mode))
+    p_u = _sym(gamma_u @ p_tilde @ gamma_u.T)
+    sig_u = np.asarray(execution_covariance(tuple(g.controls), p_u, g.sigma_p))
+    s_aug = np.zeros((n, s7.shape[1]))
+    s_aug[:nx] = s7[:nx]
+    g_mat = np.linalg.solve(phi_aug, s_aug @ gamma_u)
+    p_reset = _sym(_post(p_c, p_k, g_mat, mode, nx))
+    key = ("noise", t_i, t_c, tuple(study.noise_sigma_true), study.gencov)
+    if key not in span.memo:
+        span.memo[key] = _noise_between(study, span, t_i, t_c)
+    q_ic = _embed(study, span.memo[key])
+    x_exec_full = s_aug @ sig_u @ s_aug.T
+    pc_cutoff = _sym(phi_aug @ p_reset @ phi_aug.T + q_ic + x_exec_full)
+    before = _sym(psi_c @ (phi_aug @ p_c @ phi_aug.T + q_ic) @ psi_c.T)
+    know = _sym(psi_c @ (phi_aug @ p_k @ phi_aug.T) @ psi_c.T)
+    key = ("thrust", t_i, t_c)
+    if key not in span.memo:
+        x_i, b_i = span.state(t_i)
+        x_c, b_c = span.state(t_c)
+        span.memo[key] = (
+            x_i,
+            x_c,
+            _thrust_at(study, t_i + EPS_T, x_i, b_i),
+            _thrust_at(study, t_c - EPS_T, x_c, b_c),
+        )
+    x_i, x_c, (a_i, thr_i), (a_c, thr_c) = span.memo[key]
+    c = float(np.asarray(get_values(study.problem.params, ["exhaust_velocity_km_s"], study.problem.model))[0])
+    j_dv, j_m = correction_cost_jacobians(tuple(g.controls), a_i, a_c, float(x_i[6]), float(x_c[6]), c, thr_i, thr_c)
+    j_dv, j_m = np.asarray(j_dv), np.asarray(j_m)
+    sig_dv = math.sqrt(max(float(j_dv @ p_u @ j_dv), 0.0))
+    sig_m = math.sqrt(max(float(j_m @ p_u @ j_m), 0.0))
+    out = GuidanceOutcome(
+        name=g.name,
+        type=g.type,
+        index=k,
+        time_s=t_i,
+        cutoff_s=t_c,
+        target_time_s=g.target_time_s,
+        target_body=body,
+        estimate_model=mode,
+        rank=int(rank),
+        target_names=list(g.targets),
+        target_units=[TARGET_KINDS[t].unit for t in g.targets],
+        control_labels=list(g.control_labels),
+        control_units=list(g.control_units),
+        psi=psi_c,
+        gamma=gamma_u,
+        target_cov_before=before,
+        target_cov_after=_sym(psi_c @ pc_cutoff @ psi_c.T),
+        target_cov_knowledge=know,
+        correction_cov=p_u,
+        execution_cov=sig_u,
+        dv_mean_km_s=math.sqrt(2.0 / math.pi) * sig_dv,
+        dv_99_km_s=Z99 * sig_dv,
+        dv_rms_km_s=sig_dv,
+        propellant_sigma_kg=sig_m,
+    )
+    return out, p_reset, [(t_c, x_exec_full[:nx, :nx])]
+
+
+def _none(study, span, g, k, p_c, p_k):
+    psi, body = _target_psi(study, span, g, g.time_s)
+    before = _sym(psi @ p_c @ psi.T)
+    out = GuidanceOutcome(
+        name=g.name,
+        type=g.type,
+        index=k,
+        time_s=g.time_s,
+        cutoff_s=g.time_s,
+        target_time_s=g.target_time_s,
+        target_body=body,
+        estimate_model=study.guidance_model,
+        rank=0,
+        target_names=list(g.targets),
+        target_units=[TARGET_KINDS[t].unit for t in g.targets],
+        control_labels=[],
+        control_units=[],
+        psi=psi,
+        gamma=np.zeros((0, study.layout.n)),
+        target_cov_before=before,
+        target_cov_after=before.copy(),
+        target_cov_knowledge=_sym(psi @ p_k @ psi.T),
+        correction_cov=np.zeros((0, 0)),
+        execution_cov=np.zeros((0, 0)),
+    )
+    return out, p_c, []
+
+
+_HANDLERS = {"impulsive": _impulsive, "primary": _low_thrust, "vernier": _low_thrust, "none": _none}
+
+
+def run_guidance(
+    study: Study,
+    phi_aug: np.ndarray,
+    Qt: np.ndarray,
+    run_filter: Callable,
+    span: ReferenceSpan,
+    assumed_exec: np.ndarray | None = None,
+    P0_control: np.ndarray | None = None,
+) -> GuidanceRun:
+    """GUIDM/XGUID over the study's guidance events (module docstring).
+
+    phi_aug (K, n, n), Qt (K, nx, nx): the filter's transitions and TRUE process noise;
+    run_filter(Xa, Xt) -> (Pa_m, Pa_p, Pt_m, Pt_p, sig): the compiled filter with execution
+    errors; assumed_exec (K, nx, nx): fixed assumed-side execution covariances (None: the
+    same as the true side's).  P0_control: overrides ``study.P0_control``.
+    """
+    sched = study.schedule
+    K, n, nx = sched.n, study.layout.n, study.nx
+    Xa = np.zeros((K, nx, nx)) if assumed_exec is None else np.array(assumed_exec)
+    Xt = np.zeros((K, nx, nx))
+    Xc = np.zeros((K, nx, nx))
+    pc0 = P0_control if P0_control is not None else study.P0_control
+    if pc0 is None:
+        pc0 = study.P0_true
+    outs = run_filter(Xa, Xt)
+    control = np.zeros((K, n, n))
+    epoch = np.zeros(K, dtype=np.int64)
+    control[0] = pc0
+    state = {"cursor": 0, "P": np.array(pc0, dtype=np.float64), "epoch": 0}
+
+    def advance(k: int) -> None:
+        P = state["P"]
+        for j in range(state["cursor"] + 1, k + 1):
+            P = phi_aug[j] @ P @ phi_aug[j].T
+            P[:nx, :nx] += Qt[j] + Xc[j]
+            P = _sym(P)
+            control[j] = P
+            epoch[j] = state["epoch"]
+        state["P"], state["cursor"] = P, max(state["cursor"], k)
+
+    outcomes: list[GuidanceOutcome] = []
+    for g in study.guidance:
+        k = sched.index_of(g.time_s)
+        advance(k)
+        p_c = state["P"]
+        pt_plus = outs[3] if study.gencov else outs[1]
+        p_k = np.asarray(pt_plus[k], dtype=np.float64)
+        out, p_plus, execs = _HANDLERS[g.type](study, span, g, k, p_c, p_k)
+        outcomes.append(out)
+        control[k] = p_plus
+        state["P"], state["epoch"] = p_plus, k
+        epoch[k] = k
+        changed = False
+        for t_x, x in execs:
+            if t_x < sched.times_s[0] - 1e-6 or t_x > sched.times_s[-1] + 1e-6:
+                continue  # beyond the study: only the target covariance sees it
+            kx = sched.index_of(t_x)
+            Xt[kx] += x
+            Xc[kx] += x
+            if assumed_exec is None:
+                Xa[kx] += x
+            changed = True
+        if changed:
+            outs = run_filter(Xa, Xt)
+    advance(K - 1)
+    return GuidanceRun(outs, control, epoch, outcomes, Xa, Xt)
+

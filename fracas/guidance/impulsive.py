@@ -45,6 +45,7 @@ import jax
 import jax.numpy as jnp
 
 from fracas import _jax  # noqa: F401  (float64 before any array exists)
+from fracas.guidance.low_thrust import weighted_correction_matrix
 
 __all__ = [
     "MODES",
@@ -135,21 +136,13 @@ def guidance_matrix(psi, weights=None, tolerances=None, rtol: float = 1e-12) -> 
     targeting is exact, Ψ_v Γ = Ψ: the ΔV cancels the predicted miss Ψ δX̂.
 
     All three are one formula, Γ = W^{1/2} (E_ε⁻¹ Ψ_v W^{1/2})⁺ E_ε⁻¹ Ψ, evaluated by SVD with
-    singular values below ``rtol``·σ_max discarded; ``rank`` counts those kept.
+    singular values below ``rtol``·σ_max discarded; ``rank`` counts those kept
+    (:func:`fracas.guidance.low_thrust.weighted_correction_matrix` with K = Ψ_v, Λ = Ψ).
     Units: Γ maps a state deviation (km, km/s, ...) to ΔV in km/s.
     """
     psi = jnp.asarray(psi)
-    m = psi.shape[0]
-    w = jnp.ones(3) if weights is None else jnp.asarray(weights)
-    tol = jnp.ones(m) if tolerances is None else jnp.asarray(tolerances)
-    sqrt_w = jnp.sqrt(w)
-    a = (psi[:, _VEL] / tol[:, None]) * sqrt_w[None, :]
-    u, s, vt = jnp.linalg.svd(a, full_matrices=False)
-    keep = s > rtol * s[0]
-    s_inv = jnp.where(keep, 1.0 / jnp.where(keep, s, 1.0), 0.0)
-    a_pinv = (vt.T * s_inv[None, :]) @ u.T
-    gamma = sqrt_w[:, None] * (a_pinv @ (psi / tol[:, None]))
-    return GuidanceMatrix(gamma=gamma, rank=jnp.sum(keep))
+    gamma, rank = weighted_correction_matrix(psi[:, _VEL], psi, weights, tolerances, rtol)
+    return GuidanceMatrix(gamma=gamma, rank=rank)
 
 
 def dv_covariance(gamma, p_tilde) -> jax.Array:

@@ -30,6 +30,7 @@ import numpy as np
 from fracas import _jax  # noqa: F401  (float64 before any array exists)
 from fracas.dynamics.parameters import get_values
 from fracas.integrate import encke
+from fracas.guidance.target_kinds import CONTROL_UNITS, LOW_THRUST_CONTROLS
 from fracas.integrate.propagate import propagate_with_sensitivities
 
 __all__ = [
@@ -43,10 +44,9 @@ __all__ = [
     "execution_covariance",
 ]
 
-#: The controls of one guidance arc (digest (L-1)), in the report's order.
-LOW_THRUST_CONTROLS = ("proportionality", "alpha", "beta", "t_on", "t_off")
-#: Their units (proportionality is the dimensionless per-arc thrust scale, nominal 1).
-CONTROL_UNITS = ("1", "rad", "rad", "s", "s")
+# The controls of one guidance arc (digest (L-1)), in the report's order, and their units
+# (proportionality is the dimensionless per-arc thrust scale, nominal 1): the jax-free
+# catalogue fracas.guidance.target_kinds, which the deck validation reads too.
 #: The fracas parameter (:mod:`fracas.params`) each control varies.
 CONTROL_LABEL_NAMES = {
     "proportionality": "arc_thrust_scale",

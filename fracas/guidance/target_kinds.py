@@ -16,7 +16,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-__all__ = ["TargetKind", "TARGET_KINDS", "target_unit", "check_targets"]
+__all__ = ["TargetKind", "TARGET_KINDS", "target_unit", "check_targets", "LOW_THRUST_CONTROLS", "CONTROL_UNITS"]
 
 
 @dataclass(frozen=True)
@@ -67,3 +67,10 @@ def target_unit(name: str) -> str:
     """Unit of the target ``name`` (``KeyError`` listing the known names if unknown)."""
     check_targets((name,))
     return TARGET_KINDS[name].unit
+
+
+#: Low-thrust guidance controls (GUIDM, report L1700): proportionality, the two pointing
+#: angles, the guidance arc's start and stop times (fracas.guidance.low_thrust maps them to
+#: the arc parameters arc_thrust_scale[j], arc_alpha[j], arc_beta[j], arc_t_on[j], arc_t_off[j]).
+LOW_THRUST_CONTROLS = ("proportionality", "alpha", "beta", "t_on", "t_off")
+CONTROL_UNITS = ("1", "rad", "rad", "s", "s")

@@ -91,7 +91,7 @@ def guidance_specs(deck: TeamDeck, tdeck: TrajectoryDeck, src: str) -> tuple[Gui
                 tolerances=None if g.tolerances is None else tuple(g.tolerances),
                 sigma_p=g.execution.proportionality,
                 sigma_pointing_rad=g.execution.pointing_mrad * 1e-3,
-                sigma_res_km_s=g.execution.resolution_mm_s * 1e-6,
+                sigma_res_km_s=g.execution.resolution_m_s * 1e-3,
                 verniers_follow=bool(g.type in ("primary", "vernier") and verniers),
             )
         )

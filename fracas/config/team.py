@@ -42,7 +42,7 @@ Layout (only ``[ertraj]`` is required)::
                    targets = ["b_dot_t", ...], target_time_days, target_body, arc,
                    controls = ["proportionality", "alpha", "beta", "t_on", "t_off"],
                    weights, tolerances, execution = {proportionality, pointing_mrad,
-                   resolution_mm_s}                              (GUIDM, XGUID; §3.2)
+                   resolution_m_s}                              (GUIDM, XGUID; §3.2)
     [budget]       enabled = true, at_days = [..]   (error budget by source)
     [output]       results = "out/x_team.h5", plot = "out/x_team.png"
     [limits]       max_measurements, max_events, ... (fracas.config.limits.Limits)
@@ -355,12 +355,12 @@ class GuidanceExecution(_Section):
     """Execution errors of a guidance event (App. 9.1 high-thrust defaults, report L2722).
 
     Impulsive: proportionality (fraction of |ΔV|), two pointing angles of pointing_mrad each,
-    resolution_mm_s (isotropic); low thrust: proportionality is the fractional 1σ error of
+    resolution_m_s (isotropic); low thrust: proportionality is the fractional 1σ error of
     each control correction (a fracas choice: the report gives no low-thrust model)."""
 
     proportionality: Annotated[float, Field(ge=0, le=1)] = 0.01
     pointing_mrad: Annotated[float, Field(ge=0, le=1000)] = 7.0
-    resolution_mm_s: Annotated[float, Field(ge=0, le=1e6)] = 0.01
+    resolution_m_s: Annotated[float, Field(ge=0, le=1000)] = 0.01
 
 
 class Guidance(_Section):
@@ -402,7 +402,9 @@ class Guidance(_Section):
         low = self.type in ("primary", "vernier")
         if low:
             if self.arc is None:
-                problems.append(FieldProblem("arc", None, f'required for type "{self.type}" (the thrust arc it corrects)'))
+                problems.append(
+                    FieldProblem("arc", None, f'required for type "{self.type}" (the thrust arc it corrects)')
+                )
             if not self.controls:
                 problems.append(FieldProblem("controls", [], "give at least one control"))
             for j, c in enumerate(self.controls):
@@ -582,7 +584,7 @@ class TeamDeck(SourcedDeck):
                 FieldProblem(
                     ("errcon", "propagation"),
                     "pdot",
-                    "guidance events need propagation = \"phi\" in this release",
+                    'guidance events need propagation = "phi" in this release',
                 )
             )
         stop = self.filter.stop_days

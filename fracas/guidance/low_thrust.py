@@ -29,8 +29,8 @@ import numpy as np
 
 from fracas import _jax  # noqa: F401  (float64 before any array exists)
 from fracas.dynamics.parameters import get_values
-from fracas.integrate import encke
 from fracas.guidance.target_kinds import CONTROL_UNITS, LOW_THRUST_CONTROLS
+from fracas.integrate import encke
 from fracas.integrate.propagate import propagate_with_sensitivities
 
 __all__ = [

@@ -204,7 +204,9 @@ def _write_team_results(path: str | os.PathLike, res: TeamProduct) -> None:
         if res.control is not None:
             cg = g.create_group("control")
             ct = res.control
-            write(cg, "P_plus", ct.P_plus, "labels/units x labels/units", description="control covariance after the event")
+            write(
+                cg, "P_plus", ct.P_plus, "labels/units x labels/units", description="control covariance after the event"
+            )
             write(cg, "sigma", ct.sigma, "labels/units", description="1-sigma of the control covariance")
             write(cg, "epoch_index", np.asarray(ct.epoch_index, dtype=np.int64), "1", description="last reset")
             write(cg, "a_priori", ct.a_priori, "labels/units x labels/units", description="initial control covariance")

@@ -87,12 +87,27 @@ def budget_sources(study: Study, meas) -> list[dict]:
     for s in out:
         s.update(thrust=False, kind=None, resolution=False)
     for kind in sorted({r.kind for r in meas.records if r.used}):
-        out.append({"name": f"{kind} noise", "P0t": zero, "P0c": zero, "thrust": False, "kind": kind, "resolution": False})
-    if study.gencov and np.any(study.noise_sigma_true > 0) or (not study.gencov and np.any(study.noise_sigma_assumed > 0)):
-        out.append({"name": "thrust noise", "P0t": zero, "P0c": zero, "thrust": True, "kind": None, "resolution": False})
+        out.append(
+            {"name": f"{kind} noise", "P0t": zero, "P0c": zero, "thrust": False, "kind": kind, "resolution": False}
+        )
+    if (
+        study.gencov
+        and np.any(study.noise_sigma_true > 0)
+        or (not study.gencov and np.any(study.noise_sigma_assumed > 0))
+    ):
+        out.append(
+            {"name": "thrust noise", "P0t": zero, "P0c": zero, "thrust": True, "kind": None, "resolution": False}
+        )
     if any(g.type == "impulsive" and g.sigma_res_km_s > 0 for g in study.guidance):
         out.append(
-            {"name": "execution resolution", "P0t": zero, "P0c": zero, "thrust": False, "kind": None, "resolution": True}
+            {
+                "name": "execution resolution",
+                "P0t": zero,
+                "P0c": zero,
+                "thrust": False,
+                "kind": None,
+                "resolution": True,
+            }
         )
     return out
 
@@ -123,7 +138,8 @@ def error_budget(study: Study, phi_aug, Qa, Qt, meas, full_outs, guidance_run=No
     cols = []
     for src in sources:
         guid = tuple(
-            dataclasses.replace(g, sigma_res_km_s=g.sigma_res_km_s if src["resolution"] else 0.0) for g in study.guidance
+            dataclasses.replace(g, sigma_res_km_s=g.sigma_res_km_s if src["resolution"] else 0.0)
+            for g in study.guidance
         )
         st = dataclasses.replace(
             study,

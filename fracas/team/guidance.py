@@ -76,23 +76,30 @@ class ReferenceSpan:
     def __init__(self, study: Study, product: ReferenceTrajectory | None = None):
         self.study = study
         self.product = product
-        self._cache: dict[tuple, tuple] = {}
+        self._wanted: tuple[float, ...] = ()
         self.memo: dict[tuple, object] = {}  # Ψ, S and thrust levels, reused by budget runs
 
+    def prefetch(self, times) -> None:
+        """Integrate once over every time the guidance will ask for (in-line references)."""
+        self._wanted = tuple(sorted(set(self._wanted) | {float(t) for t in times}))
+
     def _integrated(self, times: tuple[float, ...]):
+        """One in-line integration (0, the prefetched times and ``times``), cached."""
         from fracas.team.reference import run_reference
 
-        if times not in self._cache:
-            t_out = np.array(sorted(set((0.0,) + times)))
-            traj, sens, status, failed = run_reference(self.study.problem, t_out, self.study.dynamic_labels)
-            if status != 0:
-                raise ConfigError(
-                    f"{self.study.source}: guidance: the reference ends before {failed / 86400.0:.6g} d "
-                    "(a guidance, cutoff or target time lies beyond the trajectory)"
-                )
-            bodies = self.study.problem.model.bodies
-            self._cache[times] = (t_out, np.asarray(traj.x), np.asarray(traj.primary), sens, bodies)
-        return self._cache[times]
+        grid = getattr(self, "_grid", None)
+        if grid is not None and all(np.min(np.abs(grid[0] - t)) < 1e-6 for t in times):
+            return grid
+        t_out = np.array(sorted(set((0.0,) + tuple(self._wanted) + tuple(float(t) for t in times))))
+        traj, sens, status, failed = run_reference(self.study.problem, t_out, self.study.dynamic_labels)
+        if status != 0:
+            raise ConfigError(
+                f"{self.study.source}: guidance: the reference ends before {failed / 86400.0:.6g} d "
+                "(a guidance, cutoff or target time lies beyond the trajectory)"
+            )
+        self._grid = (t_out, np.asarray(traj.x), np.asarray(traj.primary), sens, self.study.problem.model.bodies)
+        self._wanted = tuple(t_out)
+        return self._grid
 
     def _from_product(self, times):
         if self.product is None:
@@ -126,8 +133,7 @@ class ReferenceSpan:
         i1 = int(np.argmin(np.abs(t_out - t_to)))
         stm = np.asarray(sens.stm)
         par = np.asarray(sens.par)
-        inv0 = np.linalg.inv(stm[i0])
-        phi = stm[i1] @ inv0
+        phi = stm[i1] @ np.linalg.inv(stm[i0])
         theta = par[i1] - phi @ par[i0]
         return phi, theta
 
@@ -192,6 +198,16 @@ def _post(p_c, p_k, g_mat, mode, nx):
     return a @ p_c @ a.T + g_mat @ p_k @ g_mat.T + cross + cross.T
 
 
+def _state_only(m: np.ndarray, nx: int) -> np.ndarray:
+    """The guidance law acts on the estimated STATE only (digest (G-4): "the guidance uses
+    the state estimate only"; correcting for estimated parameters is not in the report):
+    the parameter columns of Ψ or Λ are dropped from Γ, but the target covariances keep
+    them (the parameters' dispersion still reaches the target)."""
+    out = np.array(m, dtype=np.float64)
+    out[:, nx:] = 0.0
+    return out
+
+
 def _sym(p):
     return 0.5 * (p + p.T)
 
@@ -233,7 +249,7 @@ def _noise_between(study: Study, span: ReferenceSpan, t_a: float, t_b: float) ->
 def _impulsive(study, span, g, k, p_c, p_k):
     nx, mode = study.nx, study.guidance_model
     psi, body = _target_psi(study, span, g, g.time_s)
-    gm = imp.guidance_matrix(psi, g.weights, g.tolerances)
+    gm = imp.guidance_matrix(_state_only(psi, nx), g.weights, g.tolerances)
     gamma = np.asarray(gm.gamma)
     p_tilde = np.asarray(imp.estimate_deviation_covariance(p_c, p_k, mode))
     p_dv = _sym(gamma @ p_tilde @ gamma.T)
@@ -294,7 +310,7 @@ def _low_thrust(study, span, g, k, p_c, p_k):
     psi_c, body = _target_psi(study, span, g, t_c)
     k_mat = psi_c[:, :nx] @ s7[:nx]
     lam = psi_c @ phi_aug
-    gamma_u, rank = weighted_correction_matrix(k_mat, lam, g.weights, g.tolerances)
+    gamma_u, rank = weighted_correction_matrix(k_mat, _state_only(lam, nx), g.weights, g.tolerances)
     gamma_u = np.asarray(gamma_u)
     p_tilde = np.asarray(imp.estimate_deviation_covariance(p_c, p_k, mode))
     p_u = _sym(gamma_u @ p_tilde @ gamma_u.T)
@@ -411,6 +427,12 @@ def run_guidance(
     pc0 = P0_control if P0_control is not None else study.P0_control
     if pc0 is None:
         pc0 = study.P0_true
+    wanted = set()
+    for g in study.guidance:
+        wanted |= {g.time_s, g.cutoff_s, g.target_time_s}
+    lo, hi = min(wanted), max(wanted)
+    wanted |= {s for s in study.thrust_switches_s if lo < s < hi}
+    span.prefetch(wanted)
     outs = run_filter(Xa, Xt)
     control = np.zeros((K, n, n))
     epoch = np.zeros(K, dtype=np.int64)
@@ -453,4 +475,3 @@ def run_guidance(
             outs = run_filter(Xa, Xt)
     advance(K - 1)
     return GuidanceRun(outs, control, epoch, outcomes, Xa, Xt)
-

@@ -59,7 +59,7 @@ __all__ = [
     "MAX_BATCH",
 ]
 
-MAX_BATCH = 32  # studies per compiled call (the scan keeps (batch, events, n, n) histories)
+MAX_BATCH = 16  # studies per compiled call (the scan keeps (batch, events, n, n) histories)
 
 
 def batch_size(b: int) -> int:

@@ -26,6 +26,7 @@ from fracas.config.sweep import (
     FIXED_OUTPUTS,
     SweepDeck,
     check_field_path,
+    is_numeric_field,
     load_sweep_deck,
     parse_field_path,
 )
@@ -45,6 +46,9 @@ __all__ = [
     "base_hash",
     "outputs_of",
     "run_one",
+    "run_group",
+    "outputs_from",
+    "study_deck",
     "SweepResult",
 ]
 
@@ -163,31 +167,36 @@ def input_unit(deck: TeamDeck, field: str) -> str:
     return "deck"
 
 
-def _final_sigma(hist, labels, label: str) -> float:
-    if label not in labels:
-        raise FracasError(f"output sigma[{label}]: no covariance label {label!r} (the study has: {', '.join(labels)})")
-    return float(hist.sigma[-1, labels.index(label)])
-
-
 def outputs_of(product, names: list[str]) -> tuple[dict[str, float], dict[str, str]]:
     """The named outputs of a TeamProduct (final values) and their units."""
-    vals, units = {}, {}
+    sig_t = None if product.true is None else product.true.sigma[-1]
+    return outputs_from(product.assumed.sigma[-1], sig_t, list(product.labels), list(product.units), names)
+
+
+def outputs_from(sig_a, sig_t, labels: list[str], units: list[str], names: list[str]):
+    """The named outputs from the final 1σ vectors (assumed, true or None) of a study whose
+    covariance rows are ``labels`` (in ``units``): (values, units)."""
+    vals, out_units = {}, {}
     for name in names:
         true = name.startswith("true_")
-        hist = product.true if true else product.assumed
-        if hist is None:
+        sig = sig_t if true else sig_a
+        if sig is None:
             raise FracasError(f"output {name}: the study has no generalized covariance ([gencov])")
-        s = np.asarray(hist.sigma[-1], dtype=np.float64)
+        s = np.asarray(sig, dtype=np.float64)
         base = name[5:] if true else name
         if base == "position_rss_km":
-            vals[name], units[name] = float(math.sqrt(float(np.sum(s[0:3] ** 2)))), "km"
+            vals[name], out_units[name] = float(math.sqrt(float(np.sum(s[0:3] ** 2)))), "km"
         elif base == "velocity_rss_km_s":
-            vals[name], units[name] = float(math.sqrt(float(np.sum(s[3:6] ** 2)))), "km/s"
+            vals[name], out_units[name] = float(math.sqrt(float(np.sum(s[3:6] ** 2)))), "km/s"
         else:
             label = base[len("sigma[") : -1]
-            vals[name] = _final_sigma(hist, list(product.labels), label)
-            units[name] = product.units[list(product.labels).index(label)]
-    return vals, units
+            if label not in labels:
+                raise FracasError(
+                    f"output sigma[{label}]: no covariance label {label!r} (the study has: {', '.join(labels)})"
+                )
+            vals[name] = float(s[labels.index(label)])
+            out_units[name] = units[labels.index(label)]
+    return vals, out_units
 
 
 def _one_line(exc: BaseException) -> str:
@@ -199,6 +208,22 @@ def _one_line(exc: BaseException) -> str:
 
 
 # ----------------------------------------------------------------------------- one study (a task)
+def study_deck(base: TeamDeck, fields: tuple[str, ...], values: tuple) -> TeamDeck:
+    """The TeamDeck of one study: ``base`` with ``fields`` set to ``values``; studies share no
+    side outputs (no per-study STM build, no punch file)."""
+    cfg = vary_many(base, dict(zip(fields, values)))
+    upd: dict[str, Any] = {}
+    if cfg.errcon.build_stm:
+        upd["errcon"] = cfg.errcon.model_copy(update={"build_stm": False})
+    if cfg.punch is not None:
+        upd["punch"] = None
+    if upd:
+        src, text = cfg._source_path, cfg._source_text
+        cfg = cfg.model_copy(update=upd)
+        cfg._source_path, cfg._source_text = src, text
+    return cfg
+
+
 def run_one(
     base: TeamDeck,
     index: int,
@@ -216,17 +241,7 @@ def run_one(
     row.update({f: _plain(v) for f, v in zip(fields, values)})
     row.update(dict.fromkeys(outputs, float("nan")))
     try:
-        cfg = vary_many(base, dict(zip(fields, values)))
-        # studies share no side outputs: no per-study STM build, no punch file
-        upd: dict[str, Any] = {}
-        if cfg.errcon.build_stm:
-            upd["errcon"] = cfg.errcon.model_copy(update={"build_stm": False})
-        if cfg.punch is not None:
-            upd["punch"] = None
-        if upd:
-            src, text = cfg._source_path, cfg._source_text
-            cfg = cfg.model_copy(update=upd)
-            cfg._source_path, cfg._source_text = src, text
+        cfg = study_deck(base, fields, values)
         out = None if results is None else Path(results)
         product, _, _ = pipeline.run_team(cfg, stm=stm, output=out, write_results=out is not None)
         vals, units = outputs_of(product, outputs)
@@ -236,6 +251,110 @@ def run_one(
         row.update(status="failed", error=_one_line(exc), units={})
     row["wall_s"] = time.perf_counter() - t0
     return row
+
+
+# ----------------------------------------------------------------------------- a group of studies (a task)
+_SETUPS: dict = {}  # group key -> (BatchSetup, prediction failures): kept by a worker between its chunks
+
+
+def _setup_for(gkey: str, study, stm: str | None):
+    """The group's shared reference, H and Φ_aug (cached in this process under ``gkey``)."""
+    from fracas.team import batch
+
+    hit = _SETUPS.get(gkey)
+    if hit is not None:
+        return hit
+    if stm is not None:
+        ref = pipeline.reference_from_stm(study, stm)
+    else:
+        from fracas.team.reference import integrate_reference
+
+        ref = integrate_reference(study)
+        from fracas.status import RunStatus
+
+        if ref.status != RunStatus.OK:
+            raise FracasError("the reference stopped early")  # run_one gives the user's message
+    got = (batch.prepare(study, ref), batch.prediction_failures(study, ref))
+    _SETUPS.clear()  # one group at a time: a worker moves on to the next group
+    _SETUPS[gkey] = got
+    return got
+
+
+def run_group(
+    base: TeamDeck,
+    items: list[tuple[int, tuple, str]],
+    fields: tuple[str, ...],
+    outputs: list[str],
+    gkey: str,
+    stm: str | None = None,
+    pad_to: int = 1,
+    max_batch: int | None = None,
+) -> list[dict[str, Any]]:
+    """Run the studies ``items`` ((index, values, key) each), which differ only in numeric
+    fields (:func:`fracas.config.sweep.is_numeric_field`), as batched computations
+    (:mod:`fracas.team.batch`): one reference, H and Φ_aug for all of them, P0, R and Q per
+    study, one vmapped filter scan per ``max_batch`` studies padded to at least ``pad_to``.
+    Returns their rows; never raises.  A study whose deck fails gets its error; a study
+    whose structure differs from the group's, or a group that cannot be batched (PDOT, a
+    user gain, a reference or prediction that fails), runs through :func:`run_one`."""
+    from fracas.team import batch
+
+    t0 = time.perf_counter()
+    max_batch = max_batch or batch.MAX_BATCH
+    rows: dict[int, dict[str, Any]] = {}
+    built = []  # (index, values, key, study)
+
+    def one(i, v, k):
+        rows[i] = run_one(base, i, fields, v, outputs, k, stm)
+
+    for i, v, k in items:
+        try:
+            built.append((i, v, k, pipeline.load_team(study_deck(base, fields, v)).study))
+        except Exception:  # noqa: BLE001 - run_one records the failure with its message
+            one(i, v, k)
+    setup = None
+    if built:
+        try:
+            setup, failed_predictions = _setup_for(gkey, built[0][3], stm)
+            if failed_predictions:
+                setup = None
+        except Exception:  # noqa: BLE001 - PDOT, a user gain, a reference that fails: one by one
+            setup = None
+    if setup is None:
+        for i, v, k, _ in built:
+            one(i, v, k)
+        built = []
+    keep = []
+    for i, v, k, st in built:
+        if batch.structure_mismatch(setup.study, st) is None:
+            keep.append((i, v, k, st))
+        else:
+            one(i, v, k)
+    if keep:
+        t1 = time.perf_counter()
+        studies = [st for *_, st in keep]
+        Pa, Pt = batch.final_covariances(setup, studies, max_batch=max_batch, pad_to=pad_to)
+        for b, (i, v, k, st) in enumerate(keep):
+            row: dict[str, Any] = {"index": int(i), "key": k}
+            row.update({f: _plain(x) for f, x in zip(fields, v)})
+            row.update(dict.fromkeys(outputs, float("nan")))
+            labels, units = st.state_labels + st.labels, st.state_units + st.units
+            with np.errstate(invalid="ignore"):
+                sa = np.sqrt(np.clip(np.diag(Pa[b]), 0, None))
+                stt = None if Pt is None else np.sqrt(np.clip(np.diag(Pt[b]), 0, None))
+            try:
+                vals, u = outputs_from(sa, stt, labels, units, outputs)
+                row.update(vals)
+                row.update(status="ok", error="", units=u)
+            except Exception as exc:  # noqa: BLE001
+                row.update(status="failed", error=_one_line(exc), units={})
+            rows[i] = row
+        others = sum(r["wall_s"] for j, r in rows.items() if j not in {x[0] for x in keep})
+        share = (time.perf_counter() - t0 - others) / len(keep)  # the batch's wall time, shared
+        for i, *_ in keep:
+            rows[i]["wall_s"] = share
+        _ = t1
+    return [rows[i] for i, _, _ in items]
 
 
 # ----------------------------------------------------------------------------- the sweep
@@ -288,6 +407,8 @@ def run_sweep(
     progress: Progress | None = None,
     table: str | Path | None = None,
     base: TeamDeck | None = None,
+    batch: bool = True,
+    max_batch: int | None = None,
 ) -> SweepResult:
     """Run every study of the sweep ``cfg``; returns a :class:`SweepResult`.
 
@@ -299,6 +420,13 @@ def run_sweep(
     each study (total: the studies to run this time).  ``table``: the table path (default the
     deck's ``[output] table``, else ``out/<deck stem>.h5``); ``base``: the study TeamDeck
     (default: read ``sweep.study``).  A failed study is a row with its one-line error.
+
+    ``batch`` (default): studies that differ only in numeric fields
+    (:func:`fracas.config.sweep.is_numeric_field`: sigmas, noise levels and times) form
+    groups that run as batched computations (:func:`run_group`, at most ``max_batch``
+    studies per compiled call, default :data:`fracas.team.batch.MAX_BATCH`), split into
+    about one chunk per worker; other studies (and every study with ``keep_results``, which
+    needs each study's whole product) run one by one (:func:`run_one`).
     """
     from fracas.io.sweep_table import read_sweep_table, write_sweep_table
 
@@ -350,19 +478,26 @@ def run_sweep(
     def results_for(i: int) -> str | None:
         return None if res_dir is None else str(res_dir / f"study_{i:05d}_{keys[i]}.h5")
 
-    def record(row: dict[str, Any]) -> None:
-        units.update(row.pop("units", {}) or {})
-        rows[row["index"]] = row
+    def record(new: list[dict[str, Any]]) -> None:
+        for row in new:
+            units.update(row.pop("units", {}) or {})
+            rows[row["index"]] = row
         write_sweep_table(out, list(rows.values()), list(fields), outputs, units, attrs)
         if progress is not None:
-            progress(len(rows) - len(skipped), len(todo))
+            done = len(rows) - len(skipped)
+            for j in range(len(new)):
+                progress(done - len(new) + j + 1, len(todo))
 
-    args = lambda i: (base, i, fields, studies[i], outputs, keys[i], stm, results_for(i))  # noqa: E731
+    group_of = _groups(studies, fields) if (batch and res_dir is None) else {}
+    from fracas.team.batch import MAX_BATCH
+
+    mb = int(max_batch or MAX_BATCH)
+    ctx = _Context(base, fields, studies, outputs, keys, stm, results_for, group_of, f"{bh}|{stm}", mb)
     if todo and workers == 0 and scheduler is None:
-        for i in todo:
-            record(run_one(*args(i)))
+        for task in ctx.tasks(todo, 1):
+            record(ctx.run(task))
     elif todo:
-        _run_dask(todo, args, record, workers, scheduler)
+        _run_dask(todo, ctx, record, workers, scheduler)
     elif rows:
         write_sweep_table(out, list(rows.values()), list(fields), outputs, units, attrs)
     ordered = [rows[i] for i in sorted(rows)]
@@ -373,7 +508,87 @@ def run_sweep(
     return SweepResult(ordered, todo, skipped, out, time.perf_counter() - t0, fields, outputs, units)
 
 
-def _run_dask(todo, args, record, workers, scheduler) -> None:
+def _groups(studies: list[tuple], fields: tuple[str, ...]) -> dict[int, str]:
+    """Study index -> its group (the values of its structural fields), for the studies whose
+    group has two or more members (the others run one by one)."""
+    numeric = [is_numeric_field(f) for f in fields]
+    if not any(numeric):
+        return {}
+    groups: dict[str, list[int]] = {}
+    for i, v in enumerate(studies):
+        groups.setdefault(json.dumps([_plain(x) for x, num in zip(v, numeric) if not num]), []).append(i)
+    return {i: g for g, idx in groups.items() if len(idx) >= 2 for i in idx}
+
+
+class _Context:
+    """What every task of a sweep needs; ``tasks`` cuts the studies to run into tasks."""
+
+    def __init__(self, base, fields, studies, outputs, keys, stm, results_for, group_of, prefix, max_batch):
+        self.base, self.fields, self.studies, self.outputs, self.keys = base, fields, studies, outputs, keys
+        self.stm, self.results_for, self.group_of, self.prefix = stm, results_for, group_of, prefix
+        self.max_batch = max_batch
+
+    def tasks(self, todo: list[int], n_workers: int) -> list[tuple]:
+        """("group", indices, group, pad) chunks (about one per worker, at most max_batch
+        studies each) and ("one", index) tasks, in the order of ``todo``."""
+        from fracas.team.batch import batch_size
+
+        by_group: dict[str, list[int]] = {}
+        for i in todo:
+            if i in self.group_of:
+                by_group.setdefault(self.group_of[i], []).append(i)
+        out: list[tuple] = []
+        for g, idx in by_group.items():
+            c = max(1, min(self.max_batch, math.ceil(len(idx) / max(1, n_workers))))
+            pad = batch_size(c)
+            out += [("group", idx[j : j + c], g, pad) for j in range(0, len(idx), c)]
+        return out + [("one", i) for i in todo if i not in self.group_of]
+
+    def call(self, task: tuple) -> tuple:
+        """(function, args) of a task (run here, or submitted to a Dask worker)."""
+        if task[0] == "one":
+            i = task[1]
+            return run_one, (
+                self.base,
+                i,
+                self.fields,
+                self.studies[i],
+                self.outputs,
+                self.keys[i],
+                self.stm,
+                self.results_for(i),
+            )
+        _, idx, g, pad = task
+        items = [(i, self.studies[i], self.keys[i]) for i in idx]
+        return run_group, (
+            self.base,
+            items,
+            self.fields,
+            self.outputs,
+            f"{self.prefix}|{g}",
+            self.stm,
+            pad,
+            self.max_batch,
+        )
+
+    def run(self, task: tuple) -> list[dict[str, Any]]:
+        fn, a = self.call(task)
+        got = fn(*a)
+        return got if isinstance(got, list) else [got]
+
+    def failed(self, task: tuple, exc: BaseException) -> list[dict[str, Any]]:
+        """The rows of a task whose worker failed (a lost worker, a pickling error)."""
+        idx = [task[1]] if task[0] == "one" else task[1]
+        rows = []
+        for i in idx:
+            row = {"index": i, "key": self.keys[i], **dict(zip(self.fields, self.studies[i]))}
+            row.update(dict.fromkeys(self.outputs, float("nan")))
+            row.update(status="failed", error=_one_line(exc), wall_s=float("nan"))
+            rows.append(row)
+        return rows
+
+
+def _run_dask(todo, ctx: _Context, record, workers, scheduler) -> None:
     import os
 
     from distributed import Client, LocalCluster, as_completed
@@ -391,16 +606,19 @@ def _run_dask(todo, args, record, workers, scheduler) -> None:
     client = Client(cluster if cluster is not None else scheduler)
     try:
         client.register_plugin(_plugin())
-        futures = {client.submit(run_one, *args(i), pure=False): i for i in todo}
+        n_workers = len(client.scheduler_info().get("workers", {})) or 1
+        futures = {}
+        for task in ctx.tasks(todo, n_workers):
+            fn, a = ctx.call(task)
+            futures[client.submit(fn, *a, pure=False)] = task
         for fut in as_completed(futures):
-            i = futures[fut]
+            task = futures[fut]
             try:
-                row = fut.result()
+                got = fut.result()
+                new = got if isinstance(got, list) else [got]
             except Exception as exc:  # noqa: BLE001 - a lost worker, a pickling error
-                a = args(i)
-                row = {"index": i, "key": a[5], **dict(zip(a[2], a[3])), **dict.fromkeys(a[4], float("nan"))}
-                row.update(status="failed", error=_one_line(exc), wall_s=float("nan"))
-            record(row)
+                new = ctx.failed(task, exc)
+            record(new)
     finally:
         client.close()
         if cluster is not None:

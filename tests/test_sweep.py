@@ -146,21 +146,42 @@ def test_vary_equals_the_deck_edited_by_hand(study_dir, tmp_path):
 
 
 # ----------------------------------------------------------------------------- running
+RTOL = 1e-12  # batched (vmapped scan) vs pipeline.run_team one by one: measured <= 2e-15 on these outputs
+
+
 def _numbers(rows):
     return [(r["index"], r["key"], r[FIELD], *(r[o] for o in OUTPUTS), r["status"]) for r in rows]
 
 
-def test_serial_sweep_equals_the_studies_run_one_by_one(serial, study_dir, tmp_path):
+@pytest.fixture(scope="module")
+def one_by_one(study_dir):
+    """The same 4 studies through the batched path with batch size 1 (the reference for bit-identity)."""
+    cfg = make_deck(study_dir, VALUES, table="one_by_one.h5", name="one_by_one.toml")
+    return run_sweep(cfg, workers=0, max_batch=1)
+
+
+def _expected(base, value, tmp_path):
+    product, _, _ = pipeline.run_team(vary(base, FIELD, value), output=tmp_path / "one.h5")
+    s, st = product.assumed.sigma[-1], product.true.sigma[-1]
+    return {
+        "position_rss_km": float(np.sqrt(np.sum(s[:3] ** 2))),
+        "velocity_rss_km_s": float(np.sqrt(np.sum(s[3:6] ** 2))),
+        "sigma[thrust_scale]": float(s[product.labels.index("thrust_scale")]),
+        "true_position_rss_km": float(np.sqrt(np.sum(st[:3] ** 2))),
+    }
+
+
+def test_serial_sweep_equals_the_studies_run_one_by_one(serial, one_by_one, study_dir, tmp_path):
     cfg, res, _ = serial
     assert [r["status"] for r in res.rows] == ["ok"] * 4 and res.ran == [0, 1, 2, 3]
+    assert _numbers(res.rows) == _numbers(one_by_one.rows)  # one batch of 4 == 4 batches of 1, bit for bit
     base = load_team_deck(study_dir / "team_small.toml")
+    worst = 0.0
     for r, value in zip(res.rows, VALUES):
-        product, _, _ = pipeline.run_team(vary(base, FIELD, value), output=tmp_path / "one.h5")
-        s = product.assumed.sigma[-1]
-        assert r["position_rss_km"] == float(np.sqrt(np.sum(s[:3] ** 2)))
-        assert r["velocity_rss_km_s"] == float(np.sqrt(np.sum(s[3:6] ** 2)))
-        assert r["sigma[thrust_scale]"] == float(s[product.labels.index("thrust_scale")])
-        assert r["true_position_rss_km"] == float(np.sqrt(np.sum(product.true.sigma[-1][:3] ** 2)))
+        for name, want in _expected(base, value, tmp_path).items():
+            worst = max(worst, abs(r[name] - want) / abs(want))
+            assert r[name] == pytest.approx(want, rel=RTOL, abs=0.0), name
+    print(f"\nbatched vs run_team one by one: max relative difference {worst:.1e}")
     t = read_sweep_table(res.table)
     assert _numbers(t.rows()) == _numbers(res.rows)
     assert t.units[FIELD] == "1" and t.units["position_rss_km"] == "km" and t.units["velocity_rss_km_s"] == "km/s"
@@ -168,17 +189,112 @@ def test_serial_sweep_equals_the_studies_run_one_by_one(serial, study_dir, tmp_p
     assert head.startswith("index,key,thrust_noise.proportionality.sigma [1],position_rss_km [km]")
 
 
+def test_unbatched_sweep_is_run_team_exactly(study_dir, tmp_path):
+    cfg = make_deck(study_dir, VALUES[:2], table="unbatched.h5", name="unbatched.toml")
+    res = run_sweep(cfg, workers=0, batch=False)
+    base = load_team_deck(study_dir / "team_small.toml")
+    for r, value in zip(res.rows, VALUES):
+        assert {k: r[k] for k in OUTPUTS} == _expected(base, value, tmp_path)
+
+
+def test_numeric_and_structural_fields():
+    from fracas.config.sweep import is_numeric_field
+
+    for f in (
+        FIELD,
+        "thrust_noise.in_plane_deg.tau_days",
+        "tracking[2].sigma",
+        "parameter[0].sigma",
+        "a_priori.position_sigma_km[1]",
+        "gencov.measurement_sigma.doppler2",
+        "gencov.thrust_noise.proportionality.sigma",
+        "gencov.parameter[0].sigma",
+    ):
+        assert is_numeric_field(f), f
+    for f in (
+        "tracking[0].interval_hours",
+        "tracking[0].stop_days",
+        "filter.stop_days",
+        "filter.type",
+        "parameter[0].label",
+        "parameter[0].role",
+        "event[0].times_days",
+        "errcon.process_noise",
+        "a_priori.from_punch",
+        "min_elevation_deg",
+    ):
+        assert not is_numeric_field(f), f
+
+
+def test_mixed_sweep_batches_each_schedule(study_dir, tmp_path, monkeypatch):
+    """filter.stop_days (structural) x the noise sigma (numeric): two batched groups, each one
+    batched call; the numbers equal run_team one by one."""
+    from fracas.team import batch
+
+    calls = []
+    real = batch.final_covariances
+    monkeypatch.setattr(
+        batch, "final_covariances", lambda setup, st, **kw: calls.append(len(st)) or real(setup, st, **kw)
+    )
+    extra = '[[sweep.vary]]\nfield = "filter.stop_days"\nvalues = [3.5, 4.0]\n'
+    p = study_dir / "mixed.toml"
+    p.write_text(sweep_text(VALUES[:3], "mixed.h5").replace("[output]", extra + "[output]"))
+    cfg = parse_sweep_deck(p.read_text(), str(p))
+    res = run_sweep(cfg, workers=0)
+    assert calls == [3, 3] and [r["status"] for r in res.rows] == ["ok"] * 6
+    base = load_team_deck(study_dir / "team_small.toml")
+    for r in res.rows:
+        deck = vary(vary(base, FIELD, r[FIELD]), "filter.stop_days", r["filter.stop_days"])
+        product, _, _ = pipeline.run_team(deck, output=tmp_path / "m.h5")
+        s = product.assumed.sigma[-1]
+        assert r["position_rss_km"] == pytest.approx(float(np.sqrt(np.sum(s[:3] ** 2))), rel=RTOL, abs=0.0)
+
+
 @pytest.mark.slow
-def test_local_cluster_gives_the_same_numbers(serial, study_dir):
-    cfg, res0, _ = serial
+def test_local_cluster_gives_the_same_numbers(one_by_one, study_dir):
+    """Two worker processes (a batched chunk each) give bit-identical numbers to the same
+    studies run one by one (batch size 1, in process)."""
     cfg2 = make_deck(study_dir, VALUES, table="cluster.h5", name="cluster.toml")
     seen = []
     t0 = time.perf_counter()
     res = run_sweep(cfg2, workers=2, progress=lambda done, total: seen.append((done, total)))
     wall = time.perf_counter() - t0
     assert seen[-1] == (4, 4) and len(seen) == 4
-    assert _numbers(res.rows) == _numbers(res0.rows)
+    assert _numbers(res.rows) == _numbers(one_by_one.rows)
     print(f"\n2 workers: {len(res.rows)} studies in {wall:.1f} s (cluster start included)")
+
+
+_KILLED = """
+import os, sys
+from fracas.config.sweep import load_sweep_deck
+from fracas.sweep import run_sweep
+def die(done, total):
+    if done == 2:
+        os._exit(3)   # killed mid-run, after two studies are in the table
+run_sweep(load_sweep_deck(sys.argv[1]), workers=0, max_batch=1, progress=die)
+"""
+
+
+def test_killed_sweep_restarts_without_redoing_finished_studies(one_by_one, study_dir, monkeypatch):
+    import subprocess
+    import sys
+
+    from fracas.team import batch
+
+    cfg = make_deck(study_dir, VALUES, table="killed.h5", name="killed.toml")
+    root = Path(__file__).resolve().parents[1]
+    r = subprocess.run([sys.executable, "-c", _KILLED, str(study_dir / "killed.toml")], cwd=root, timeout=300)
+    assert r.returncode == 3
+    table = cfg.resolve(cfg.output.table)
+    assert [row["index"] for row in read_sweep_table(table).rows()] == [0, 1]
+    calls = []
+    real = batch.final_covariances
+    monkeypatch.setattr(
+        batch, "final_covariances", lambda setup, st, **kw: calls.append(len(st)) or real(setup, st, **kw)
+    )
+    res = run_sweep(cfg, workers=0)
+    assert res.skipped == [0, 1] and res.ran == [2, 3] and calls == [2]
+    assert _numbers(read_sweep_table(table).rows()) == _numbers(one_by_one.rows)
 
 
 def test_resume_runs_only_the_missing_studies(serial, study_dir, monkeypatch):
@@ -191,9 +307,10 @@ def test_resume_runs_only_the_missing_studies(serial, study_dir, monkeypatch):
     calls = []
     real = pipeline.run_team
     monkeypatch.setattr(pipeline, "run_team", lambda cfg, **kw: calls.append(1) or real(cfg, **kw))
-    res = run_sweep(half, workers=0)
+    res = run_sweep(half, workers=0, batch=False)
     assert len(calls) == 2 and res.ran == [0, 2] and res.skipped == [1, 3]
-    assert _numbers(read_sweep_table(table).rows()) == _numbers(res0.rows)
+    got = read_sweep_table(table).rows()
+    assert _numbers([got[1], got[3]]) == _numbers([res0.rows[1], res0.rows[3]])
     calls.clear()
     run_sweep(half, workers=0)  # everything is in the table now
     assert calls == []

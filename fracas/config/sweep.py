@@ -46,6 +46,8 @@ __all__ = [
     "check_output_name",
     "FIXED_OUTPUTS",
     "DEFAULT_OUTPUTS",
+    "NUMERIC_FIELDS",
+    "is_numeric_field",
 ]
 
 #: output name -> unit
@@ -60,6 +62,54 @@ _SIGMA_OUTPUT = re.compile(r"^(true_)?sigma\[([^\]]+)\]$")
 _PART = re.compile(r"^([A-Za-z_][A-Za-z_0-9]*)((?:\[[0-9]+\])*)$")
 MAX_STUDIES = 1_000_000
 Scalar = float | int | bool | str
+
+
+#: Fields whose value changes only numbers of a study (a-priori and parameter sigmas, noise
+#: levels and correlation times, measurement sigmas), never its schedule, layout, labels,
+#: roles, filter or reference: studies that differ only in these are batched into one
+#: compiled computation (fracas.team.batch).  Paths with list indices dropped ("*" any
+#: dict key).  Anything not listed is structural (its studies run one by one).
+NUMERIC_FIELDS = frozenset(
+    {
+        "a_priori.position_sigma_km",
+        "a_priori.position_rss_km",
+        "a_priori.velocity_sigma_km_s",
+        "a_priori.velocity_rss_km_s",
+        "a_priori.mass_sigma_kg",
+        "parameter.sigma",
+        "tracking.sigma",
+        *(
+            f"{t}thrust_noise.{c}.{f}"
+            for t in ("", "gencov.")
+            for c in ("proportionality", "in_plane_deg", "out_of_plane_deg")
+            for f in ("sigma", "tau_days")
+        ),
+        "gencov.a_priori.position_sigma_km",
+        "gencov.a_priori.position_rss_km",
+        "gencov.a_priori.velocity_sigma_km_s",
+        "gencov.a_priori.velocity_rss_km_s",
+        "gencov.a_priori.mass_sigma_kg",
+        "gencov.parameter.sigma",
+        "gencov.measurement_sigma.*",
+    }
+)
+
+
+def is_numeric_field(path: str) -> bool:
+    """Whether varying ``path`` changes only numbers of a study (:data:`NUMERIC_FIELDS`)."""
+    try:
+        parts = parse_field_path(path)
+    except ValueError:
+        return False
+    names = [p for p in parts if isinstance(p, str)]
+    plain = ".".join(names)
+    if plain in NUMERIC_FIELDS:
+        return True
+    return (
+        len(names) == 3
+        and names[:2] == ["gencov", "measurement_sigma"]
+        and "gencov.measurement_sigma.*" in NUMERIC_FIELDS
+    )
 
 
 def parse_field_path(path: str) -> tuple[str | int, ...]:

@@ -1,0 +1,378 @@
+"""Many TEAM studies that differ only in numbers, run as one compiled computation (sweeps).
+
+Studies that share everything structural (the schedule, the layout and labels, the filter,
+the reference) but differ in their a-priori covariances, measurement sigmas and thrust-noise
+levels share the reference, the observation matrices H and the augmented transitions Φ_aug;
+only P0, R and the process noise Q differ.  :func:`prepare` builds the shared part once;
+:func:`batch_noise` evaluates DYNO's Q̃ of every study at once (one ``vmap`` of
+:func:`fracas.filters.process_noise.dyno_q` over studies and intervals, on noise partials
+computed once); :func:`run_batch` runs the filter scan of :mod:`fracas.team.scan`
+(``filter_scan``, unchanged) under ``jax.vmap`` over the studies and returns each study's
+final covariances (after its last event), which is what a sweep's table needs.
+
+The noise code repeats the front half of :func:`fracas.team.transitions.interval_noise` /
+:func:`~fracas.team.transitions.grid_noise` (nodes, partials, cell transitions), split from
+the sigma- and tau-dependent back half so the back half can run for many studies at once.
+Batches are padded to a few sizes (:func:`batch_size`) and schedules to the event buckets
+of :func:`fracas.team.transitions.bucket`, so one compile serves many batches.
+
+Core module: arrays in, arrays out; no deck, no file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import partial
+from types import SimpleNamespace
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from fracas import _jax  # noqa: F401
+from fracas.filters.process_noise import dyno_q
+from fracas.integrate.propagate import propagate_with_sensitivities
+from fracas.team.measure import MeasurementSet, assemble_measurements
+from fracas.team.reference import Reference
+from fracas.team.scan import filter_scan
+from fracas.team.study import Study
+from fracas.team.transitions import (
+    EPS_T,
+    TIME_MERGE_S,
+    _noise_cells,
+    augmented_transitions,
+    bucket,
+    noise_partials,
+    primary_index,
+)
+
+__all__ = [
+    "BatchSetup",
+    "prepare",
+    "batch_size",
+    "batch_noise",
+    "batch_R",
+    "run_batch",
+    "final_covariances",
+    "structure_mismatch",
+    "prediction_failures",
+    "MAX_BATCH",
+]
+
+MAX_BATCH = 16  # studies per compiled call (the scan keeps (batch, events, n, n) histories)
+
+
+def batch_size(b: int) -> int:
+    """The padded batch size: 4, 8, 16, 32, ... (a few sizes share compiled code)."""
+    return bucket(b, base=4)
+
+
+@dataclass
+class BatchSetup:
+    """What a group of studies shares: the structure source ``study``, its reference, its
+    measurements (H and the row of every used observation), Φ_aug and (lazily) the noise
+    nodes."""
+
+    study: Study
+    ref: Reference
+    meas: MeasurementSet
+    phi_aug: np.ndarray
+    _nodes: dict | None = field(default=None, repr=False)
+
+    @property
+    def K(self) -> int:
+        return self.study.schedule.n
+
+
+def prepare(study: Study, ref: Reference) -> BatchSetup:
+    """The shared part of a group (PHI propagation, built-in gains only)."""
+    if study.propagation != "phi" or study.filter_kind == "user":
+        raise ValueError("batched studies need PHI propagation and a built-in gain")
+    return BatchSetup(study, ref, assemble_measurements(study, ref), augmented_transitions(study, ref))
+
+
+def structure_mismatch(a: Study, b: Study) -> str | None:
+    """None when ``b`` has the same structure as ``a`` (everything but the numbers a batch
+    varies: P0, noise sigma/tau, observation and true sigmas); else what differs."""
+    sa, sb = a.schedule, b.schedule
+    checks = [
+        ("schedule times", sa.n == sb.n and np.array_equal(sa.times_s, sb.times_s)),
+        ("schedule events", sa.events == sb.events and sa.tracking == sb.tracking),
+        (
+            "predictions",
+            {k: list(v) for k, v in sa.predict_to_s.items()} == {k: list(v) for k, v in sb.predict_to_s.items()},
+        ),
+        ("layout", a.layout == b.layout and a.labels == b.labels and a.roles == b.roles),
+        ("dynamic", np.array_equal(a.dynamic, b.dynamic)),
+        ("filter", (a.filter_kind, a.square_root, a.gencov) == (b.filter_kind, b.square_root, b.gencov)),
+        (
+            "propagation",
+            (a.propagation, a.noise_model, a.noise_step_s) == (b.propagation, b.noise_model, b.noise_step_s),
+        ),
+        (
+            "trajectory",
+            (a.trajectory_hash, a.start_s, a.stop_s, a.thrust_switches_s)
+            == (b.trajectory_hash, b.start_s, b.stop_s, b.thrust_switches_s),
+        ),
+        ("elevation", a.min_elevation_deg == b.min_elevation_deg),
+        (
+            "tracking",
+            [(t.kind, t.stations, t.body) for t in a.tracking] == [(t.kind, t.stations, t.body) for t in b.tracking],
+        ),
+        (
+            "stars",
+            all(
+                (x.star_unit is None) == (y.star_unit is None)
+                and (x.star_unit is None or np.array_equal(x.star_unit, y.star_unit))
+                for x, y in zip(a.tracking, b.tracking)
+            ),
+        ),
+        (
+            "observations",
+            [(o.kind, o.stations) for o in a.observations] == [(o.kind, o.stations) for o in b.observations],
+        ),
+        ("stations", a.stations == b.stations),
+        ("shapes", a.P0_assumed.shape == b.P0_assumed.shape and a.true_sigma.shape == b.true_sigma.shape),
+        ("user gain", a.user_gain is None and b.user_gain is None),
+    ]
+    bad = [name for name, ok in checks if not ok]
+    return ", ".join(bad) if bad else None
+
+
+def prediction_failures(study: Study, ref: Reference) -> list[tuple[int, float]]:
+    """(k, t_to) of every prediction event whose integration runs off the trajectory (a
+    property of the reference, the same for every study of a group)."""
+    from fracas.team.predict import predict_from
+
+    if not study.schedule.predict_to_s:
+        return []
+    n, K = study.layout.n, study.schedule.n
+    res = SimpleNamespace(
+        study=study, ref=ref, times_s=study.schedule.times_s, Pa_plus=np.zeros((K, n, n)), Pt_plus=None
+    )
+    out = []
+    for k, targets in study.schedule.predict_to_s.items():
+        for t in targets:
+            if int(predict_from(res, k, t)[2]):
+                out.append((k, t))
+    return out
+
+
+# ----------------------------------------------------------------------------- process noise
+@jax.jit
+def _dyno_studies(phi, h0, h1, sigma, tau, dt):
+    """DYNO's Q̃ (S, M, nx, nx) of S noise levels (sigma, tau (S, 3)) over M intervals."""
+    per_interval = jax.vmap(dyno_q, in_axes=(0, 0, 0, None, None, 0))
+    return jax.vmap(per_interval, in_axes=(None, None, None, 0, 0, None))(phi, h0, h1, sigma, tau, dt)
+
+
+def _pad_rows(a: np.ndarray, n: int) -> np.ndarray:
+    return np.concatenate([a, np.zeros((n - len(a),) + a.shape[1:])]) if n > len(a) else a
+
+
+def _interval_nodes(study: Study, ref: Reference) -> dict:
+    """interval_noise's partials, nodes and transitions (the part that needs no sigma)."""
+    t, states, primary, phi = ref.times_s, ref.states, ref.primary, ref.phi
+    K, nx = len(t), study.nx
+    dt = np.diff(t)
+    prim = primary_index(study, primary)
+    t_nodes = np.concatenate([t[:-1] + np.minimum(EPS_T, dt / 2), t[1:] - np.minimum(EPS_T, dt / 2)])
+    x_nodes = np.concatenate([states[:-1], states[1:]])
+    p_nodes = np.concatenate([prim[:-1], prim[1:]])
+    h = noise_partials(study, t_nodes, x_nodes, p_nodes)
+    m, mp = K - 1, bucket(K - 1)
+    args = tuple(_pad_rows(a, mp) for a in (phi[1:, :nx, :nx], h[: K - 1], h[K - 1 :], dt))
+    return {"model": "interval", "m": m, "args": args}
+
+
+def _grid_nodes(study: Study, ref: Reference) -> dict:
+    """grid_noise's cells, partials and cell transitions (the part that needs no sigma)."""
+    t = np.asarray(ref.times_s, dtype=np.float64)
+    x0 = ref.states[0]
+    nx = study.nx
+    cells = _noise_cells(study, float(t[0]), float(t[-1]))
+    near = np.abs(t[:, None] - cells[None, :]).min(axis=1) <= TIME_MERGE_S
+    U = np.array(sorted(set(cells.tolist()) | set(t[~near].tolist())))
+    pr = study.problem
+    M = len(U)
+    Up = np.concatenate([U, np.repeat(U[-1:], bucket(M) - M)])
+    traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, x0, Up, ())
+    step_phi = np.array(sens.stm_step)[:M, :nx, :nx]
+    xs = np.asarray(traj.x)[:M]
+    prim = np.asarray(traj.primary)[:M].astype(np.int32)
+    iu = {float(u): i for i, u in enumerate(U)}
+    ic = np.array([iu[float(c)] for c in cells])
+    nc = len(cells) - 1
+    phic = np.broadcast_to(np.eye(nx), (nc, nx, nx)).copy()
+    for j in range(nc):
+        for i in range(ic[j] + 1, ic[j + 1] + 1):
+            phic[j] = step_phi[i] @ phic[j]
+    dt = np.diff(cells)
+    e = np.minimum(EPS_T, dt / 2)
+    t_nodes = np.concatenate([cells[:-1] + e, cells[1:] - e])
+    x_nodes = np.concatenate([xs[ic[:-1]], xs[ic[1:]]])
+    p_nodes = np.concatenate([prim[ic[:-1]], prim[ic[1:]]])
+    h = noise_partials(study, t_nodes, x_nodes, p_nodes)
+    mp = bucket(nc)
+    args = tuple(_pad_rows(a, mp) for a in (phic, h[:nc], h[nc:], dt))
+    sched = {}
+    for k, tk in enumerate(t):
+        sched[int(np.argmin(np.abs(U - tk)))] = k
+    return {
+        "model": "grid",
+        "m": nc,
+        "args": args,
+        "U": U,
+        "step_phi": step_phi,
+        "cell_at": {int(ic[j + 1]): j for j in range(nc)},
+        "sched": sched,
+    }
+
+
+def _nodes(setup: BatchSetup) -> dict:
+    if setup._nodes is None:
+        st = setup.study
+        setup._nodes = _interval_nodes(st, setup.ref) if st.noise_model == "interval" else _grid_nodes(st, setup.ref)
+    return setup._nodes
+
+
+def batch_noise(setup: BatchSetup, studies: list[Study]) -> tuple[np.ndarray, np.ndarray]:
+    """Qa, Qt (B, K, nx, nx): the process noise of every study (the model of
+    :func:`fracas.team.transitions.process_noise`), assumed and true."""
+    B, K, nx = len(studies), setup.K, setup.study.nx
+    Qa, Qt = np.zeros((B, K, nx, nx)), np.zeros((B, K, nx, nx))
+    noisy = [i for i, s in enumerate(studies) if s.has_noise]
+    if not noisy or K < 2:
+        return Qa, Qt
+    nd = _nodes(setup)
+    sig = np.array(
+        [s.noise_sigma_assumed for s in (studies[i] for i in noisy)] + [studies[i].noise_sigma_true for i in noisy]
+    )
+    tau = np.array(
+        [s.noise_tau_assumed for s in (studies[i] for i in noisy)] + [studies[i].noise_tau_true for i in noisy]
+    )
+    S, Sp = len(sig), batch_size(len(sig))
+    sig = np.concatenate([sig, np.repeat(sig[-1:], Sp - S, axis=0)])
+    tau = np.concatenate([tau, np.repeat(tau[-1:], Sp - S, axis=0)])
+    phi, h0, h1, dt = nd["args"]
+    q = np.asarray(_dyno_studies(*(jnp.asarray(a) for a in (phi, h0, h1, sig, tau, dt))))[:S, : nd["m"]]
+    idx = np.array(noisy)
+    if nd["model"] == "interval":
+        Q = np.concatenate([np.zeros((S, 1, nx, nx)), q], axis=1)
+    else:
+        U, step_phi, cell_at, sched = nd["U"], nd["step_phi"], nd["cell_at"], nd["sched"]
+        Q = np.zeros((S, K, nx, nx))
+        acc = np.zeros((S, nx, nx))
+        for i in range(1, len(U)):
+            acc = step_phi[i] @ acc @ step_phi[i].T
+            j = cell_at.get(i)
+            if j is not None:
+                acc = acc + q[:, j]
+            if i in sched:
+                Q[:, sched[i]] = 0.5 * (acc + acc.transpose(0, 2, 1))
+                acc = np.zeros((S, nx, nx))
+    n = len(noisy)
+    Qa[idx], Qt[idx] = Q[:n], Q[n:]
+    return Qa, Qt
+
+
+def batch_R(setup: BatchSetup, studies: list[Study]) -> tuple[np.ndarray, np.ndarray]:
+    """Ra, Rt (B, K, m, m): every study's assumed and true measurement noise on the group's
+    observation rows (MENO: diag(sigma²), unit on the padded rows)."""
+    meas = setup.meas
+    B = len(studies)
+    Ra = np.broadcast_to(meas.R_assumed, (B,) + meas.R_assumed.shape).copy()
+    Rt = np.broadcast_to(meas.R_true, (B,) + meas.R_true.shape).copy()
+    used = [r for r in meas.records if r.used]
+    if not used:
+        return Ra, Rt
+    kk = np.array([r.k for r in used], dtype=np.intp)
+    rr = np.array([r.row for r in used], dtype=np.intp)
+    jj = np.array([r.tracking for r in used], dtype=np.intp)
+    for b, s in enumerate(studies):
+        obs_sig = np.array([o.sigma for o in s.observations], dtype=np.float64)
+        Ra[b, kk, rr, rr] = obs_sig[jj] ** 2
+        Rt[b, kk, rr, rr] = s.true_sigma[jj] ** 2
+    return Ra, Rt
+
+
+# ----------------------------------------------------------------------------- the batched filter
+@partial(jax.jit, static_argnames=("layout", "kind", "gencov", "square_root"))
+def _final(P0a, P0t, phi, Qa, Qt, H, Ra, Rt, last, *, layout, kind, gencov, square_root):
+    """vmap of the filter scan over studies (shared Φ and H); each study's P⁺ at event ``last``."""
+
+    def one(p0a, p0t, qa, qt, ra, rt):
+        outs = filter_scan(
+            p0a, p0t, phi, qa, qt, H, ra, rt, layout=layout, kind=kind, gencov=gencov, square_root=square_root
+        )
+        return outs[1][last], outs[3][last]
+
+    return jax.vmap(one)(P0a, P0t, Qa, Qt, Ra, Rt)
+
+
+def _pad_events(a: np.ndarray, Kp: int, eye: bool) -> np.ndarray:
+    """Neutral events (identity Φ / unit R, else zero) appended on axis -3 up to Kp
+    (fracas.team.scan's padding, for batched arrays)."""
+    K = a.shape[-3]
+    if K == Kp:
+        return a
+    extra = np.zeros(a.shape[:-3] + (Kp - K,) + a.shape[-2:])
+    if eye:
+        extra[...] = np.eye(a.shape[-1])
+    return np.concatenate([a, extra], axis=-3)
+
+
+def run_batch(setup: BatchSetup, P0a, P0t, Qa, Qt, Ra, Rt, pad_to: int = 1) -> tuple[np.ndarray, np.ndarray | None]:
+    """The filter over the group's schedule for B studies at once (padded to
+    :func:`batch_size` of max(B, ``pad_to``): the last study repeated); (Pa_plus, Pt_plus or
+    None) (B, n, n) after the last event."""
+    st = setup.study
+    B, K = len(P0a), setup.K
+    Kp, Bp = bucket(K), batch_size(max(B, pad_to))
+
+    def pad_b(a):
+        a = np.asarray(a, dtype=np.float64)
+        return np.concatenate([a, np.repeat(a[-1:], Bp - B, axis=0)]) if Bp > B else a
+
+    args = [
+        pad_b(P0a),
+        pad_b(P0t),
+        _pad_events(setup.phi_aug, Kp, True),
+        pad_b(_pad_events(Qa, Kp, False)),
+        pad_b(_pad_events(Qt, Kp, False)),
+        _pad_events(setup.meas.H, Kp, False),
+        pad_b(_pad_events(Ra, Kp, True)),
+        pad_b(_pad_events(Rt, Kp, True)),
+    ]
+    Pa, Pt = _final(
+        *(jnp.asarray(a) for a in args),
+        jnp.asarray(K - 1),
+        layout=st.layout,
+        kind=st.filter_kind,
+        gencov=st.gencov,
+        square_root=st.square_root,
+    )
+    Pa = np.asarray(Pa)[:B]
+    return Pa, (np.asarray(Pt)[:B] if st.gencov else None)
+
+
+def final_covariances(
+    setup: BatchSetup, studies: list[Study], max_batch: int = MAX_BATCH, pad_to: int = 1
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Every study's final assumed (and true) covariance (B, n, n), in calls of at most
+    ``max_batch`` studies, each padded to at least ``pad_to`` (one compile for a group's
+    chunks).  Each study must have the setup's structure
+    (:func:`structure_mismatch`)."""
+    outs_a, outs_t = [], []
+    for i in range(0, len(studies), max_batch):
+        part = studies[i : i + max_batch]
+        Qa, Qt = batch_noise(setup, part)
+        Ra, Rt = batch_R(setup, part)
+        P0a = np.array([s.P0_assumed for s in part])
+        P0t = np.array([s.P0_true for s in part])
+        Pa, Pt = run_batch(setup, P0a, P0t, Qa, Qt, Ra, Rt, pad_to=min(pad_to, max_batch))
+        outs_a.append(Pa)
+        outs_t.append(Pt)
+    Pa = np.concatenate(outs_a)
+    Pt = None if outs_t[0] is None else np.concatenate(outs_t)
+    return Pa, Pt

@@ -67,8 +67,11 @@ def _dv(x_km_s: float, dv_unit: str) -> float:
     return float(x_km_s) * _vfactor(dv_unit)
 
 
-def _sigmas(C) -> np.ndarray:
-    """1σ from the diagonal of a covariance (NaN where non-finite, negative diagonals as 0)."""
+def _sigmas(C, n: int | None = None) -> np.ndarray:
+    """1σ from the diagonal of a covariance (NaN where non-finite, negative diagonals as 0;
+    ``n`` NaN where the covariance is missing)."""
+    if C is None or np.ndim(C) != 2 or (n is not None and np.shape(C)[0] < n):
+        return np.full(n or 0, math.nan)
     d = np.diag(np.asarray(C, dtype=float))
     with np.errstate(invalid="ignore"):
         return np.where(np.isfinite(d), np.sqrt(np.clip(d, 0.0, None)), np.nan)
@@ -125,7 +128,8 @@ def target_table(g: dict, velocity_unit: str = "mm/s"):
     _num_col(t, "before")
     _num_col(t, "after")
     _num_col(t, "knowledge")
-    sb, sa, sk = (_sigmas(g[k]) for k in ("target_cov_before", "target_cov_after", "target_cov_knowledge"))
+    m = len(g.get("target_names", []))
+    sb, sa, sk = (_sigmas(g.get(k), m) for k in ("target_cov_before", "target_cov_after", "target_cov_knowledge"))
     for i, name in enumerate(g.get("target_names", [])):
         f, u = _unit(g["target_units"][i], velocity_unit)
         t.add_row(escape(str(name)), escape(u), _fmt(sb[i] * f), _fmt(sa[i] * f), _fmt(sk[i] * f))
@@ -142,8 +146,8 @@ def control_table(g: dict, dv_unit: str = "m/s"):
     _text_col(t, "unit")
     _num_col(t, "correction")
     _num_col(t, "execution")
-    sc = _sigmas(g["correction_cov"])
-    se = _sigmas(g["execution_cov"]) if g.get("execution_cov") is not None else np.full(len(sc), math.nan)
+    m = len(g.get("control_labels", []))
+    sc, se = _sigmas(g.get("correction_cov"), m), _sigmas(g.get("execution_cov"), m)
     for i, lab in enumerate(g.get("control_labels", [])):
         f, u = _unit(g["control_units"][i], dv_unit)
         t.add_row(escape(str(lab)), escape(u), _fmt(sc[i] * f), _fmt(se[i] * f))
@@ -322,7 +326,11 @@ def bplane_figure(r: dict, n: int = 361):
         ut = g["target_units"][names.index("b_dot_t")]
         ur = g["target_units"][names.index("b_dot_r")]
         for key, label, color in _BPLANE:
+            if g.get(key) is None:
+                continue
             C = bplane_block(g, key)
+            if not np.all(np.isfinite(C)):
+                continue
             for k, style in ((1.0, "-"), (3.0, "--")):
                 p = ellipse_points(C, k, n)
                 ax.plot(p[:, 0], p[:, 1], style, color=color, label=f"{label} {k:g}σ")

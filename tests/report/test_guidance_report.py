@@ -288,3 +288,17 @@ def test_report_command_plots_and_prints_paths(old, monkeypatch, tmp_path):
 
     s = json.loads(res.stdout)
     assert s["plot"] == str(png) and len(s["plots"]) == 5
+
+
+def test_event_without_correction_prints(syn, tmp_path):
+    """A guidance event of type "none" (no correction, NaN ΔV, missing covariances)."""
+    r = dict(syn)
+    g = dict(syn["guidance"][0], name="map", type="none", rank=0, status=2)
+    g.update(dv_mean_km_s=math.nan, dv_99_km_s=math.nan, dv_rms_km_s=math.nan, target_cov_after=None)
+    g.pop("execution_cov")
+    r["guidance"] = [*syn["guidance"], g]
+    text = render(r, verbosity="verbose")
+    assert max(len(ln) for ln in text.splitlines() if not ln.startswith("written:")) <= 80
+    assert "guidance event map: status 2" in text
+    assert f"{running_mean_dv(syn['guidance'])[-1] * 1e3:.4g}" in tokens(text)  # NaN adds nothing
+    assert len(plot_all(r, tmp_path / "none.png")) == 5

@@ -297,24 +297,33 @@ def _team_report(
     velocity_unit: str = "mm/s",
     width: int | None = None,
 ) -> None:
-    """Print (and plot) a TEAM results file: tables at a verbosity, --json, or --quiet's one line."""
-    from fracas.report.team import load, plot_team, print_team, quiet_line, summary_dict
+    """Print (and plot) a TEAM results file: tables at a verbosity, --json, or --quiet's one line.
+
+    With ``png``: every plot of the file (:func:`fracas.report.team.plot_all`: ``png`` and the
+    B-plane, correlation, error-budget and ΔV plots beside it where they apply), each path
+    printed after the tables ("plot: PATH"; --json: ``plot`` and the list ``plots``)."""
+    from fracas.report.team import load, plot_all, print_team, quiet_line, summary_dict
 
     r = load(path)
+    plots = []
     if png is not None:
         if stage is not None:
             stage("plotting")
-        plot_team(r, png)
+        plots = plot_all(r, png)
     if as_json:
         out = summary_dict(r)
         out["timing_s"].update({k: round(float(v), 4) for k, v in (extra_timing or {}).items()})
         if png is not None:
             out["plot"] = str(png)
+            out["plots"] = [str(p) for p in plots]
         click.echo(json.dumps(out))
-    elif verbosity == "quiet":
+        return
+    if verbosity == "quiet":
         click.echo(quiet_line(r, velocity_unit))
     else:
         print_team(r, verbosity=verbosity, velocity_unit=velocity_unit, width=width)
+    for p in plots:
+        click.echo(f"plot: {p}")
 
 
 @main.command()

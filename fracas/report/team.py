@@ -21,11 +21,23 @@ from pathlib import Path
 import numpy as np
 
 from fracas.constants import DAY_S
+from fracas.report._tables import VELOCITY_UNITS, _fmt, _num_col, _table, _text_col, _unit, _vfactor
+from fracas.report.guidance import (
+    bplane_figure,
+    budget_figure,
+    correlation_figure,
+    dv_figure,
+    mark_guidance,
+    print_budget,
+    print_guidance,
+    save_figure,
+)
 from fracas.status import RunStatus, status_text
 
 __all__ = [
     "print_team",
     "plot_team",
+    "plot_all",
     "covariance_table",
     "summary_dict",
     "quiet_line",
@@ -37,8 +49,6 @@ __all__ = [
 _EIGEN_EVENTS = ("eigenvector", "thrust_on", "thrust_off", "final")
 #: the printout levels, least to most
 VERBOSITY = ("quiet", "normal", "verbose")
-#: velocity units the printout can use -> factor from km/s
-VELOCITY_UNITS = {"km/s": 1.0, "m/s": 1e3, "mm/s": 1e6}
 _SHORT_EVENT = {
     "initial": "init",
     "thrust_on": "on",
@@ -62,17 +72,6 @@ def load(path) -> dict:
     from fracas.io.team_results import read_team_results
 
     return read_team_results(path)
-
-
-def _vfactor(velocity_unit: str) -> float:
-    if velocity_unit not in VELOCITY_UNITS:
-        raise ValueError(f"velocity_unit must be one of {', '.join(VELOCITY_UNITS)}, not {velocity_unit!r}")
-    return VELOCITY_UNITS[velocity_unit]
-
-
-def _unit(u: str, velocity_unit: str) -> tuple[float, str]:
-    """(factor, unit shown) of a value in unit ``u``: km/s becomes ``velocity_unit``."""
-    return (_vfactor(velocity_unit), velocity_unit) if u == "km/s" else (1.0, u)
 
 
 def _rss(P: np.ndarray, blk: slice) -> float:
@@ -102,33 +101,6 @@ def _eigen_at(h: dict, k: int):
 
 
 _EVENT_SHOW = ("thrust_on", "thrust_off", "propagation", "eigenvector", "prediction", "punch", "final", "initial")
-
-
-def _fmt(x: float) -> str:
-    """The one compact number format of the tables (at most 10 characters)."""
-    return f"{x:.4g}" if np.isfinite(x) else ("nan" if np.isnan(x) else f"{x}")
-
-
-def _table(title: str, boxed: bool = True):
-    from rich import box
-    from rich.table import Table
-
-    return Table(
-        title=title,
-        title_justify="left",
-        show_edge=False,
-        pad_edge=False,
-        box=box.HEAVY_HEAD if boxed else None,
-        header_style="bold",
-    )
-
-
-def _num_col(t, header: str) -> None:
-    t.add_column(header, justify="right", no_wrap=True)
-
-
-def _text_col(t, header: str, justify: str = "left") -> None:
-    t.add_column(header, justify=justify, overflow="fold")
 
 
 def covariance_table(
@@ -410,6 +382,9 @@ def print_team(
             line += f"; true RSS {_fmt(_rss(Pt, slice(0, 3)))} km, {_fmt(_rss(Pt, slice(3, 6)) * vf)} {vu}"
         con.print(escape(line))
 
+    print_guidance(r, con, verbosity=verbosity, velocity_unit=vu)
+    print_budget(r, con, verbosity=verbosity, velocity_unit=vu)
+
     mask = float(at.get("min_elevation_deg", 0.0))
     trk = np.asarray(m["tracking"])
     parts, none_used = [], []
@@ -448,7 +423,11 @@ def print_team(
 
 
 def plot_team(r: dict, png: str | Path) -> Path:
-    """Position and velocity RSS 1σ and parameter 1σ (relative to a priori) against time."""
+    """Position and velocity RSS 1σ and parameter 1σ (relative to a priori) against time.
+
+    With guidance events in the file (``r["guidance"]``), vertical lines mark them; with a
+    control covariance (``r["control"]``), its RSS 1σ (the actual dispersion about the
+    reference) is a third curve.  Without either the figure is what it always was."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -466,6 +445,12 @@ def plot_team(r: dict, png: str | Path) -> Path:
         vel = np.sqrt(np.clip(np.einsum("kii->k", P[:, 3:6, 3:6]), 0, None)) * 1e6
         ax[0].semilogy(t, pos, style, label=which)
         ax[1].semilogy(t, vel, style, label=which)
+    if r.get("control") is not None:
+        P = np.asarray(r["control"]["P_plus"])
+        pos = np.sqrt(np.clip(np.einsum("kii->k", P[:, :3, :3]), 0, None))
+        vel = np.sqrt(np.clip(np.einsum("kii->k", P[:, 3:6, 3:6]), 0, None)) * 1e6
+        ax[0].semilogy(t, pos, ":", label="control (actual dispersion)")
+        ax[1].semilogy(t, vel, ":", label="control (actual dispersion)")
     ax[0].set_ylabel("position RSS 1σ (km)")
     ax[1].set_ylabel("velocity RSS 1σ (mm/s)")
     A = r["assumed"]
@@ -475,6 +460,8 @@ def plot_team(r: dict, png: str | Path) -> Path:
             ax[2].plot(t, A["sigma"][:, i] / prior, label=lab)
     ax[2].set_ylabel("solve-for 1σ / a priori")
     ax[2].set_xlabel("days from the trajectory epoch")
+    if r.get("guidance"):
+        mark_guidance(r, ax)
     for a in ax:
         a.grid(True, alpha=0.3)
         a.legend(fontsize=8)
@@ -489,3 +476,23 @@ def plot_team(r: dict, png: str | Path) -> Path:
     finally:
         plt.close(fig)
     return png
+
+
+def plot_all(r: dict, png: str | Path) -> list[Path]:
+    """Every plot of a results file: the knowledge history at ``png`` (:func:`plot_team`)
+    and, where they apply, ``<stem>_bplane.png`` (guidance events targeting B·T and B·R),
+    ``<stem>_correlation.png`` (an eigenvector event), ``<stem>_budget.png`` (an error
+    budget) and ``<stem>_dv.png`` (guidance events) beside it; the paths written, in that
+    order, each atomically."""
+    png = Path(png)
+    out = [plot_team(r, png)]
+    for suffix, make in (
+        ("bplane", bplane_figure),
+        ("correlation", correlation_figure),
+        ("budget", budget_figure),
+        ("dv", dv_figure),
+    ):
+        fig = make(r)
+        if fig is not None:
+            out.append(save_figure(fig, png.with_name(f"{png.stem}_{suffix}.png")))
+    return out

@@ -1,0 +1,48 @@
+"""The table helpers the TEAM printouts share (:mod:`fracas.report.team`,
+:mod:`fracas.report.guidance`): one compact number format, rich tables that fit a terminal
+(text columns fold, number columns never wrap), one velocity unit per printout."""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: velocity units the printout can use -> factor from km/s
+VELOCITY_UNITS = {"km/s": 1.0, "m/s": 1e3, "mm/s": 1e6}
+
+
+def _vfactor(velocity_unit: str) -> float:
+    if velocity_unit not in VELOCITY_UNITS:
+        raise ValueError(f"velocity_unit must be one of {', '.join(VELOCITY_UNITS)}, not {velocity_unit!r}")
+    return VELOCITY_UNITS[velocity_unit]
+
+
+def _unit(u: str, velocity_unit: str) -> tuple[float, str]:
+    """(factor, unit shown) of a value in unit ``u``: km/s becomes ``velocity_unit``."""
+    return (_vfactor(velocity_unit), velocity_unit) if u == "km/s" else (1.0, u)
+
+
+def _fmt(x: float) -> str:
+    """The one compact number format of the tables (at most 10 characters)."""
+    return f"{x:.4g}" if np.isfinite(x) else ("nan" if np.isnan(x) else f"{x}")
+
+
+def _table(title: str, boxed: bool = True):
+    from rich import box
+    from rich.table import Table
+
+    return Table(
+        title=title,
+        title_justify="left",
+        show_edge=False,
+        pad_edge=False,
+        box=box.HEAVY_HEAD if boxed else None,
+        header_style="bold",
+    )
+
+
+def _num_col(t, header: str) -> None:
+    t.add_column(header, justify="right", no_wrap=True)
+
+
+def _text_col(t, header: str, justify: str = "left") -> None:
+    t.add_column(header, justify=justify, overflow="fold")

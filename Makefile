@@ -14,7 +14,8 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 demo: $(STAMP)
-	mkdir -p out
+	mkdir -p out stm_files
+	$(BIN)/fracas run namelists/earth_mars_guidance.toml
 	$(BIN)/fracas propagate namelists/leo_j2.toml -o out/leo_j2.h5 --plot out/leo_j2.png
 	$(BIN)/fracas propagate namelists/earth_mars_sep.toml -o out/earth_mars_sep.h5 --plot out/earth_mars_sep.png
 	$(BIN)/fracas propagate namelists/near_earth_spiral.toml -o out/near_earth_spiral.h5 --plot out/near_earth_spiral.png
@@ -22,6 +23,7 @@ demo: $(STAMP)
 	$(BIN)/fracas stm build namelists/mercury_approach_team.toml -o stm_files/mercury_approach.h5
 	$(BIN)/fracas stm info stm_files/mercury_approach.h5
 	$(BIN)/fracas run namelists/mercury_approach_team.toml --stm stm_files/mercury_approach.h5
+	$(BIN)/fracas run namelists/mercury_approach_guidance.toml --quiet
 	$(BIN)/fracas report out/earth_mars_team.h5 --quiet
 	$(BIN)/fracas sweep namelists/earth_mars_sweep.toml --workers 0
 

@@ -271,10 +271,13 @@ def run_team(
             check_output_path(cfg.resolve(cfg.punch.file), "punch file")
         if plot is not None:
             check_output_path(plot, "plot")
-    if ec.build_stm and stm is None and stm_path is not None:
+    build = stm is None and (
+        ec.build_stm is True or (ec.build_stm == "if_missing" and stm_path is not None and not stm_path.exists())
+    )
+    if build and stm_path is not None:
         check_output_path(stm_path, "STM file")
     t1 = time.perf_counter()
-    if ec.build_stm and stm is None:
+    if build:
         stm_path, _ = build_stm(cfg, stm_path, on_stage, case=case)
     if stm_path is not None:
         if not stm_path.exists():

@@ -305,6 +305,7 @@ class GuidanceEvent:
     dv_rms_km_s: float = float("nan")
     propellant_sigma_kg: float = float("nan")
     status: int = 0
+    dv_variance_km2_s2: float = float("nan")  # E|ΔV|² unclipped (linear in the error sources)
 
 
 @dataclass

@@ -47,6 +47,49 @@ def _line(src: str, field: str, value, expected: str) -> str:
     return f"{src}: {field} = {v}: {expected}"
 
 
+def _guidance_problems(deck, tdeck: TrajectoryDeck, src: str) -> list[str]:
+    """[[guidance]] against the trajectory: target times within it, a low-thrust event on an
+    existing thrust arc (the same checks as fracas.build.guidance, without building)."""
+    out: list[str] = []
+    dur = tdeck.duration_days
+    arcs = list(tdeck.thrust_arc)
+    for k, g in enumerate(deck.guidance):
+        f = f"guidance[{k}]"
+        t_f = g.target_time_days if g.target_time_days is not None else dur
+        if t_f > dur * (1 + 1e-12):
+            out.append(_line(src, f"{f}.target_time_days", t_f, f"must be within the trajectory (<= {dur:g} d)"))
+        if g.time_days > dur * (1 + 1e-12):
+            out.append(_line(src, f"{f}.time_days", g.time_days, f"must be within the trajectory (<= {dur:g} d)"))
+        if g.type not in ("primary", "vernier"):
+            continue
+        if g.arc is None or g.arc >= len(arcs):
+            have = f"0..{len(arcs) - 1}" if arcs else "none: the trajectory deck has no [[thrust_arc]]"
+            out.append(_line(src, f"{f}.arc", g.arc, f"expected a thrust arc ({have})"))
+            continue
+        arc = arcs[g.arc]
+        if not (arc.start_days - 1e-9 <= g.time_days < arc.stop_days):
+            out.append(
+                _line(
+                    src,
+                    f"{f}.time_days",
+                    g.time_days,
+                    f"must lie on thrust_arc[{g.arc}] ({arc.start_days:g} to {arc.stop_days:g} d)",
+                )
+            )
+        if "t_on" in g.controls and abs(g.time_days - arc.start_days) > 1e-9:
+            out.append(
+                _line(
+                    src,
+                    f"{f}.controls",
+                    g.controls,
+                    f"t_on is a control only when the guidance starts the arc (time_days = {arc.start_days:g})",
+                )
+            )
+        if t_f < arc.stop_days:
+            out.append(_line(src, f"{f}.target_time_days", t_f, f"must not precede the cutoff ({arc.stop_days:g} d)"))
+    return out
+
+
 def _model(tdeck: TrajectoryDeck) -> types.SimpleNamespace:
     """What :func:`fracas.params.parse_label` reads of a force model, from the deck alone."""
     return types.SimpleNamespace(
@@ -161,6 +204,7 @@ def _team_checks(deck: TeamDeck) -> list[str]:
         for k, lab in enumerate(deck.stm.parameters):
             out.append(_label_problem(lab, model, stations, src, f"stm.parameters[{k}]", dynamic_only=True))
         dur = tdeck.duration_days
+        out += _guidance_problems(deck, tdeck, src)
         for k, e in enumerate(deck.event):
             late = [t for t in e.times() if t > dur * (1 + 1e-12)]
             if late:
@@ -175,7 +219,7 @@ def _team_checks(deck: TeamDeck) -> list[str]:
     ec = deck.errcon
     if ec.stm_file:
         spath = deck.resolve(ec.stm_file)
-        if ec.build_stm:
+        if ec.build_stm is True or (ec.build_stm == "if_missing" and not spath.exists()):
             out.append(_output_problem(spath, src, "errcon.stm_file", ec.stm_file))
         else:
             out += _input_problems(spath, src, "errcon.stm_file", ec.stm_file, "fracas-stm", thash)

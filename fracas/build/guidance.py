@@ -112,7 +112,12 @@ def control_a_priori(ap: APriori | None, src: str, nx: int, P0_true: np.ndarray,
     if ap is None:
         return None
     if ap.from_punch is not None:
-        raise _err(src, "control.from_punch", ap.from_punch, "not available in this release; give the sigmas")
+        raise _err(
+            src,
+            "control.from_punch",
+            ap.from_punch,
+            "a punched control covariance is reloaded with a_priori.from_punch (leave [control] out); give sigmas here",
+        )
     P = np.array(P0_true, dtype=np.float64)
     P[:nx, :] = 0.0
     P[:, :nx] = 0.0

@@ -324,7 +324,11 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
         punched=punched,
         guidance=guid,
         guidance_model=deck.errcon.guidance_model,
-        P0_control=control_a_priori(deck.control, src, nx, P0t, _state_sigmas),
+        P0_control=(
+            np.array(punched["control"], dtype=np.float64)
+            if punched is not None and punched.get("control") is not None and deck.control is None
+            else control_a_priori(deck.control, src, nx, P0t, _state_sigmas)
+        ),
         budget=bool(deck.budget.enabled and deck.errcon.propagation == "phi"),
         budget_at_s=tuple(t * DAY_S for t in deck.budget.at_days),
     )

@@ -5,7 +5,7 @@ mm/s, deg, µrad); :mod:`fracas.team.setup` converts to km, s, rad.  No JAX here
 Layout (only ``[ertraj]`` is required)::
 
     title = "Mercury approach"
-    [errcon]       build_stm = false, analysis = true,       ($ERRCON)
+    [errcon]       build_stm = false | true | "if_missing", analysis = true,  ($ERRCON)
                    propagation = "phi" | "pdot",  stm_file = "stm_files/x.h5"
                    process_noise = "grid" | "interval",  noise_step_hours = 1.0,
                    guidance_model = "report" | "orthogonal" | "tsim"  (the estimated-deviation
@@ -154,7 +154,7 @@ class _Section(BaseModel):
 class ErrCon(_Section):
     """$ERRCON: what this run does."""
 
-    build_stm: bool = False
+    build_stm: bool | Literal["if_missing"] = False
     analysis: bool = True
     propagation: Literal["phi", "pdot"] = "phi"
     stm_file: str | None = None

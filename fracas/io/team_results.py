@@ -63,7 +63,8 @@ _GUIDANCE_MATRICES = (
     ("correction_cov", "control units^2", "covariance of the correction (dV km^2/s^2, or controls)"),
     ("execution_cov", "control units^2", "execution-error covariance"),
 )
-_GUIDANCE_SCALARS = ("dv_mean_km_s", "dv_99_km_s", "dv_rms_km_s", "propellant_sigma_kg")
+_GUIDANCE_SCALARS = ("dv_mean_km_s", "dv_99_km_s", "dv_rms_km_s", "propellant_sigma_kg", "dv_variance_km2_s2")
+_SCALAR_UNITS = {"propellant_sigma_kg": "kg", "dv_variance_km2_s2": "km^2/s^2"}
 
 
 def _write_guidance(g: h5py.Group, events: list[GuidanceEvent]) -> None:
@@ -84,7 +85,7 @@ def _write_guidance(g: h5py.Group, events: list[GuidanceEvent]) -> None:
         for k, units, desc in _GUIDANCE_MATRICES:
             write(q, k, np.asarray(getattr(e, k), dtype=np.float64), units, description=desc)
         for k in _GUIDANCE_SCALARS:
-            write(q, k, float(getattr(e, k)), "km/s" if k.endswith("km_s") else "kg")
+            write(q, k, float(getattr(e, k)), _SCALAR_UNITS.get(k, "km/s"))
 
 
 def _read_guidance(c: Checked, g: h5py.Group, n: int) -> list[dict[str, Any]]:
@@ -411,6 +412,8 @@ def _write_punch(path: str | os.PathLike, res: TeamProduct, indices: list[int] |
             write(g, "assumed", res.assumed.P_plus[k][:n, :n], "labels/units x labels/units")
             if res.true is not None:
                 write(g, "true", res.true.P_plus[k][:n, :n], "labels/units x labels/units")
+            if res.control is not None:
+                write(g, "control", res.control.P_plus[k][:n, :n], "labels/units x labels/units")
         write_provenance(f, res.provenance)
 
 
@@ -456,7 +459,9 @@ def read_punch(path: str | os.PathLike, source: str = "<deck>", *, verify: bool 
                 c.num(f"{k}/state", (7,), finite=True)
             if "true" in f[k]:
                 out["true"] = c.num(f"{k}/true", (n, n), finite=True)
-            for which in ("assumed", "true"):
+            if "control" in f[k]:
+                out["control"] = c.num(f"{k}/control", (n, n), finite=True)
+            for which in ("assumed", "true", "control"):
                 if which in out and not np.allclose(out[which], out[which].T, rtol=1e-10, atol=0.0):
                     raise c.fail(f"{k}/{which}", "not symmetric, expected a covariance matrix")
             return out

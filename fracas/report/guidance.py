@@ -343,7 +343,7 @@ def bplane_figure(r: dict, n: int = 361):
         ax.legend(fontsize=7)
     for ax in list(axes.flat)[len(gs) :]:
         ax.set_visible(False)
-    fig.suptitle(f"B-plane dispersion: {r['attrs']['title']}")
+    fig.suptitle(f"B-plane dispersion: {r['attrs']['title']}", fontsize="medium", wrap=True)
     fig.tight_layout()
     return fig
 

@@ -41,7 +41,7 @@ def budget_outputs(study: Study, p_true_plus: np.ndarray, outcomes) -> tuple[lis
         if o.type != "none":
             names.append(f"{o.name} dV rms")
             units.append("km/s")
-            vals.append(o.dv_rms_km_s**2)
+            vals.append(o.dv_variance_km2_s2)  # unclipped: a source's share may be indefinite
         for j, t in enumerate(o.target_names):
             names.append(f"{o.name} {t} after")
             units.append(o.target_units[j])

@@ -172,13 +172,11 @@ def _target_psi_uncached(study: Study, span: ReferenceSpan, g: GuidanceSpec, t_s
 
     x_f, body_f = span.state(g.target_time_s)
     body = g.target_body or body_f
-    if body != body_f:
-        raise ConfigError(
-            f"{study.source}: guidance {g.name}: target_body = {body!r}, but the reference's central body at "
-            f"{g.target_time_s / 86400.0:.6g} d is {body_f!r} (targets are evaluated about the central body)"
-        )
+    x_rel = np.array(x_f[:6], dtype=np.float64)
+    if body != body_f:  # the target body's state relative to the central body (DE421)
+        x_rel = x_rel - _relative_body_state(study, body, body_f, g.target_time_s)
     mu = float(np.asarray(get_values(study.problem.params, [f"mu[{body}]"], study.problem.model))[0])
-    a_t = np.asarray(target_jacobian(tuple(g.targets), x_f[:6], float(g.target_time_s), mu))
+    a_t = np.asarray(target_jacobian(tuple(g.targets), x_rel, float(g.target_time_s), mu))
     phi, theta = span.transition(g.target_time_s, t_s)
     nx = study.nx
     return a_t[:, :nx] @ augment(study, phi, theta)[:nx, :], body
@@ -196,6 +194,23 @@ def _post(p_c, p_k, g_mat, mode, nx):
     a = np.eye(p_c.shape[0]) - g_mat
     cross = a @ c @ g_mat.T
     return a @ p_c @ a.T + g_mat @ p_k @ g_mat.T + cross + cross.T
+
+
+def _relative_body_state(study: Study, body: str, centre: str, t_s: float) -> np.ndarray:
+    """(6,) state of ``body`` relative to ``centre`` at t_s (s from the epoch), ICRF, DE421.
+
+    The targets are functions of the spacecraft's state relative to the target body; that
+    body's own motion does not depend on the spacecraft, so A_T is unchanged."""
+    from fracas.constants import DAY_S
+    from fracas.dynamics.ephemeris import body_states, build_ephemeris
+
+    et = float(study.problem.epoch_et_s) + float(t_s)
+    names = sorted({body, centre} - {"sun"})
+    table = build_ephemeris(names, et - DAY_S, et + DAY_S, margin_s=DAY_S)
+    pos, vel = (np.asarray(a) for a in body_states(table, et))
+    helio = {b: np.concatenate([pos[i], vel[i]]) for i, b in enumerate(names)}
+    helio["sun"] = np.zeros(6)
+    return helio[body] - helio[centre]
 
 
 def _state_only(m: np.ndarray, nx: int) -> np.ndarray:
@@ -287,6 +302,7 @@ def _impulsive(study, span, g, k, p_c, p_k):
         dv_mean_km_s=dvstats.mean_dv_magnitude(p_dv),
         dv_99_km_s=dvstats.dv_magnitude_quantile(p_dv, 0.99),
         dv_rms_km_s=dvstats.rms_dv_magnitude(p_dv),
+        dv_variance_km2_s2=float(np.trace(p_dv)),
     )
     return out, p_plus, [(g.time_s, x_exec)]
 
@@ -341,7 +357,8 @@ def _low_thrust(study, span, g, k, p_c, p_k):
     c = float(np.asarray(get_values(study.problem.params, ["exhaust_velocity_km_s"], study.problem.model))[0])
     j_dv, j_m = correction_cost_jacobians(tuple(g.controls), a_i, a_c, float(x_i[6]), float(x_c[6]), c, thr_i, thr_c)
     j_dv, j_m = np.asarray(j_dv), np.asarray(j_m)
-    sig_dv = math.sqrt(max(float(j_dv @ p_u @ j_dv), 0.0))
+    var_dv = float(j_dv @ p_u @ j_dv)
+    sig_dv = math.sqrt(max(var_dv, 0.0))
     sig_m = math.sqrt(max(float(j_m @ p_u @ j_m), 0.0))
     out = GuidanceOutcome(
         name=g.name,
@@ -368,6 +385,7 @@ def _low_thrust(study, span, g, k, p_c, p_k):
         dv_99_km_s=Z99 * sig_dv,
         dv_rms_km_s=sig_dv,
         propellant_sigma_kg=sig_m,
+        dv_variance_km2_s2=var_dv,
     )
     return out, p_reset, [(t_c, x_exec_full[:nx, :nx])]
 

@@ -41,7 +41,10 @@ PNG = b"\x89PNG\r\n\x1a\n"
 @pytest.fixture(scope="module")
 def old(tmp_path_factory) -> dict:
     _, path, _ = run_team(SMALL, None, tmp_path_factory.mktemp("guidance") / "small.h5")
-    return read_team_results(path)
+    r = read_team_results(path)
+    for key in ("guidance", "control", "budget"):  # as a file written before these existed
+        r.pop(key, None)
+    return r
 
 
 @pytest.fixture(scope="module")

@@ -227,3 +227,21 @@ def test_results_file_round_trip(case_ref, tmp_path):
     np.testing.assert_array_equal(r["budget"]["variance"], res.budget.variance)
     assert r["budget"]["sources"] == res.budget.sources
     assert abs(res.guidance[0].time_s - 3.2 * DAY_S) < 1e-6
+
+
+def test_control_covariance_punched_and_reloaded(case_ref, tmp_path):
+    """A punch file carries the control covariance at the punch time; a study reloaded from it
+    (a_priori.from_punch, no [control]) starts its control covariance from it, bit for bit."""
+    from fracas.build.team import build_case
+    from fracas.io.team_results import read_punch, write_punch
+
+    case, _, _, res = case_ref
+    prod = team_product(res, reference_source="memory")
+    k = res.study.schedule.index_of(3.6 * DAY_S)
+    p = tmp_path / "punch.h5"
+    write_punch(p, prod, [k])
+    punched = read_punch(p)
+    np.testing.assert_array_equal(punched["control"], res.control[k])
+    deck = case.deck.model_copy(update={"control": None})
+    study = build_case(deck, punched).study
+    np.testing.assert_array_equal(study.P0_control, res.control[k])

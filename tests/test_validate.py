@@ -197,7 +197,7 @@ def test_validate_command_lists_every_problem(tmp_path):
     decks = sorted(str(p) for p in (ROOT / "namelists").glob("*.toml"))
     r = CliRunner().invoke(main, ["validate", *decks])
     assert r.exit_code == 0, r.output
-    kind = {"_team.toml": "team", "_sweep.toml": "sweep"}
+    kind = {"_team.toml": "team", "_guidance.toml": "team", "_sweep.toml": "sweep"}
     expected = [f"ok: {d} ({next((v for k, v in kind.items() if d.endswith(k)), 'propagate')})" for d in decks]
     assert r.stdout.splitlines() == expected
     bad = tmp_path / "bad.toml"

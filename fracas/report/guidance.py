@@ -184,10 +184,34 @@ def budget_rows(r: dict, i: int, top: int | None = None) -> list[tuple[str, floa
     return rows
 
 
+def budget_summary_table(r: dict, velocity_unit: str = "mm/s", dv_unit: str = "m/s", n_top: int = 2):
+    """The budget in one table (the normal printout): per output its 1σ and its ``n_top``
+    largest sources with their % of the variance."""
+    from rich.markup import escape
+
+    b = r["budget"]
+    t = _table("error budget (largest sources, % of variance; --verbose: every source)", boxed=False)
+    _text_col(t, "output")
+    _num_col(t, "1σ")
+    _text_col(t, "unit")
+    for j in range(n_top):
+        _text_col(t, f"source {j + 1}")
+    totals = np.asarray(b["total"], dtype=float)
+    for i, name in enumerate(b["outputs"]):
+        f, u = _output_unit(str(name), str(b["units"][i]), velocity_unit, dv_unit)
+        tot = totals[i]
+        sig = math.sqrt(tot) * f if np.isfinite(tot) and tot >= 0 else math.nan
+        rows = budget_rows(r, i)[:n_top]
+        cells = [escape(f"{src} {pct:.0f}%") if np.isfinite(pct) else escape(src) for src, _v, _s, pct in rows]
+        cells += [""] * (n_top - len(cells))
+        t.add_row(escape(str(name)), _fmt(sig), u, *cells)
+    return t
+
+
 def budget_tables(r: dict, verbosity: str = "normal", velocity_unit: str = "mm/s", dv_unit: str = "m/s"):
-    """One table per budget output (its sources ranked: σ-equivalent in the output's unit
-    and % of the total variance; normal: the top :data:`BUDGET_TOP` and "others", verbose:
-    all) and the sum-check line; ([], None) without a budget."""
+    """The budget's tables and the sum-check line; ([], None) without a budget.  Normal: one
+    summary table (:func:`budget_summary_table`); verbose: one table per output, its sources
+    ranked (σ-equivalent in the output's unit and % of the total variance)."""
     from rich.markup import escape
 
     b = r.get("budget")
@@ -196,7 +220,9 @@ def budget_tables(r: dict, verbosity: str = "normal", velocity_unit: str = "mm/s
     top = None if verbosity == "verbose" else BUDGET_TOP
     tables = []
     totals = np.asarray(b["total"], dtype=float)
-    for i, name in enumerate(b["outputs"]):
+    if verbosity == "normal":
+        tables.append(budget_summary_table(r, velocity_unit, dv_unit))
+    for i, name in enumerate(b["outputs"] if verbosity == "verbose" else []):
         f, u = _output_unit(str(name), str(b["units"][i]), velocity_unit, dv_unit)
         tot = totals[i]
         sig = math.sqrt(tot) * f if np.isfinite(tot) and tot >= 0 else math.nan

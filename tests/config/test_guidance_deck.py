@@ -99,11 +99,12 @@ def test_guidance_mistakes_name_the_field(extra, field, words):
     assert "g.toml" in msg and field in msg and words in msg and "\n" not in msg
 
 
+GOOD_TAIL = 'time_days = 1.0\ntargets = ["x"]\n'
+
+
 def test_pdot_with_guidance_refused():
     with pytest.raises(DeckError, match=r"errcon.propagation.*phi"):
-        _deck(
-            '[errcon]\npropagation = "pdot"\n[[guidance]]\nname = "a"\ntype = "impulsive"\ntime_days = 1.0\ntargets = ["x"]\n'
-        )
+        _deck('[errcon]\npropagation = "pdot"\n[[guidance]]\nname = "a"\ntype = "impulsive"\n' + GOOD_TAIL)
 
 
 def test_validate_checks_guidance_against_the_trajectory(tmp_path):

@@ -149,12 +149,13 @@ class ErrCon(_Section):
     propagation: Literal["phi", "pdot"] = "phi"
     stm_file: str | None = None
     # PHI mode's thrust-noise model (fracas.team.transitions): "grid" (default) computes
-    # DYNO's Q̃ on fixed noise cells (a grid of noise_step_hours anchored at the epoch, cut at
-    # the thrust switches; with an STM file, the first multiple of noise_step_hours on the
-    # file's grid, taken from the file without integrating) and maps each cell's Q̃ to the
-    # event times, so eigenvector, prediction and print events leave every covariance
-    # unchanged; "interval" is FRACAS's DYNO over each schedule interval (every event time
-    # changes the noise: up to ~3e-3 in sigma on tests/data/team_small.toml).
+    # DYNO's Q̃ on fixed noise cells (a grid anchored at the epoch, cut at the thrust
+    # switches; its step is the smallest multiple of noise_step_hours on the [stm] grid, so
+    # in-line runs and runs from the deck's STM file share it, and the file's runs read the
+    # cells from the file without integrating) and maps each cell's Q̃ to the event times,
+    # so eigenvector, prediction and print events leave every covariance unchanged;
+    # "interval" is FRACAS's DYNO over each schedule interval (every event time changes the
+    # noise: up to ~3e-3 in sigma on tests/data/team_small.toml; docs/team_results.md).
     process_noise: Literal["grid", "interval"] = "grid"
     noise_step_hours: PositiveFloat = 1.0
 

@@ -89,7 +89,9 @@ def integrate_reference(study: Study) -> Reference:
     extra = noise_cell_times(study)
     if extra.size:
         near = np.abs(extra[:, None] - times[None, :]).min(axis=1) <= TIME_TOL_S
-        t_all = np.unique(np.concatenate([[0.0], times, extra[~near]]))
+        ex = np.unique(extra[~near])
+        ex = ex[np.concatenate([[True], np.diff(ex) > TIME_TOL_S])]  # a target on a cell end is one time
+        t_all = np.unique(np.concatenate([[0.0], times, ex]))
         return _integrate_with_cells(study, times, t_all, labels)
     lead = times[0] > 0.0
     t_out = np.concatenate([[0.0], times]) if lead else times

@@ -18,28 +18,30 @@ Two thrust-noise models for PHI mode (``errcon.process_noise``, ``Study.noise_mo
   changes the covariances only at integration round-off (tests/team/test_noise_invariance.py).
   Where the reference, Φ and h at the cell ends come from:
 
-  * an STM file (``Reference.product``): the cells are the file's own grid
-    (:func:`stm_cell_step`: the first multiple of ``noise_step_s`` whose every point in the
-    span is a file time -- ``noise_step_s`` itself when the file's ``[stm] grid_hours``
-    divides it, else e.g. 2 h cells for a 2 h file grid and a 1 h noise step), cut at the
-    thrust switches and the schedule's ends; states, Φ (chained file steps,
-    :func:`fracas.products.chain`) and primaries are read at the cell ends and event times:
-    no integration.  A file without such a grid (no ``grid_hours``, or one coarser than
-    the shortest correlation time) falls back to the in-line integration below.  The
-    step used is reported by :func:`noise_settings`.
-  * otherwise (in-line reference, or that fallback): the reference, Φ and h are integrated
-    afresh at the union of the cell ends (``noise_step_s``) and the event times.
+  The study's ``noise_step_s`` is already the deck's cell step (:func:`noise_cell_step`:
+  the smallest multiple of ``noise_step_hours`` on the deck's ``[stm] grid_hours``, e.g.
+  2 h for a 1 h noise step and a 2 h file grid), so a deck's in-line runs and its runs
+  from its own STM file use the same cells.  The reference at the cell ends and event
+  times is read from ``Reference.product`` -- the STM file's contents, or the in-line
+  reference, which :func:`fracas.team.reference.integrate_reference` integrates once
+  through the cell ends -- without integrating (:func:`stm_cell_step` checks that the
+  product holds the grid, or takes the first multiple of the step it does hold); states,
+  Φ (chained steps, :func:`fracas.products.chain`) and primaries at those times.  Only a
+  product without such a grid (another deck's file without ``grid_hours``), or no product,
+  integrates the reference again at the union of the cell ends and the event times.
+  :func:`noise_settings` says which.
 
   h is evaluated with the state at each cell end and the time ``EPS_T`` inside the cell
   (as :func:`interval_noise` does): the thrust program is a function of time, so a cell
   that starts at thrust-on or ends at thrust-off sees the thrust on, a coast cell gets
   zero noise; the state itself is continuous at a switch, and moving it by ``EPS_T``
   (~1e-10 relative) is neglected.  Both sources give the same cells for the same step, and
-  the same covariances to ~5e-11 (tests/team/test_noise_invariance.py); the cell step
-  matters more: DYNO's Q̃ is not additive, so 2 h cells differ from 1 h cells by ~5e-3 in
-  scaled covariance on tests/data/team_small.toml, the size of what one event did to the
-  "interval" model -- but fixed once for a given file grid and noise step, whatever the
-  events.  Between cell ends the covariance lacks the current cell's noise (at most one
+  the same covariances (bit for bit on team_small: the same output times;
+  tests/team/test_noise_invariance.py).  The cell step is a modelling choice: DYNO puts a
+  cell's noise at its start, so the position part of Q̃ grows with the cell length
+  squared (2 h and 1 h cells differ by ~5e-3 in scaled covariance on team_small, by up to
+  40 % in early position sigma on Earth-Mars against 4 h intervals), but it is fixed for
+  a deck, whatever the events.  Between cell ends the covariance lacks the current cell's noise (at most one
   cell of it).  Chosen over carrying the three noise states through the PHI filter
   (exact, as PDOT does) because it keeps the filter's state, layout and products
   unchanged; PDOT remains the exact model (``errcon.propagation = "pdot"``).

@@ -33,6 +33,7 @@ from fracas.measurements.stations import DSN_STATIONS, Station
 from fracas.params import param_unit, parse_label
 from fracas.team.schedule import build_schedule, merge_times, range_times
 from fracas.team.study import Study, TrackingSpec
+from fracas.team.transitions import noise_cell_step
 
 __all__ = [
     "TeamCase",
@@ -317,7 +318,9 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
         trajectory_end_s=dur,
         pdot_step_s=deck.ertraj.pdot_step_hours * 3600.0,
         noise_model=deck.errcon.process_noise,
-        noise_step_s=deck.errcon.noise_step_hours * 3600.0,
+        noise_step_s=noise_cell_step(  # on the deck's STM grid: in-line and file runs share the cells
+            deck.errcon.noise_step_hours * 3600.0, (deck.stm.grid_hours or 0.0) * 3600.0, np.concatenate([tau_a, tau_t])
+        ),
         user_gain_spec=deck.filter.user_gain or "",
         trajectory_hash=trajectory_hash(tdeck),
         trajectory_source=tdeck.source_path or "",

@@ -10,7 +10,7 @@ Layout (only ``[ertraj]`` is required)::
                    process_noise = "grid" | "interval",  noise_step_hours = 1.0,
                    guidance_model = "report" | "orthogonal" | "tsim"  (the estimated-deviation
                    covariance that sizes corrections: P_c, P_c − P_k, P_c + P_k)
-                   (PHI mode's thrust-noise model: DYNO on a fixed grid, default, or
+                   (PHI mode's thrust-noise model: DYNO on fixed cells, default, or
                    FRACAS's DYNO per schedule interval; fracas.team.transitions)
     [ertraj]       deck = "trajectory.toml"   (relative to this file)      ($ERTRAJ)
                    pdot_step_hours = 2.4      (PDOT integration step)
@@ -158,15 +158,15 @@ class ErrCon(_Section):
     analysis: bool = True
     propagation: Literal["phi", "pdot"] = "phi"
     stm_file: str | None = None
-    # PHI mode's thrust-noise model (fracas.team.transitions): "grid" computes DYNO's Q̃ on
-    # fixed noise cells (a grid of noise_step_hours anchored at the epoch, cut at the thrust
-    # switches) and maps each cell's Q̃ to the event times, so eigenvector, prediction and
-    # print events leave every covariance unchanged; "interval" (default, FRACAS's DYNO over
-    # each schedule interval: every event time changes the noise by up to ~3e-3 in sigma).
-    # "interval" stays the default for now because "grid" integrates the reference at the
-    # cell ends even when an STM file is given (Mercury via its STM file: 13 s instead of
-    # 5.2 s cold); it becomes the default once STM files carry the noise-cell times.
-    process_noise: Literal["grid", "interval"] = "interval"
+    # PHI mode's thrust-noise model (fracas.team.transitions): "grid" (default) computes
+    # DYNO's Q̃ on fixed noise cells (a grid anchored at the epoch, cut at the thrust
+    # switches; its step is the smallest multiple of noise_step_hours on the [stm] grid, so
+    # in-line runs and runs from the deck's STM file share it, and the file's runs read the
+    # cells from the file without integrating) and maps each cell's Q̃ to the event times,
+    # so eigenvector, prediction and print events leave every covariance unchanged;
+    # "interval" is FRACAS's DYNO over each schedule interval (every event time changes the
+    # noise: up to ~3e-3 in sigma on tests/data/team_small.toml; docs/team_results.md).
+    process_noise: Literal["grid", "interval"] = "grid"
     guidance_model: Literal[GUIDANCE_MODELS] = "report"  # type: ignore[valid-type]
     noise_step_hours: PositiveFloat = 1.0
 

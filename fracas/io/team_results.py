@@ -149,6 +149,11 @@ def _write_team_results(path: str | os.PathLike, res: TeamProduct) -> None:
         g.attrs["n_state"] = int(res.n_state)
         g.attrs["min_elevation_deg"] = float(st.get("min_elevation_deg", 0.0))
         g.attrs["trajectory_hash"] = st.get("trajectory_hash", "")
+        g.attrs["process_noise"] = str(st.get("process_noise", ""))
+        g.attrs["noise_cells"] = str(st.get("noise_cells", ""))
+        g.attrs["noise_cell_s"] = float(st.get("noise_cell_s", float("nan")))
+        if "guidance_model" in st:
+            g.attrs["guidance_model"] = str(st["guidance_model"])
         pr = g.create_group("print")
         for k, v in st.get("print", {}).items():
             pr.attrs[k] = v

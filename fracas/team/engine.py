@@ -72,7 +72,7 @@ def run_study(study: Study, ref: Reference, progress=None, product=None) -> Team
     if study.guidance:
         from fracas.team.guidance import ReferenceSpan, run_guidance
 
-        span = ReferenceSpan(study, product)
+        span = ReferenceSpan(study, product if product is not None else getattr(ref, "product", None))
 
         def filt(xa, xt):
             return run_filter(study, phi_aug, Qa, Qt, meas, xa, xt)

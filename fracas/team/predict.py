@@ -64,7 +64,7 @@ def predict_from(res, k: int, t_to: float):
     if study.noise_model == "interval":
         Qa, Qt = interval_noise(study, t_out, sub.states, prim, phi)
     else:  # the fixed noise cells, clipped to start at t_k
-        Qa, Qt = grid_noise(study, t_out, ref.states[k])
+        Qa, Qt = grid_noise(study, t_out, ref.states[k], ref.product)  # read from the reference's product
     n = study.layout.n  # PDOT's noise states (appended last) are dropped: DYNO's Q̃ stands for them
     Pa = res.Pa_plus[k][:n, :n]
     Pt = res.Pt_plus[k][:n, :n] if res.Pt_plus is not None else None

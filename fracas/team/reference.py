@@ -14,11 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracas.integrate.propagate import propagate_with_sensitivities
-from fracas.products import ReferenceTrajectory, chain, time_indices
+from fracas.products import TIME_TOL_S, ReferenceTrajectory, chain, time_indices
 from fracas.status import RunStatus
 from fracas.team.study import Study
 
-__all__ = ["Reference", "integrate_reference", "reference_from_product", "run_reference"]
+__all__ = ["Reference", "integrate_reference", "noise_cell_times", "reference_from_product", "run_reference"]
 
 
 @dataclass
@@ -29,7 +29,10 @@ class Reference:
     (identity at k = 0); theta (K, 7, n_dyn) Θ(t_k, t_{k-1}) for ``labels`` (the study's
     dynamic parameters); source: "integrated" or the STM file path; status: OK, or
     OUTSIDE_TRAJECTORY when the trajectory ended before ``failed_at_s`` (a schedule time;
-    the matrices from there on are not finite); integrator_status: the propagation's own.
+    the matrices from there on are not finite); integrator_status: the propagation's own;
+    product: the STM file's contents when the reference came from one (every file time, not
+    only the schedule's: the fixed noise cells are taken from its grid without integrating,
+    fracas.team.transitions.grid_noise), None for an in-line reference.
     """
 
     times_s: np.ndarray
@@ -43,6 +46,7 @@ class Reference:
     status: RunStatus = RunStatus.OK
     failed_at_s: float = float("nan")
     integrator_status: int = 0
+    product: ReferenceTrajectory | None = None
 
 
 def run_reference(problem, t_out: np.ndarray, labels: list[str]):
@@ -56,12 +60,41 @@ def run_reference(problem, t_out: np.ndarray, labels: list[str]):
     return traj, sens, RunStatus.OUTSIDE_TRAJECTORY, float(t_out[int(np.argmax(~finite))])
 
 
-def integrate_reference(study: Study) -> Reference:
-    """PATH: integrate the reference and its sensitivities over the study's schedule times."""
+def noise_cell_times(study: Study) -> np.ndarray:
+    """The extra output times of an in-line reference for the fixed-cell noise model: the
+    noise cells (fracas.team.transitions) over the schedule and on to the last prediction
+    target inside the trajectory, and those targets, so that neither the run nor its
+    predictions integrate the reference again (empty for other models or without noise)."""
+    from fracas.team.transitions import _noise_cells
+
+    if study.propagation != "phi" or study.noise_model != "grid" or not study.has_noise:
+        return np.zeros(0)
     times = study.schedule.times_s
+    end = study.trajectory_end_s if study.trajectory_end_s > times[-1] else float(times[-1])
+    targets = [t for ts in study.schedule.predict_to_s.values() for t in ts if times[-1] < t <= end]
+    t1 = max([float(times[-1])] + targets)
+    return np.concatenate([_noise_cells(study, float(times[0]), t1), targets])
+
+
+def integrate_reference(study: Study) -> Reference:
+    """PATH: integrate the reference and its sensitivities over the study's schedule times.
+
+    With the fixed-cell noise model the integration also outputs at the noise-cell ends
+    (:func:`noise_cell_times`); the schedule's matrices are then chained over those steps
+    and the whole integration is kept as ``Reference.product``, which
+    :func:`fracas.team.transitions.grid_noise` reads as it reads an STM file.
+    """
+    times = study.schedule.times_s
+    labels = study.dynamic_labels
+    extra = noise_cell_times(study)
+    if extra.size:
+        near = np.abs(extra[:, None] - times[None, :]).min(axis=1) <= TIME_TOL_S
+        ex = np.unique(extra[~near])
+        ex = ex[np.concatenate([[True], np.diff(ex) > TIME_TOL_S])]  # a target on a cell end is one time
+        t_all = np.unique(np.concatenate([[0.0], times, ex]))
+        return _integrate_with_cells(study, times, t_all, labels)
     lead = times[0] > 0.0
     t_out = np.concatenate([[0.0], times]) if lead else times
-    labels = study.dynamic_labels
     traj, sens, status, failed_at = run_reference(study.problem, t_out, labels)
     sl = slice(1, None) if lead else slice(None)
     phi = np.array(sens.stm_step)[sl]
@@ -84,6 +117,58 @@ def integrate_reference(study: Study) -> Reference:
     )
 
 
+def _integrate_with_cells(study: Study, times: np.ndarray, t_all: np.ndarray, labels: list[str]) -> Reference:
+    """The in-line reference over ``t_all`` (the schedule, the noise cells, 0), held as an
+    in-memory ReferenceTrajectory and read back at the schedule times."""
+    pr = study.problem
+    traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, pr.x0, t_all, labels)
+    bodies = pr.model.bodies
+    stm_step = np.array(sens.stm_step, np.float64)
+    stm_step[0] = np.eye(7)  # t_all[0] = 0: from the epoch to itself
+    par_step = np.array(sens.par_step, np.float64)
+    par_step[0] = 0.0
+    data = ReferenceTrajectory(
+        times_s=t_all,
+        epoch_et_s=float(pr.epoch_et_s),
+        event_types=["grid"] * len(t_all),
+        states=np.array(traj.x, np.float64),
+        primary=[bodies[int(i)] if 0 <= int(i) < len(bodies) else "" for i in np.asarray(traj.primary)],
+        stm_step=stm_step,
+        par_step=par_step,
+        param_labels=list(labels),
+        param_units=[""] * len(labels),
+        param_values=np.zeros(len(labels)),
+        param_steps=np.full(len(labels), np.nan),
+        deck_text="",
+        deck_hash="",
+        title="in-line reference",
+    )
+    idx = time_indices(data, times)
+    phi, theta = chain(data, times)
+    phi[0] = np.eye(7)
+    theta[0] = 0.0
+    # a failure counts at the first schedule time whose transition is not finite (an
+    # integration that ends after the schedule, on the way to a prediction target, does
+    # not fail the reference: the prediction reports it)
+    finite = np.all(np.isfinite(phi), axis=(1, 2)) & np.all(np.isfinite(data.states[idx]), axis=1)
+    status, failed_at = RunStatus.OK, float("nan")
+    if not np.all(finite):
+        status, failed_at = RunStatus.OUTSIDE_TRAJECTORY, float(times[int(np.argmax(~finite))])
+    return Reference(
+        times,
+        data.states[idx],
+        [data.primary[int(i)] for i in idx],
+        phi,
+        theta,
+        labels,
+        "integrated",
+        status=status,
+        failed_at_s=failed_at,
+        integrator_status=int(traj.status),
+        product=data,
+    )
+
+
 def reference_from_product(study: Study, data: ReferenceTrajectory, source: str) -> Reference:
     """STMRDR: the study's columns and times from a reference-trajectory product, chained.
 
@@ -97,5 +182,13 @@ def reference_from_product(study: Study, data: ReferenceTrajectory, source: str)
     idx = time_indices(data, times)
     prim = [data.primary[int(i)] for i in idx]
     return Reference(
-        times, np.asarray(data.states)[idx], prim, phi, theta, list(study.dynamic_labels), source, data.deck_text
+        times,
+        np.asarray(data.states)[idx],
+        prim,
+        phi,
+        theta,
+        list(study.dynamic_labels),
+        source,
+        data.deck_text,
+        product=data,
     )

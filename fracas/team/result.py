@@ -243,6 +243,9 @@ def team_product(
     if st.guidance:
         sett["guidance_model"] = st.guidance_model
     sett.update(settings or {})
+    from fracas.team.transitions import noise_settings
+
+    sett.update(noise_settings(st, res.ref))
     control = None
     if res.control is not None:
         pc0 = st.P0_control if st.P0_control is not None else st.P0_true

@@ -8,17 +8,42 @@ Two thrust-noise models for PHI mode (``errcon.process_noise``, ``Study.noise_mo
   so every event time (eigenvector, prediction, print) changes the answer (by ~1e-3 in σ
   on tests/data/team_small.toml).
 - ``"grid"`` (default; :func:`grid_noise`): the noise is computed once on fixed *noise
-  cells* that do not depend on the events: a grid of ``noise_step_s`` anchored at the epoch
+  cells* that do not depend on the events: a grid of ``noise_step_s`` (or of a multiple of
+  it on an STM file's grid, below) anchored at the epoch
   (t = 0), cut at the thrust switches and at the schedule's first and last times.  Each
   cell's DYNO Q̃_c is injected at the cell's end b and mapped to the event times with the
   reference transitions, so the noise over a schedule interval (t_{k-1}, t_k] is
   Q_k = sum over cells ending in it of Φ(t_k, b) Q̃_c Φ(t_k, b)ᵀ.  That sum composes
   exactly (Φ(t_c, t_b) Q(t_a, t_b) Φᵀ + Q(t_b, t_c) = Q(t_a, t_c)), so adding event times
   changes the covariances only at integration round-off (tests/team/test_noise_invariance.py).
-  The reference, Φ and h are integrated in line at the union of the cell ends and the
-  event times.  Between cell ends the covariance lacks the current cell's noise (at most
-  one ``noise_step_s`` of it).  Chosen over carrying the three noise states through the PHI
-  filter (exact, as PDOT does) because it keeps the filter's state, layout and products
+  Where the reference, Φ and h at the cell ends come from:
+
+  The study's ``noise_step_s`` is already the deck's cell step (:func:`noise_cell_step`:
+  the smallest multiple of ``noise_step_hours`` on the deck's ``[stm] grid_hours``, e.g.
+  2 h for a 1 h noise step and a 2 h file grid), so a deck's in-line runs and its runs
+  from its own STM file use the same cells.  The reference at the cell ends and event
+  times is read from ``Reference.product`` -- the STM file's contents, or the in-line
+  reference, which :func:`fracas.team.reference.integrate_reference` integrates once
+  through the cell ends -- without integrating (:func:`stm_cell_step` checks that the
+  product holds the grid, or takes the first multiple of the step it does hold); states,
+  Φ (chained steps, :func:`fracas.products.chain`) and primaries at those times.  Only a
+  product without such a grid (another deck's file without ``grid_hours``), or no product,
+  integrates the reference again at the union of the cell ends and the event times.
+  :func:`noise_settings` says which.
+
+  h is evaluated with the state at each cell end and the time ``EPS_T`` inside the cell
+  (as :func:`interval_noise` does): the thrust program is a function of time, so a cell
+  that starts at thrust-on or ends at thrust-off sees the thrust on, a coast cell gets
+  zero noise; the state itself is continuous at a switch, and moving it by ``EPS_T``
+  (~1e-10 relative) is neglected.  Both sources give the same cells for the same step, and
+  the same covariances (bit for bit on team_small: the same output times;
+  tests/team/test_noise_invariance.py).  The cell step is a modelling choice: DYNO puts a
+  cell's noise at its start, so the position part of Q̃ grows with the cell length
+  squared (2 h and 1 h cells differ by ~5e-3 in scaled covariance on team_small, by up to
+  40 % in early position sigma on Earth-Mars against 4 h intervals), but it is fixed for
+  a deck, whatever the events.  Between cell ends the covariance lacks the current cell's noise (at most one
+  cell of it).  Chosen over carrying the three noise states through the PHI filter
+  (exact, as PDOT does) because it keeps the filter's state, layout and products
   unchanged; PDOT remains the exact model (``errcon.propagation = "pdot"``).
 
 Shared by the PHI engine, PDOT and prediction events; jitted kernels are compiled once
@@ -35,6 +60,7 @@ from fracas import _jax  # noqa: F401
 from fracas.filters.process_noise import dyno_q
 from fracas.integrate.propagate import propagate_with_sensitivities
 from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at
+from fracas.products import TIME_TOL_S, ReferenceTrajectory, chain, time_indices
 from fracas.team.study import Study
 
 __all__ = [
@@ -45,6 +71,9 @@ __all__ = [
     "primary_index",
     "interval_noise",
     "grid_noise",
+    "stm_cell_step",
+    "noise_cell_step",
+    "noise_settings",
     "process_noise",
     "EPS_T",
 ]
@@ -135,9 +164,10 @@ def interval_noise(study: Study, t: np.ndarray, states: np.ndarray, primary: lis
     return out[0], out[1]
 
 
-def _noise_cells(study: Study, t0: float, t1: float) -> np.ndarray:
-    """The noise-cell ends in [t0, t1]: t0, the grid m * noise_step_s, the thrust switches, t1."""
-    step = float(study.noise_step_s)
+def _noise_cells(study: Study, t0: float, t1: float, step_s: float | None = None) -> np.ndarray:
+    """The noise-cell ends in [t0, t1]: t0, the grid m * step_s (default noise_step_s), the
+    thrust switches, t1."""
+    step = float(study.noise_step_s if step_s is None else step_s)
     m0, m1 = int(np.floor(t0 / step)) + 1, int(np.ceil(t1 / step)) - 1
     pts = [t0, t1] + [m * step for m in range(m0, m1 + 1)] + [s for s in study.thrust_switches_s if t0 < s < t1]
     pts = np.array(sorted(p for p in pts if t0 <= p <= t1))
@@ -150,31 +180,126 @@ def _noise_cells(study: Study, t0: float, t1: float) -> np.ndarray:
 TIME_MERGE_S = 1e-6  # s: a cell end and an event time closer than this are one point
 
 
-def grid_noise(study: Study, t: np.ndarray, x0: np.ndarray):
+def _on_file(t_file: np.ndarray, pts: np.ndarray) -> bool:
+    """Whether every time in ``pts`` is a file time (within TIME_TOL_S)."""
+    if pts.size == 0:
+        return True
+    i = np.clip(np.searchsorted(t_file, pts), 1, len(t_file) - 1)
+    d = np.minimum(np.abs(t_file[i] - pts), np.abs(t_file[i - 1] - pts))
+    return bool(np.all(d <= TIME_TOL_S))
+
+
+def _cap(base: float, taus) -> float:
+    """The longest cell step considered: the shortest finite correlation time (DYNO's
+    alpha = 0 regime), or ``base`` when that is shorter."""
+    taus = np.asarray(taus, np.float64).ravel()
+    taus = taus[np.isfinite(taus) & (taus > 0)]
+    return max(base, float(taus.min())) if taus.size else base
+
+
+def noise_cell_step(noise_step_s: float, grid_s: float | None, taus_s=()) -> float:
+    """A deck's noise-cell step (s): the smallest multiple j * noise_step_s that is a whole
+    multiple of its STM file's grid step ``grid_s`` ([stm] grid_hours), so that the deck's
+    in-line runs and its runs from its own STM file use the same cells (2 h for a 1 h noise
+    step on a 2 h file grid); ``noise_step_s`` itself without a grid, or when no multiple up
+    to the shortest correlation time in ``taus_s`` fits (such a file's runs integrate)."""
+    base = float(noise_step_s)
+    if not grid_s:
+        return base
+    for j in range(1, max(1, int(np.floor(_cap(base, taus_s) / base * (1 + 1e-12)))) + 1):
+        r = j * base / float(grid_s)
+        if abs(r - round(r)) <= 1e-9 * max(1.0, r):
+            return j * base
+    return base
+
+
+def stm_cell_step(study: Study, data: ReferenceTrajectory, t0: float, t1: float) -> float | None:
+    """The noise-cell step an STM file supports over [t0, t1] (s), or None.
+
+    The smallest multiple j * noise_step_s (j = 1, 2, ...; at most the shortest correlation
+    time, or noise_step_s when that is shorter) whose every grid point m * j * noise_step_s
+    inside (t0, t1) is a file time.  It depends on the file's times and noise_step_s only,
+    not on the study's events: a file with a uniform grid ([stm] grid_hours, anchored at
+    t = 0 like the noise grid) gives noise_step_s when that is a multiple of the file's
+    step, else the first multiple of noise_step_s on the file's grid (Earth-Mars: 2 h file
+    grid, 1 h noise step -> 2 h cells).  None (no such grid: the caller integrates) for a
+    file without a usable grid.
+    """
+    t_file = np.asarray(data.times_s, np.float64)
+    base = float(study.noise_step_s)
+    cap = _cap(base, np.concatenate([np.asarray(study.noise_tau_assumed), np.asarray(study.noise_tau_true)]))
+    for j in range(1, max(1, int(np.floor(cap / base * (1 + 1e-12)))) + 1):
+        step = j * base
+        m = np.arange(np.floor(t0 / step) + 1, np.ceil(t1 / step))
+        pts = m * step
+        pts = pts[(pts > t0 + TIME_MERGE_S) & (pts < t1 - TIME_MERGE_S)]
+        if _on_file(t_file, pts):
+            return step
+    return None
+
+
+def _stm_nodes(study: Study, data: ReferenceTrajectory, t: np.ndarray):
+    """The noise cells of ``t``'s span on an STM file and the union of cell ends and ``t``
+    with the reference at every union time, from the file alone (no integration):
+    (cells, U, step_phi (M, nx, nx) Φ(U_i, U_{i-1}), states (M, 7), primary (M,)), or None
+    when the file has no usable grid or lacks a thrust switch or one of ``t``."""
+    step = _stm_step(study, data, t)
+    if step is None:
+        return None
+    cells = _noise_cells(study, float(t[0]), float(t[-1]), step)
+    U = _union(cells, t)
+    phi, _ = chain(data, U)
+    idx = time_indices(data, U)
+    bodies = study.problem.model.bodies
+    prim = np.array([bodies.index(data.primary[int(i)]) for i in idx], dtype=np.int32)
+    return cells, U, phi[:, : study.nx, : study.nx], np.asarray(data.states, np.float64)[idx], prim
+
+
+def _union(cells: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The cell ends and the times of ``t`` not within TIME_MERGE_S of one, sorted."""
+    near = np.abs(t[:, None] - cells[None, :]).min(axis=1) <= TIME_MERGE_S
+    return np.array(sorted(set(cells.tolist()) | set(t[~near].tolist())))
+
+
+def grid_noise(study: Study, t: np.ndarray, x0: np.ndarray, product: ReferenceTrajectory | None = None):
     """Q (K, nx, nx) over each interval (t_{k-1}, t_k] of the fixed-cell model (element 0 is
     zero), assumed and true: every cell's DYNO Q̃ mapped from its end to t_k (module docstring).
 
-    ``x0`` (7,): the reference state at t[0]; the reference is integrated afresh from it over
-    the union of the cell ends and ``t`` (NaN where that integration fails).
+    With ``product`` (the study's STM file) whose grid supports the cells
+    (:func:`stm_cell_step`), the cells are that grid's and the states, Φ and primaries at
+    the cell ends and ``t`` come from the file: no integration.  Otherwise ``x0`` (7,),
+    the reference state at t[0], is integrated afresh over the union of the cell ends and
+    ``t`` (NaN where that integration fails) on cells of noise_step_s.
     """
     t = np.asarray(t, dtype=np.float64)
     K, nx = len(t), study.nx
     zeros = np.zeros((K, nx, nx))
     if not study.has_noise or K < 2:
         return zeros, zeros.copy()
-    cells = _noise_cells(study, float(t[0]), float(t[-1]))
-    near = np.abs(t[:, None] - cells[None, :]).min(axis=1) <= TIME_MERGE_S
-    U = np.array(sorted(set(cells.tolist()) | set(t[~near].tolist())))
-    pr = study.problem
-    M = len(U)
-    Up = np.concatenate([U, np.repeat(U[-1:], bucket(M) - M)])  # a few sizes share one compile
-    traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, x0, Up, ())
-    step_phi = np.array(sens.stm_step)[:M, :nx, :nx]
-    xs = np.asarray(traj.x)[:M]
-    prim = np.asarray(traj.primary)[:M].astype(np.int32)
+    got = _stm_nodes(study, product, t) if product is not None else None
+    if got is not None:
+        cells, U, step_phi, xs, prim = got
+    else:
+        cells = _noise_cells(study, float(t[0]), float(t[-1]))
+        U = _union(cells, t)
+        pr = study.problem
+        M = len(U)
+        Up = np.concatenate([U, np.repeat(U[-1:], bucket(M) - M)])  # a few sizes share one compile
+        traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, x0, Up, ())
+        step_phi = np.array(sens.stm_step)[:M, :nx, :nx]
+        xs = np.asarray(traj.x)[:M]
+        prim = np.asarray(traj.primary)[:M].astype(np.int32)
+    return _cell_noise(study, t, cells, U, step_phi, xs, prim)
+
+
+def _cell_noise(study: Study, t, cells, U, step_phi, xs, prim):
+    """DYNO over every cell and the sums mapped to ``t`` (``grid_noise``'s second half)."""
+    K, nx = len(t), study.nx
+    zeros = np.zeros((K, nx, nx))
     iu = {float(u): i for i, u in enumerate(U)}
     ic = np.array([iu[float(c)] for c in cells])
     # DYNO over every cell (a, b]: Φ(b, a) from the union steps, h just inside the ends
+    # (the state at the end, the time EPS_T inside: one-sided at the thrust switches)
     nc = len(cells) - 1
     phic = np.broadcast_to(np.eye(nx), (nc, nx, nx)).copy()
     for j in range(nc):
@@ -213,12 +338,43 @@ def grid_noise(study: Study, t: np.ndarray, x0: np.ndarray):
     return out[0], out[1]
 
 
+def noise_settings(study: Study, ref) -> dict:
+    """How the run's process noise was made, for the product's settings: the model and, for
+    the fixed cells, their step (s) and where the reference at their ends came from:
+    "stm_file" (read from the study's STM file), "reference" (the in-line reference,
+    integrated once through the cell ends, :func:`fracas.team.reference.integrate_reference`)
+    or "integrated" (integrated again for the noise: a file without a usable grid)."""
+    if study.propagation == "pdot":
+        return {"process_noise": "pdot"}
+    if study.noise_model == "interval":
+        return {"process_noise": "interval"}
+    t = np.asarray(ref.times_s, np.float64)
+    product = getattr(ref, "product", None)
+    step = _stm_step(study, product, t) if product is not None and len(t) > 1 else None
+    if step is not None:
+        where = "reference" if ref.source == "integrated" else "stm_file"
+        return {"process_noise": "grid", "noise_cells": where, "noise_cell_s": float(step)}
+    return {"process_noise": "grid", "noise_cells": "integrated", "noise_cell_s": float(study.noise_step_s)}
+
+
+def _stm_step(study: Study, data: ReferenceTrajectory, t: np.ndarray) -> float | None:
+    """:func:`stm_cell_step` over ``t``'s span, or None when the file also lacks one of ``t``
+    or a thrust switch inside the span."""
+    t0, t1 = float(t[0]), float(t[-1])
+    t_file = np.asarray(data.times_s, np.float64)
+    sw = np.array([s for s in study.thrust_switches_s if t0 < s < t1])
+    if not (_on_file(t_file, sw) and _on_file(t_file, t)):
+        return None
+    return stm_cell_step(study, data, t0, t1)
+
+
 def process_noise(study: Study, ref) -> tuple[np.ndarray, np.ndarray]:
     """The effective process noise over the schedule's intervals, assumed and true levels:
-    the fixed-cell model (``study.noise_model == "grid"``) or FRACAS's per-interval DYNO."""
+    the fixed-cell model (``study.noise_model == "grid"``; from the STM file's grid when the
+    reference came from one, :func:`grid_noise`) or FRACAS's per-interval DYNO."""
     if study.noise_model == "interval":
         return interval_noise(study, ref.times_s, ref.states, ref.primary, ref.phi)
-    return grid_noise(study, ref.times_s, ref.states[0])
+    return grid_noise(study, ref.times_s, ref.states[0], getattr(ref, "product", None))
 
 
 _bucket = bucket  # old private name

@@ -327,6 +327,8 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
         punched=punched,
         guidance=guid,
         guidance_model=deck.errcon.guidance_model,
+        guidance_reset=deck.errcon.guidance_reset,
+        guidance_estimates=deck.errcon.guidance_estimates,
         P0_control=(
             np.array(punched["control"], dtype=np.float64)
             if punched is not None and punched.get("control") is not None and deck.control is None

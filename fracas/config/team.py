@@ -9,7 +9,9 @@ Layout (only ``[ertraj]`` is required)::
                    propagation = "phi" | "pdot",  stm_file = "stm_files/x.h5"
                    process_noise = "grid" | "interval",  noise_step_hours = 1.0,
                    guidance_model = "report" | "orthogonal" | "tsim"  (the estimated-deviation
-                   covariance that sizes corrections: P_c, P_c − P_k, P_c + P_k)
+                   covariance that sizes corrections: P_c, P_c − P_k, P_c + P_k),
+                   guidance_reset = "state" | "all"  (blocks of GUIDM's reset),
+                   guidance_estimates = "state" | "state_and_solve_for"
                    (PHI mode's thrust-noise model: DYNO on fixed cells, default, or
                    FRACAS's DYNO per schedule interval; fracas.team.transitions)
     [ertraj]       deck = "trajectory.toml"   (relative to this file)      ($ERTRAJ)
@@ -168,6 +170,16 @@ class ErrCon(_Section):
     # noise: up to ~3e-3 in sigma on tests/data/team_small.toml; docs/team_results.md).
     process_noise: Literal["grid", "interval"] = "grid"
     guidance_model: Literal[GUIDANCE_MODELS] = "report"  # type: ignore[valid-type]
+    # which blocks GUIDM's reset of the control covariance to the knowledge touches (report
+    # model): "state" (default, digest P-B2) the state and state-parameter blocks, keeping
+    # the parameters' own dispersion (estimating a bias does not change it); "all" also
+    # the parameter block (the literal reading, which shrinks the actual dispersion)
+    guidance_reset: Literal["state", "all"] = "state"
+    # what the guidance law corrects (digest (G-4)): "state" (default, GUIDM: the estimated
+    # state only) or "state_and_solve_for" (also the estimated solve-for parameters, e.g. a
+    # thrust bias, whose effect on the target the correction then cancels; the post-maneuver
+    # control covariance is then the exact (G-7) form with the model's C_xe)
+    guidance_estimates: Literal["state", "state_and_solve_for"] = "state"
     noise_step_hours: PositiveFloat = 1.0
 
 

@@ -182,10 +182,15 @@ def _target_psi_uncached(study: Study, span: ReferenceSpan, g: GuidanceSpec, t_s
     return a_t[:, :nx] @ augment(study, phi, theta)[:nx, :], body
 
 
-def _post(p_c, p_k, g_mat, mode, nx):
+def _post(p_c, p_k, g_mat, mode, nx, reset="state"):
     """P_c⁺ for a correction δX⁺ = (I − G)δX + G e (digest (G-7) with BΓ → G); ``report``:
-    the reset to the knowledge (state and state-parameter blocks, P-B2)."""
-    if mode == "report":
+    the reset to the knowledge, of the state and state-parameter blocks (``reset="state"``,
+    P-B2) or of every block (``"all"``).  ``reset="exact"``: the exact form with the model's
+    C_xe in every mode (the report model's C_xe = P_k/2); used when the law also corrects
+    estimated parameters, which the reset to the knowledge cannot represent."""
+    if mode == "report" and reset != "exact":
+        if reset == "all":
+            return np.array(p_k, dtype=np.float64)
         out = p_c.copy()
         out[:nx, :] = p_k[:nx, :]
         out[:, :nx] = p_k[:, :nx]
@@ -213,14 +218,20 @@ def _relative_body_state(study: Study, body: str, centre: str, t_s: float) -> np
     return helio[body] - helio[centre]
 
 
-def _state_only(m: np.ndarray, nx: int) -> np.ndarray:
-    """The guidance law acts on the estimated STATE only (digest (G-4): "the guidance uses
-    the state estimate only"; correcting for estimated parameters is not in the report):
-    the parameter columns of Ψ or Λ are dropped from Γ, but the target covariances keep
-    them (the parameters' dispersion still reaches the target)."""
+def _law_columns(m: np.ndarray, study: Study) -> np.ndarray:
+    """The columns of Ψ or Λ the guidance law acts on.  Default the estimated STATE only
+    (digest (G-4): "the guidance uses the state estimate only"); with
+    ``guidance_estimates = "state_and_solve_for"`` also the solve-for parameters (the
+    digest's optional −Ψ_v⁺Ψ_s ŝ).  The target covariances keep every column (the other
+    parameters' dispersion still reaches the target)."""
+    keep = study.nx + (study.layout.ns if study.guidance_estimates == "state_and_solve_for" else 0)
     out = np.array(m, dtype=np.float64)
-    out[:, nx:] = 0.0
+    out[:, keep:] = 0.0
     return out
+
+
+def _reset(study: Study) -> str:
+    return "exact" if study.guidance_estimates == "state_and_solve_for" else study.guidance_reset
 
 
 def _sym(p):
@@ -264,7 +275,7 @@ def _noise_between(study: Study, span: ReferenceSpan, t_a: float, t_b: float) ->
 def _impulsive(study, span, g, k, p_c, p_k):
     nx, mode = study.nx, study.guidance_model
     psi, body = _target_psi(study, span, g, g.time_s)
-    gm = imp.guidance_matrix(_state_only(psi, nx), g.weights, g.tolerances)
+    gm = imp.guidance_matrix(_law_columns(psi, study), g.weights, g.tolerances)
     gamma = np.asarray(gm.gamma)
     p_tilde = np.asarray(imp.estimate_deviation_covariance(p_c, p_k, mode))
     p_dv = _sym(gamma @ p_tilde @ gamma.T)
@@ -275,7 +286,7 @@ def _impulsive(study, span, g, k, p_c, p_k):
     )
     b = np.zeros((study.layout.n, 3))
     b[_VEL, :] = np.eye(3)
-    p_plus = _sym(_post(p_c, p_k, b @ gamma, mode, nx) + b @ sig_ex @ b.T)
+    p_plus = _sym(_post(p_c, p_k, b @ gamma, mode, nx, _reset(study)) + b @ sig_ex @ b.T)
     x_exec = np.zeros((nx, nx))
     x_exec[_VEL, _VEL] = sig_ex
     out = GuidanceOutcome(
@@ -326,7 +337,7 @@ def _low_thrust(study, span, g, k, p_c, p_k):
     psi_c, body = _target_psi(study, span, g, t_c)
     k_mat = psi_c[:, :nx] @ s7[:nx]
     lam = psi_c @ phi_aug
-    gamma_u, rank = weighted_correction_matrix(k_mat, _state_only(lam, nx), g.weights, g.tolerances)
+    gamma_u, rank = weighted_correction_matrix(k_mat, _law_columns(lam, study), g.weights, g.tolerances)
     gamma_u = np.asarray(gamma_u)
     p_tilde = np.asarray(imp.estimate_deviation_covariance(p_c, p_k, mode))
     p_u = _sym(gamma_u @ p_tilde @ gamma_u.T)
@@ -334,7 +345,7 @@ def _low_thrust(study, span, g, k, p_c, p_k):
     s_aug = np.zeros((n, s7.shape[1]))
     s_aug[:nx] = s7[:nx]
     g_mat = np.linalg.solve(phi_aug, s_aug @ gamma_u)
-    p_reset = _sym(_post(p_c, p_k, g_mat, mode, nx))
+    p_reset = _sym(_post(p_c, p_k, g_mat, mode, nx, _reset(study)))
     key = ("noise", t_i, t_c, tuple(study.noise_sigma_true), study.gencov)
     if key not in span.memo:
         span.memo[key] = _noise_between(study, span, t_i, t_c)

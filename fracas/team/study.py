@@ -133,6 +133,8 @@ class Study:
     punched: dict | None = None
     guidance: tuple[GuidanceSpec, ...] = ()
     guidance_model: str = "report"
+    guidance_reset: str = "state"
+    guidance_estimates: str = "state"
     P0_control: np.ndarray | None = None
     budget: bool = False
     budget_at_s: tuple[float, ...] = ()

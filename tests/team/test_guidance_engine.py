@@ -245,3 +245,50 @@ def test_control_covariance_punched_and_reloaded(case_ref, tmp_path):
     deck = case.deck.model_copy(update={"control": None})
     study = build_case(deck, punched).study
     np.testing.assert_array_equal(study.P0_control, res.control[k])
+
+
+@pytest.mark.parametrize("model, sign", [("orthogonal", -1.0), ("tsim", 1.0)])
+def test_estimate_models_and_reset_options(case_ref, model, sign):
+    """The P̃ models of the digest (G-0) through the engine: P_ΔV = Γ (P_c ± P_k) Γᵀ for
+    ``orthogonal`` (−) and ``tsim`` (+), with P_c and P_k the engine's own before the event
+    (numpy, 1e-9 relative); and ``guidance_reset = "all"`` sets the control covariance's
+    parameter block to the knowledge's too (the default keeps the parameters' dispersion)."""
+    case, product, ref, _ = case_ref
+    st = dataclasses.replace(case.study, guidance_model=model, budget=False)
+    res = run_study(st, ref, product=product)
+    g = res.guidance[0]
+    k, nx = g.index, st.nx
+    from fracas.team.transitions import augmented_transitions
+
+    phi = augmented_transitions(st, res.ref)[k]
+    p_c = phi @ res.control[k - 1] @ phi.T
+    p_c[:nx, :nx] += res.Q_true[k]
+    p_k = res.Pt_minus[k]
+    gamma = g.gamma
+    want = gamma @ (p_c + sign * p_k) @ gamma.T
+    np.testing.assert_allclose(g.correction_cov, want, rtol=1e-9, atol=1e-9 * np.max(np.abs(want)))
+
+    st_all = dataclasses.replace(case.study, guidance_reset="all", budget=False)
+    r_all = run_study(st_all, ref, product=product)
+    ka = r_all.guidance[0].index
+    np.testing.assert_allclose(r_all.control[ka][nx:, nx:], r_all.Pt_minus[ka][nx:, nx:], rtol=1e-12, atol=0)
+    r_def = run_study(dataclasses.replace(case.study, budget=False), ref, product=product)
+    assert not np.allclose(r_def.control[ka][nx:, nx:], r_def.Pt_minus[ka][nx:, nx:])
+
+
+def test_guidance_on_state_and_solve_for(case_ref):
+    """``guidance_estimates = "state_and_solve_for"``: Γ acts on the state and the solve-for
+    columns only (consider and ignore columns zero; the default law: state only), and Γ is
+    the least-norm solution of Ψ_v Γ = Ψ on those columns (three targets: Ψ_v Γ equals Ψ
+    there to 1e-9 relative)."""
+    case, product, ref, res = case_ref
+    lay = case.study.layout
+    nx, ns = case.study.nx, lay.ns
+    g0 = res.guidance[0]
+    assert np.all(g0.gamma[:, nx:] == 0.0)
+    st = dataclasses.replace(case.study, guidance_estimates="state_and_solve_for", budget=False)
+    g = run_study(st, ref, product=product).guidance[0]
+    assert np.any(g.gamma[:, nx : nx + ns] != 0.0) and np.all(g.gamma[:, nx + ns :] == 0.0)
+    cols = slice(0, nx + ns)
+    lhs = g.psi[:, 3:6] @ g.gamma[:, cols]
+    np.testing.assert_allclose(lhs, g.psi[:, cols], rtol=1e-9, atol=1e-9 * np.max(np.abs(g.psi[:, cols])))

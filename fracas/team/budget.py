@@ -154,10 +154,12 @@ def error_budget(study: Study, phi_aug, Qa, Qt, meas, full_outs, guidance_run=No
         ms = dataclasses.replace(meas, R_true=_mask_r(meas, src["kind"]))
 
         def filt(xa, xt, st=st, qt=qt, ms=ms):
-            return run_filter(st, phi_aug, Qa, qt, ms, xa, xt)
+            return run_filter(st, phi_aug, Qa, qt, ms, xa, xt, host=False)
 
         if guidance_run is not None:
-            gr = run_guidance(st, phi_aug, qt, filt, span, assumed_exec=guidance_run.Xa, P0_control=src["P0c"])
+            gr = run_guidance(
+                st, phi_aug, qt, filt, span, assumed_exec=guidance_run.Xa, P0_control=src["P0c"], summary=False
+            )
             _, _, vals = budget_outputs(st, gr.outs[3], gr.outcomes)
         else:
             outs = filt(None, None)

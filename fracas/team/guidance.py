@@ -272,7 +272,7 @@ def _noise_between(study: Study, span: ReferenceSpan, t_a: float, t_b: float) ->
     return q
 
 
-def _impulsive(study, span, g, k, p_c, p_k):
+def _impulsive(study, span, g, k, p_c, p_k, summary=True):
     nx, mode = study.nx, study.guidance_model
     psi, body = _target_psi(study, span, g, g.time_s)
     gm = imp.guidance_matrix(_law_columns(psi, study), g.weights, g.tolerances)
@@ -310,15 +310,15 @@ def _impulsive(study, span, g, k, p_c, p_k):
         target_cov_knowledge=_sym(psi @ p_k @ psi.T),
         correction_cov=p_dv,
         execution_cov=sig_ex,
-        dv_mean_km_s=dvstats.mean_dv_magnitude(p_dv),
-        dv_99_km_s=dvstats.dv_magnitude_quantile(p_dv, 0.99),
+        dv_mean_km_s=dvstats.mean_dv_magnitude(p_dv) if summary else float("nan"),
+        dv_99_km_s=dvstats.dv_magnitude_quantile(p_dv, 0.99) if summary else float("nan"),
         dv_rms_km_s=dvstats.rms_dv_magnitude(p_dv),
         dv_variance_km2_s2=float(np.trace(p_dv)),
     )
     return out, p_plus, [(g.time_s, x_exec)]
 
 
-def _low_thrust(study, span, g, k, p_c, p_k):
+def _low_thrust(study, span, g, k, p_c, p_k, summary=True):
     from fracas.guidance.low_thrust import (
         control_sensitivity,
         correction_cost_jacobians,
@@ -401,7 +401,7 @@ def _low_thrust(study, span, g, k, p_c, p_k):
     return out, p_reset, [(t_c, x_exec_full[:nx, :nx])]
 
 
-def _none(study, span, g, k, p_c, p_k):
+def _none(study, span, g, k, p_c, p_k, summary=True):
     psi, body = _target_psi(study, span, g, g.time_s)
     before = _sym(psi @ p_c @ psi.T)
     out = GuidanceOutcome(
@@ -440,13 +440,15 @@ def run_guidance(
     span: ReferenceSpan,
     assumed_exec: np.ndarray | None = None,
     P0_control: np.ndarray | None = None,
+    summary: bool = True,
 ) -> GuidanceRun:
     """GUIDM/XGUID over the study's guidance events (module docstring).
 
     phi_aug (K, n, n), Qt (K, nx, nx): the filter's transitions and TRUE process noise;
     run_filter(Xa, Xt) -> (Pa_m, Pa_p, Pt_m, Pt_p, sig): the compiled filter with execution
     errors; assumed_exec (K, nx, nx): fixed assumed-side execution covariances (None: the
-    same as the true side's).  P0_control: overrides ``study.P0_control``.
+    same as the true side's).  P0_control: overrides ``study.P0_control``.  summary=False
+    skips the |ΔV| mean and quantile (NaN; the error budget needs only the covariances).
     """
     sched = study.schedule
     K, n, nx = sched.n, study.layout.n, study.nx
@@ -485,7 +487,7 @@ def run_guidance(
         p_c = state["P"]
         pt_plus = outs[3] if study.gencov else outs[1]
         p_k = np.asarray(pt_plus[k], dtype=np.float64)
-        out, p_plus, execs = _HANDLERS[g.type](study, span, g, k, p_c, p_k)
+        out, p_plus, execs = _HANDLERS[g.type](study, span, g, k, p_c, p_k, summary)
         outcomes.append(out)
         control[k] = p_plus
         state["P"], state["epoch"] = p_plus, k

@@ -103,11 +103,13 @@ def _pad_events(K: int, Kp: int, arrays):
     return out
 
 
-def run_filter(study: Study, phi_aug, Qa, Qt, meas, Xa=None, Xt=None):
+def run_filter(study: Study, phi_aug, Qa, Qt, meas, Xa=None, Xt=None, host: bool = True):
     """Run the jitted scan over the schedule (padded to a bucket size); numpy outputs.
 
     Xa / Xt (K, nx, nx): execution-error covariances of guidance events (zero elsewhere;
-    default none), added to the assumed / true knowledge after the event."""
+    default none), added to the assumed / true knowledge after the event.  host=False
+    returns the padded device arrays (index them at k < K) without copying the histories
+    to numpy (the error budget reads a few events of each pass)."""
     K = study.schedule.n
     Kp = bucket(K)
     Xa = np.zeros_like(Qa) if Xa is None else Xa
@@ -152,6 +154,8 @@ def run_filter(study: Study, phi_aug, Qa, Qt, meas, Xa=None, Xt=None):
                 "gain(P_assumed, H, R, layout) -> K (n_est, m) under jax tracing)"
             ) from None
         raise
+    if not host:
+        return tuple(outs)
     Pa_m, Pa_p, Pt_m, Pt_p, sig = (np.asarray(o)[:K] for o in outs)
     return Pa_m, Pa_p, Pt_m, Pt_p, sig
 

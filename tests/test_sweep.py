@@ -376,3 +376,108 @@ def test_sweep_command_in_process(tmp_path):
     t = read_sweep_table(out)
     np.testing.assert_array_equal(t.inputs["thrust_noise.proportionality.sigma"], [0.01, 0.02])
     assert t.status == ["ok", "ok"]
+
+
+# ----------------------------------------------------------------------------- numbers-only studies
+def _same(a, b, path="study"):
+    """Recursive equality of two studies: arrays bit for bit (dtype, shape, values)."""
+    import dataclasses
+
+    if hasattr(a, "shape") and hasattr(a, "dtype"):
+        a, b = np.asarray(a), np.asarray(b)
+        assert a.dtype == b.dtype and a.shape == b.shape, path
+        assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), path
+    elif dataclasses.is_dataclass(a) and not isinstance(a, type):
+        assert type(a) is type(b), path
+        for f in dataclasses.fields(a):
+            _same(getattr(a, f.name), getattr(b, f.name), f"{path}.{f.name}")
+    elif isinstance(a, dict):
+        assert a.keys() == b.keys(), path
+        for k in a:
+            _same(a[k], b[k], f"{path}[{k!r}]")
+    elif isinstance(a, (list, tuple)):
+        assert type(a) is type(b) and len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b)):
+            _same(x, y, f"{path}[{i}]")
+    elif not callable(a):
+        assert a == b, (path, a, b)
+
+
+DERIVED = {
+    "a_priori.position_sigma_km[1]": (100.0, 40.0),
+    "a_priori.mass_sigma_kg": (0.5, 0.2),
+    "parameter[0].sigma": (0.01, 0.03),
+    "parameter[3].sigma": (0.001, 0.004),
+    "thrust_noise.proportionality.sigma": (0.01, 0.02),
+    "thrust_noise.in_plane_deg.tau_days": (2.0, 0.7),
+    "tracking[0].sigma": (1.0, 0.6),
+    "tracking[2].sigma": (2.0, 5.0),
+    "gencov.measurement_sigma.doppler2": (2.0, 3.0),
+    "gencov.parameter[0].sigma": (0.1, 0.25),
+}
+
+
+def test_derived_study_equals_build_case(study_dir):
+    """A study derived from its group's first (fracas.build.vary.derive_study) equals the one
+    build_case builds from its own deck, every field, arrays bit for bit."""
+    from fracas.build.vary import derivable, derive_study
+    from fracas.sweep import study_deck
+
+    base = load_team_deck(study_dir / "team_small.toml")
+    fields = tuple(DERIVED)
+    first = pipeline.load_team(study_deck(base, fields, tuple(a for a, _ in DERIVED.values()))).study
+    for k in range(len(fields) + 1):  # one field changed at a time, then all of them
+        vals = tuple(b if (j == k or k == len(fields)) else a for j, (a, b) in enumerate(DERIVED.values()))
+        deck = study_deck(base, fields, vals)
+        assert derivable(first, deck)
+        _same(derive_study(first, deck), pipeline.load_team(deck).study)
+    with pytest.raises(DeckError, match="must be <= 1"):
+        study_deck(base, (FIELD,), (2.0,))  # the deck's own validation, as in a single run
+
+
+# ----------------------------------------------------------------------------- guidance
+GUIDANCE = """
+[[guidance]]
+name = "tcm1"
+type = "impulsive"
+time_days = 3.2
+targets = ["x", "y", "z"]
+"""
+GUIDANCE_OUTPUTS = ["position_rss_km", "tcm1.dv_mean_m_s", "tcm1.dv_99_m_s", "tcm1.dv_rms_m_s", "tcm1.x_sigma_after"]
+
+
+def test_guidance_sweep_equals_run_team_one_by_one(study_dir, tmp_path):
+    """A study with a [[guidance]] event: its guidance outputs over a sweep of the thrust
+    noise (one by one, in process) equal run_team's events; unknown names are one-line
+    errors naming the field."""
+    (study_dir / "team_guid.toml").write_text((study_dir / "team_small.toml").read_text() + GUIDANCE)
+    text = sweep_text([0.005, 0.02], "guid.h5").replace("team_small.toml", "team_guid.toml")
+    text = text.replace(f"outputs = {OUTPUTS!r}", f"outputs = {GUIDANCE_OUTPUTS!r}")
+    p = study_dir / "guid_sweep.toml"
+    p.write_text(text)
+    res = run_sweep(parse_sweep_deck(text, str(p)), workers=0)
+    assert [r["status"] for r in res.rows] == ["ok", "ok"], [r["error"] for r in res.rows]
+    assert res.units["tcm1.dv_99_m_s"] == "m/s" and res.units["tcm1.x_sigma_after"] == "km"
+    base = load_team_deck(study_dir / "team_guid.toml")
+    for r in res.rows:
+        product, _, _ = pipeline.run_team(vary(base, FIELD, r[FIELD]), write_results=False)
+        (e,) = product.guidance
+        assert r["tcm1.dv_mean_m_s"] == e.dv_mean_km_s * 1000.0 and r["tcm1.dv_99_m_s"] == e.dv_99_km_s * 1000.0
+        assert r["tcm1.dv_rms_m_s"] == e.dv_rms_km_s * 1000.0 > 0
+        assert r["tcm1.x_sigma_after"] == float(np.sqrt(e.target_cov_after[0, 0]))
+        assert r["position_rss_km"] == float(np.sqrt(np.sum(product.assumed.sigma[-1][:3] ** 2)))
+    for name, needle in (
+        ("tcm2.dv_99_m_s", r"sweep.outputs\[0\] = 'tcm2.dv_99_m_s': the study .* has no guidance event 'tcm2'"),
+        ("tcm1.b_dot_t_sigma_after", "guidance event 'tcm1' has no target 'b_dot_t'"),
+        ("tcm1.propellant_sigma_kg", "only for low-thrust guidance"),
+    ):
+        bad = text.replace(f"outputs = {GUIDANCE_OUTPUTS!r}", f"outputs = [{name!r}]")
+        with pytest.raises(DeckError, match=needle) as exc:
+            run_sweep(parse_sweep_deck(bad, str(p)), workers=0)
+        assert "\n" not in str(exc.value)
+    for name, needle in (
+        ("tcm1.dv_max", "unknown guidance output 'dv_max'"),
+        ("tcm1.q_sigma_after", "unknown target 'q'"),
+    ):
+        with pytest.raises(DeckError, match=needle):
+            parse_sweep_deck(text.replace(f"outputs = {GUIDANCE_OUTPUTS!r}", f"outputs = [{name!r}]"), str(p))

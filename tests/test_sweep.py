@@ -23,11 +23,11 @@ VALUES = [0.005, 0.01, 0.02, 0.04]
 OUTPUTS = ["position_rss_km", "velocity_rss_km_s", "sigma[thrust_scale]", "true_position_rss_km"]
 
 
-def sweep_text(values, table="sweep.h5", extra=""):
+def sweep_text(values, table="sweep.h5", extra="", study="team_small.toml"):
     return f"""mode = "sweep"
 title = "proportionality sweep"
 [sweep]
-study = "team_small.toml"
+study = "{study}"
 outputs = {OUTPUTS!r}
 {extra}
 [[sweep.vary]]
@@ -46,9 +46,9 @@ def study_dir(tmp_path_factory):
     return d
 
 
-def make_deck(d: Path, values, table="sweep.h5", name="sweep.toml", extra="") -> SweepDeck:
+def make_deck(d: Path, values, table="sweep.h5", name="sweep.toml", extra="", study="team_small.toml") -> SweepDeck:
     p = d / name
-    p.write_text(sweep_text(values, table, extra))
+    p.write_text(sweep_text(values, table, extra, study))
     return parse_sweep_deck(p.read_text(), str(p))
 
 
@@ -250,18 +250,40 @@ def test_mixed_sweep_batches_each_schedule(study_dir, tmp_path, monkeypatch):
         assert r["position_rss_km"] == pytest.approx(float(np.sqrt(np.sum(s[:3] ** 2))), rel=RTOL, abs=0.0)
 
 
+PREDICTION = '[[event]]\ntype = "prediction"\ntimes_days = [3.0]\npredict_to_days = 5.0\n'
+LEAN = 'stm_file = "lean_stm.h5"'
+
+
+@pytest.fixture(scope="module")
+def lean(study_dir):
+    """The studies of the tests that start fresh processes (worker processes, a killed run):
+    team_small without its prediction event, over an STM file built once, so that a fresh
+    process traces little (no in-line reference, no prediction integration); and these
+    studies through the batched path one at a time (batch size 1, in process)."""
+    text = (study_dir / "team_small.toml").read_text()
+    assert text.count(PREDICTION) == 1
+    (study_dir / "team_lean.toml").write_text(text.replace(PREDICTION, ""))
+    pipeline.build_stm(load_team_deck(study_dir / "team_lean.toml"), study_dir / "lean_stm.h5")
+    cfg = make_deck(study_dir, VALUES, "lean_one_by_one.h5", "lean_one_by_one.toml", LEAN, "team_lean.toml")
+    return run_sweep(cfg, workers=0, max_batch=1)
+
+
 @pytest.mark.slow
-def test_local_cluster_gives_the_same_numbers(one_by_one, study_dir):
+def test_local_cluster_gives_the_same_numbers(lean, study_dir):
     """Two worker processes (a batched chunk each) give bit-identical numbers to the same
-    studies run one by one (batch size 1, in process)."""
-    cfg2 = make_deck(study_dir, VALUES, table="cluster.h5", name="cluster.toml")
+    studies run one by one (batch size 1, in process); and run_team's over the STM file."""
+    cfg2 = make_deck(study_dir, VALUES, "cluster.h5", "cluster.toml", LEAN, "team_lean.toml")
     seen = []
     t0 = time.perf_counter()
     res = run_sweep(cfg2, workers=2, progress=lambda done, total: seen.append((done, total)))
     wall = time.perf_counter() - t0
     assert seen[-1] == (4, 4) and len(seen) == 4
-    assert _numbers(res.rows) == _numbers(one_by_one.rows)
+    assert _numbers(res.rows) == _numbers(lean.rows)
     print(f"\n2 workers: {len(res.rows)} studies in {wall:.1f} s (cluster start included)")
+    deck = vary(load_team_deck(study_dir / "team_lean.toml"), FIELD, VALUES[0])
+    product, _, _ = pipeline.run_team(deck, stm=str(study_dir / "lean_stm.h5"), write_results=False)
+    s = product.assumed.sigma[-1]
+    assert res.rows[0]["position_rss_km"] == pytest.approx(float(np.sqrt(np.sum(s[:3] ** 2))), rel=RTOL, abs=0.0)
 
 
 _KILLED = """
@@ -275,13 +297,13 @@ run_sweep(load_sweep_deck(sys.argv[1]), workers=0, max_batch=1, progress=die)
 """
 
 
-def test_killed_sweep_restarts_without_redoing_finished_studies(one_by_one, study_dir, monkeypatch):
+def test_killed_sweep_restarts_without_redoing_finished_studies(lean, study_dir, monkeypatch):
     import subprocess
     import sys
 
     from fracas.team import batch
 
-    cfg = make_deck(study_dir, VALUES, table="killed.h5", name="killed.toml")
+    cfg = make_deck(study_dir, VALUES, "killed.h5", "killed.toml", LEAN, "team_lean.toml")
     root = Path(__file__).resolve().parents[1]
     r = subprocess.run([sys.executable, "-c", _KILLED, str(study_dir / "killed.toml")], cwd=root, timeout=300)
     assert r.returncode == 3
@@ -294,7 +316,7 @@ def test_killed_sweep_restarts_without_redoing_finished_studies(one_by_one, stud
     )
     res = run_sweep(cfg, workers=0)
     assert res.skipped == [0, 1] and res.ran == [2, 3] and calls == [2]
-    assert _numbers(read_sweep_table(table).rows()) == _numbers(one_by_one.rows)
+    assert _numbers(read_sweep_table(table).rows()) == _numbers(lean.rows)
 
 
 def test_resume_runs_only_the_missing_studies(serial, study_dir, monkeypatch):

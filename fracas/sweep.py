@@ -705,13 +705,15 @@ def _run_dask(todo, ctx: _Context, record, workers, scheduler) -> None:
         for task in ctx.tasks(todo, n_workers):
             fn, a = ctx.call(task)
             futures[client.submit(fn, *a, pure=False)] = task
-        for fut in as_completed(futures):
-            task = futures[fut]
-            try:
-                got = fut.result()
-                new = got if isinstance(got, list) else [got]
-            except Exception as exc:  # noqa: BLE001 - a lost worker, a pickling error
-                new = ctx.failed(task, exc)
+        for done in as_completed(futures).batches():  # results that arrive together: one table write
+            new: list[dict[str, Any]] = []
+            for fut in done:
+                task = futures[fut]
+                try:
+                    got = fut.result()
+                    new += got if isinstance(got, list) else [got]
+                except Exception as exc:  # noqa: BLE001 - a lost worker, a pickling error
+                    new += ctx.failed(task, exc)
             record(new)
     finally:
         client.close()

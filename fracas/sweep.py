@@ -356,6 +356,10 @@ def run_group(
     fields (:func:`fracas.config.sweep.is_numeric_field`), as batched computations
     (:mod:`fracas.team.batch`): one reference, H and Φ_aug for all of them, P0, R and Q per
     study, one vmapped filter scan per ``max_batch`` studies padded to at least ``pad_to``.
+    Each study's deck is made and validated as in a single run (:func:`study_deck`); the
+    group's first study is built whole (``build_case``), the others are derived from it
+    (:func:`fracas.build.vary.derive_study`: the same arrays, no trajectory load or schedule
+    build) unless a varied field would add a table the base study lacks.
     Returns their rows; never raises.  A study whose deck fails gets its error; a study
     whose structure differs from the group's, or a group that cannot be batched (PDOT, a
     user gain, a reference or prediction that fails), runs through :func:`run_one`."""

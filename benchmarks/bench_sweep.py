@@ -4,7 +4,8 @@
     sigmas x 5 thrust-noise correlation times x 4 QVLBI range sigmas): one group of studies
     that differ only in numbers, batched (fracas.team.batch) on a LocalCluster of two worker
     processes, against pipeline.run_team one study after another in this process (the
-    baseline, measured in the same run on the first --baseline studies).  Goal >= 20 studies/s.
+    baseline, measured in the same run on the first --baseline studies, each deck as the sweep
+    makes it: fracas.sweep.study_deck, no error budget).  Goal >= 20 studies/s.
 (b) 20 studies that change the tracking schedule (Doppler interval_hours 1 ... 20 h): one task
     per study, 2 workers vs 1 worker.  Goal >= 1.6x faster.
 

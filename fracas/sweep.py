@@ -23,11 +23,12 @@ import tomllib
 from fracas import pipeline
 from fracas.config.modes import deck_mode
 from fracas.config.sweep import (
-    FIXED_OUTPUTS,
     SweepDeck,
     check_field_path,
+    guidance_output,
     is_numeric_field,
     load_sweep_deck,
+    output_unit,
     parse_field_path,
 )
 from fracas.config.team import TeamDeck, load_team_deck
@@ -48,6 +49,8 @@ __all__ = [
     "run_one",
     "run_group",
     "outputs_from",
+    "guidance_outputs",
+    "check_outputs",
     "study_deck",
     "SweepResult",
 ]
@@ -168,9 +171,65 @@ def input_unit(deck: TeamDeck, field: str) -> str:
 
 
 def outputs_of(product, names: list[str]) -> tuple[dict[str, float], dict[str, str]]:
-    """The named outputs of a TeamProduct (final values) and their units."""
+    """The named outputs of a TeamProduct (final values, guidance event results) and their units."""
     sig_t = None if product.true is None else product.true.sigma[-1]
-    return outputs_from(product.assumed.sigma[-1], sig_t, list(product.labels), list(product.units), names)
+    cov = [n for n in names if guidance_output(n) is None]
+    vals, units = outputs_from(product.assumed.sigma[-1], sig_t, list(product.labels), list(product.units), cov)
+    gv, gu = guidance_outputs(product.guidance, [n for n in names if guidance_output(n) is not None])
+    vals.update(gv)
+    units.update(gu)
+    return {n: vals[n] for n in names}, {n: units[n] for n in names}
+
+
+def guidance_outputs(events, names: list[str]) -> tuple[dict[str, float], dict[str, str]]:
+    """The named guidance outputs (``NAME.dv_mean_m_s``, ...; :func:`fracas.config.sweep.guidance_output`)
+    of a study's guidance events (:class:`fracas.products.GuidanceEvent`): (values, units)."""
+    by_name = {e.name: e for e in (events or [])}
+    vals, units = {}, {}
+    for name in names:
+        event, what, target = guidance_output(name)
+        e = by_name.get(event)
+        if e is None:
+            have = ", ".join(by_name) or "none"
+            raise FracasError(f"output {name}: the study has no guidance event {event!r} (its guidance events: {have})")
+        if target is not None:
+            if target not in e.target_names:
+                raise FracasError(
+                    f"output {name}: guidance event {event!r} has no target {target!r} "
+                    f"(its targets: {', '.join(e.target_names)})"
+                )
+            j = list(e.target_names).index(target)
+            vals[name] = float(math.sqrt(max(float(np.asarray(e.target_cov_after)[j, j]), 0.0)))
+            units[name] = str(e.target_units[j])
+        elif what == "propellant_sigma_kg":
+            vals[name], units[name] = float(e.propellant_sigma_kg), "kg"
+        else:
+            vals[name] = float(getattr(e, what.replace("_m_s", "_km_s"))) * 1000.0
+            units[name] = "m/s"
+    return vals, units
+
+
+def check_outputs(cfg: SweepDeck, base: TeamDeck) -> None:
+    """Refuse (one-line DeckError naming the field) a guidance output the study cannot give:
+    an event it does not have, a target not among the event's, the propellant of an
+    impulsive event."""
+    events = {g.name: g for g in (base.guidance or [])}
+    for k, name in enumerate(cfg.sweep.outputs):
+        g = guidance_output(name)
+        if g is None:
+            continue
+        event, what, target = g
+        where = f"{cfg.source_path or '<deck>'}: sweep.outputs[{k}] = {name!r}"
+        e = events.get(event)
+        if e is None:
+            have = ", ".join(events) or "none"
+            raise DeckError(f"{where}: the study {base.source_path} has no guidance event {event!r} (it has: {have})")
+        if target is not None and target not in e.targets:
+            raise DeckError(
+                f"{where}: guidance event {event!r} has no target {target!r} (its targets: {', '.join(e.targets)})"
+            )
+        if what == "propellant_sigma_kg" and e.type not in ("primary", "vernier"):
+            raise DeckError(f"{where}: only for low-thrust guidance (primary, vernier); {event!r} is {e.type}")
 
 
 def outputs_from(sig_a, sig_t, labels: list[str], units: list[str], names: list[str]):
@@ -210,9 +269,12 @@ def _one_line(exc: BaseException) -> str:
 # ----------------------------------------------------------------------------- one study (a task)
 def study_deck(base: TeamDeck, fields: tuple[str, ...], values: tuple) -> TeamDeck:
     """The TeamDeck of one study: ``base`` with ``fields`` set to ``values``; studies share no
-    side outputs (no per-study STM build, no punch file)."""
+    side outputs (no per-study STM build, no punch file) and compute no error budget (the
+    table has no budget output; it would cost one covariance pass per error source)."""
     cfg = vary_many(base, dict(zip(fields, values)))
     upd: dict[str, Any] = {}
+    if cfg.budget.enabled:
+        upd["budget"] = cfg.budget.model_copy(update={"enabled": False})
     if cfg.errcon.build_stm:
         upd["errcon"] = cfg.errcon.model_copy(update={"build_stm": False})
     if cfg.punch is not None:
@@ -294,6 +356,10 @@ def run_group(
     fields (:func:`fracas.config.sweep.is_numeric_field`), as batched computations
     (:mod:`fracas.team.batch`): one reference, H and Φ_aug for all of them, P0, R and Q per
     study, one vmapped filter scan per ``max_batch`` studies padded to at least ``pad_to``.
+    Each study's deck is made and validated as in a single run (:func:`study_deck`); the
+    group's first study is built whole (``build_case``), the others are derived from it
+    (:func:`fracas.build.vary.derive_study`: the same arrays, no trajectory load or schedule
+    build) unless a varied field would add a table the base study lacks.
     Returns their rows; never raises.  A study whose deck fails gets its error; a study
     whose structure differs from the group's, or a group that cannot be batched (PDOT, a
     user gain, a reference or prediction that fails), runs through :func:`run_one`."""
@@ -307,9 +373,20 @@ def run_group(
     def one(i, v, k):
         rows[i] = run_one(base, i, fields, v, outputs, k, stm)
 
+    from fracas.build.vary import derivable, derive_study
+
+    hit = _SETUPS.get(gkey)
+    ref = hit[0].study if hit is not None else None  # the group's structure: built whole once
+    numbers_only = _tables_exist(base, fields)
     for i, v, k in items:
         try:
-            built.append((i, v, k, pipeline.load_team(study_deck(base, fields, v)).study))
+            deck = study_deck(base, fields, v)
+            if ref is not None and numbers_only and derivable(ref, deck):
+                st = derive_study(ref, deck)
+            else:
+                st = pipeline.load_team(deck).study
+                ref = st if ref is None else ref
+            built.append((i, v, k, st))
         except Exception:  # noqa: BLE001 - run_one records the failure with its message
             one(i, v, k)
     setup = None
@@ -355,6 +432,25 @@ def run_group(
             rows[i]["wall_s"] = share
         _ = t1
     return [rows[i] for i, _, _ in items]
+
+
+def _tables_exist(base: TeamDeck, fields: tuple[str, ...]) -> bool:
+    """Whether every numeric field of ``fields`` lies in a table (or list) the base study
+    has, so that setting it changes a number and adds no table (a [gencov] or a thrust-noise
+    component the study does not have would change its structure)."""
+    cur0 = base.model_dump(mode="python")
+    for f in fields:
+        if not is_numeric_field(f):
+            continue
+        cur: Any = cur0
+        for p in parse_field_path(f)[:-1]:
+            try:
+                cur = cur[p]
+            except (KeyError, IndexError, TypeError):
+                return False
+            if cur is None:
+                return False
+    return True
 
 
 # ----------------------------------------------------------------------------- the sweep
@@ -445,13 +541,14 @@ def run_sweep(
                 "(a list index beyond its entries, or a table the study does not have)"
             ) from None
     outputs = list(sw.outputs)
+    check_outputs(cfg, base)
     out = check_output_path(table if table is not None else _table_path(cfg), "sweep table")
     plot = check_output_path(cfg.resolve(cfg.output.plot), "plot") if cfg.output.plot else None
     bh = base_hash(base)
     studies = cfg.studies()
     keys = [study_key(bh, fields, v) for v in studies]
     units: dict[str, str] = {f: input_unit(base, f) for f in fields}
-    units.update({n: FIXED_OUTPUTS[n] for n in outputs if n in FIXED_OUTPUTS})
+    units.update({n: u for n in outputs if (u := output_unit(n)) is not None})
     rows: dict[int, dict[str, Any]] = {}
     if resume and out.exists():
         old = read_sweep_table(out)
@@ -488,7 +585,8 @@ def run_sweep(
             for j in range(len(new)):
                 progress(done - len(new) + j + 1, len(todo))
 
-    group_of = _groups(studies, fields) if (batch and res_dir is None) else {}
+    # guidance studies are not batched (fracas.team.batch.prepare): one by one from the start
+    group_of = _groups(studies, fields) if (batch and res_dir is None and not base.guidance) else {}
     from fracas.team.batch import MAX_BATCH
 
     mb = int(max_batch or MAX_BATCH)
@@ -611,13 +709,15 @@ def _run_dask(todo, ctx: _Context, record, workers, scheduler) -> None:
         for task in ctx.tasks(todo, n_workers):
             fn, a = ctx.call(task)
             futures[client.submit(fn, *a, pure=False)] = task
-        for fut in as_completed(futures):
-            task = futures[fut]
-            try:
-                got = fut.result()
-                new = got if isinstance(got, list) else [got]
-            except Exception as exc:  # noqa: BLE001 - a lost worker, a pickling error
-                new = ctx.failed(task, exc)
+        for done in as_completed(futures).batches():  # results that arrive together: one table write
+            new: list[dict[str, Any]] = []
+            for fut in done:
+                task = futures[fut]
+                try:
+                    got = fut.result()
+                    new += got if isinstance(got, list) else [got]
+                except Exception as exc:  # noqa: BLE001 - a lost worker, a pickling error
+                    new += ctx.failed(task, exc)
             record(new)
     finally:
         client.close()

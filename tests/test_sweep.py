@@ -23,11 +23,11 @@ VALUES = [0.005, 0.01, 0.02, 0.04]
 OUTPUTS = ["position_rss_km", "velocity_rss_km_s", "sigma[thrust_scale]", "true_position_rss_km"]
 
 
-def sweep_text(values, table="sweep.h5", extra=""):
+def sweep_text(values, table="sweep.h5", extra="", study="team_small.toml"):
     return f"""mode = "sweep"
 title = "proportionality sweep"
 [sweep]
-study = "team_small.toml"
+study = "{study}"
 outputs = {OUTPUTS!r}
 {extra}
 [[sweep.vary]]
@@ -46,9 +46,9 @@ def study_dir(tmp_path_factory):
     return d
 
 
-def make_deck(d: Path, values, table="sweep.h5", name="sweep.toml", extra="") -> SweepDeck:
+def make_deck(d: Path, values, table="sweep.h5", name="sweep.toml", extra="", study="team_small.toml") -> SweepDeck:
     p = d / name
-    p.write_text(sweep_text(values, table, extra))
+    p.write_text(sweep_text(values, table, extra, study))
     return parse_sweep_deck(p.read_text(), str(p))
 
 
@@ -250,18 +250,40 @@ def test_mixed_sweep_batches_each_schedule(study_dir, tmp_path, monkeypatch):
         assert r["position_rss_km"] == pytest.approx(float(np.sqrt(np.sum(s[:3] ** 2))), rel=RTOL, abs=0.0)
 
 
+PREDICTION = '[[event]]\ntype = "prediction"\ntimes_days = [3.0]\npredict_to_days = 5.0\n'
+LEAN = 'stm_file = "lean_stm.h5"'
+
+
+@pytest.fixture(scope="module")
+def lean(study_dir):
+    """The studies of the tests that start fresh processes (worker processes, a killed run):
+    team_small without its prediction event, over an STM file built once, so that a fresh
+    process traces little (no in-line reference, no prediction integration); and these
+    studies through the batched path one at a time (batch size 1, in process)."""
+    text = (study_dir / "team_small.toml").read_text()
+    assert text.count(PREDICTION) == 1
+    (study_dir / "team_lean.toml").write_text(text.replace(PREDICTION, ""))
+    pipeline.build_stm(load_team_deck(study_dir / "team_lean.toml"), study_dir / "lean_stm.h5")
+    cfg = make_deck(study_dir, VALUES, "lean_one_by_one.h5", "lean_one_by_one.toml", LEAN, "team_lean.toml")
+    return run_sweep(cfg, workers=0, max_batch=1)
+
+
 @pytest.mark.slow
-def test_local_cluster_gives_the_same_numbers(one_by_one, study_dir):
+def test_local_cluster_gives_the_same_numbers(lean, study_dir):
     """Two worker processes (a batched chunk each) give bit-identical numbers to the same
-    studies run one by one (batch size 1, in process)."""
-    cfg2 = make_deck(study_dir, VALUES, table="cluster.h5", name="cluster.toml")
+    studies run one by one (batch size 1, in process); and run_team's over the STM file."""
+    cfg2 = make_deck(study_dir, VALUES, "cluster.h5", "cluster.toml", LEAN, "team_lean.toml")
     seen = []
     t0 = time.perf_counter()
     res = run_sweep(cfg2, workers=2, progress=lambda done, total: seen.append((done, total)))
     wall = time.perf_counter() - t0
     assert seen[-1] == (4, 4) and len(seen) == 4
-    assert _numbers(res.rows) == _numbers(one_by_one.rows)
+    assert _numbers(res.rows) == _numbers(lean.rows)
     print(f"\n2 workers: {len(res.rows)} studies in {wall:.1f} s (cluster start included)")
+    deck = vary(load_team_deck(study_dir / "team_lean.toml"), FIELD, VALUES[0])
+    product, _, _ = pipeline.run_team(deck, stm=str(study_dir / "lean_stm.h5"), write_results=False)
+    s = product.assumed.sigma[-1]
+    assert res.rows[0]["position_rss_km"] == pytest.approx(float(np.sqrt(np.sum(s[:3] ** 2))), rel=RTOL, abs=0.0)
 
 
 _KILLED = """
@@ -275,13 +297,13 @@ run_sweep(load_sweep_deck(sys.argv[1]), workers=0, max_batch=1, progress=die)
 """
 
 
-def test_killed_sweep_restarts_without_redoing_finished_studies(one_by_one, study_dir, monkeypatch):
+def test_killed_sweep_restarts_without_redoing_finished_studies(lean, study_dir, monkeypatch):
     import subprocess
     import sys
 
     from fracas.team import batch
 
-    cfg = make_deck(study_dir, VALUES, table="killed.h5", name="killed.toml")
+    cfg = make_deck(study_dir, VALUES, "killed.h5", "killed.toml", LEAN, "team_lean.toml")
     root = Path(__file__).resolve().parents[1]
     r = subprocess.run([sys.executable, "-c", _KILLED, str(study_dir / "killed.toml")], cwd=root, timeout=300)
     assert r.returncode == 3
@@ -294,7 +316,7 @@ def test_killed_sweep_restarts_without_redoing_finished_studies(one_by_one, stud
     )
     res = run_sweep(cfg, workers=0)
     assert res.skipped == [0, 1] and res.ran == [2, 3] and calls == [2]
-    assert _numbers(read_sweep_table(table).rows()) == _numbers(one_by_one.rows)
+    assert _numbers(read_sweep_table(table).rows()) == _numbers(lean.rows)
 
 
 def test_resume_runs_only_the_missing_studies(serial, study_dir, monkeypatch):
@@ -376,3 +398,108 @@ def test_sweep_command_in_process(tmp_path):
     t = read_sweep_table(out)
     np.testing.assert_array_equal(t.inputs["thrust_noise.proportionality.sigma"], [0.01, 0.02])
     assert t.status == ["ok", "ok"]
+
+
+# ----------------------------------------------------------------------------- numbers-only studies
+def _same(a, b, path="study"):
+    """Recursive equality of two studies: arrays bit for bit (dtype, shape, values)."""
+    import dataclasses
+
+    if hasattr(a, "shape") and hasattr(a, "dtype"):
+        a, b = np.asarray(a), np.asarray(b)
+        assert a.dtype == b.dtype and a.shape == b.shape, path
+        assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), path
+    elif dataclasses.is_dataclass(a) and not isinstance(a, type):
+        assert type(a) is type(b), path
+        for f in dataclasses.fields(a):
+            _same(getattr(a, f.name), getattr(b, f.name), f"{path}.{f.name}")
+    elif isinstance(a, dict):
+        assert a.keys() == b.keys(), path
+        for k in a:
+            _same(a[k], b[k], f"{path}[{k!r}]")
+    elif isinstance(a, (list, tuple)):
+        assert type(a) is type(b) and len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b)):
+            _same(x, y, f"{path}[{i}]")
+    elif not callable(a):
+        assert a == b, (path, a, b)
+
+
+DERIVED = {
+    "a_priori.position_sigma_km[1]": (100.0, 40.0),
+    "a_priori.mass_sigma_kg": (0.5, 0.2),
+    "parameter[0].sigma": (0.01, 0.03),
+    "parameter[3].sigma": (0.001, 0.004),
+    "thrust_noise.proportionality.sigma": (0.01, 0.02),
+    "thrust_noise.in_plane_deg.tau_days": (2.0, 0.7),
+    "tracking[0].sigma": (1.0, 0.6),
+    "tracking[2].sigma": (2.0, 5.0),
+    "gencov.measurement_sigma.doppler2": (2.0, 3.0),
+    "gencov.parameter[0].sigma": (0.1, 0.25),
+}
+
+
+def test_derived_study_equals_build_case(study_dir):
+    """A study derived from its group's first (fracas.build.vary.derive_study) equals the one
+    build_case builds from its own deck, every field, arrays bit for bit."""
+    from fracas.build.vary import derivable, derive_study
+    from fracas.sweep import study_deck
+
+    base = load_team_deck(study_dir / "team_small.toml")
+    fields = tuple(DERIVED)
+    first = pipeline.load_team(study_deck(base, fields, tuple(a for a, _ in DERIVED.values()))).study
+    for k in range(len(fields) + 1):  # one field changed at a time, then all of them
+        vals = tuple(b if (j == k or k == len(fields)) else a for j, (a, b) in enumerate(DERIVED.values()))
+        deck = study_deck(base, fields, vals)
+        assert derivable(first, deck)
+        _same(derive_study(first, deck), pipeline.load_team(deck).study)
+    with pytest.raises(DeckError, match="must be <= 1"):
+        study_deck(base, (FIELD,), (2.0,))  # the deck's own validation, as in a single run
+
+
+# ----------------------------------------------------------------------------- guidance
+GUIDANCE = """
+[[guidance]]
+name = "tcm1"
+type = "impulsive"
+time_days = 3.2
+targets = ["x", "y", "z"]
+"""
+GUIDANCE_OUTPUTS = ["position_rss_km", "tcm1.dv_mean_m_s", "tcm1.dv_99_m_s", "tcm1.dv_rms_m_s", "tcm1.x_sigma_after"]
+
+
+def test_guidance_sweep_equals_run_team_one_by_one(study_dir, tmp_path):
+    """A study with a [[guidance]] event: its guidance outputs over a sweep of the thrust
+    noise (one by one, in process) equal run_team's events; unknown names are one-line
+    errors naming the field."""
+    (study_dir / "team_guid.toml").write_text((study_dir / "team_small.toml").read_text() + GUIDANCE)
+    text = sweep_text([0.005, 0.02], "guid.h5").replace("team_small.toml", "team_guid.toml")
+    text = text.replace(f"outputs = {OUTPUTS!r}", f"outputs = {GUIDANCE_OUTPUTS!r}")
+    p = study_dir / "guid_sweep.toml"
+    p.write_text(text)
+    res = run_sweep(parse_sweep_deck(text, str(p)), workers=0)
+    assert [r["status"] for r in res.rows] == ["ok", "ok"], [r["error"] for r in res.rows]
+    assert res.units["tcm1.dv_99_m_s"] == "m/s" and res.units["tcm1.x_sigma_after"] == "km"
+    base = load_team_deck(study_dir / "team_guid.toml")
+    for r in res.rows:
+        product, _, _ = pipeline.run_team(vary(base, FIELD, r[FIELD]), write_results=False)
+        (e,) = product.guidance
+        assert r["tcm1.dv_mean_m_s"] == e.dv_mean_km_s * 1000.0 and r["tcm1.dv_99_m_s"] == e.dv_99_km_s * 1000.0
+        assert r["tcm1.dv_rms_m_s"] == e.dv_rms_km_s * 1000.0 > 0
+        assert r["tcm1.x_sigma_after"] == float(np.sqrt(e.target_cov_after[0, 0]))
+        assert r["position_rss_km"] == float(np.sqrt(np.sum(product.assumed.sigma[-1][:3] ** 2)))
+    for name, needle in (
+        ("tcm2.dv_99_m_s", r"sweep.outputs\[0\] = 'tcm2.dv_99_m_s': the study .* has no guidance event 'tcm2'"),
+        ("tcm1.b_dot_t_sigma_after", "guidance event 'tcm1' has no target 'b_dot_t'"),
+        ("tcm1.propellant_sigma_kg", "only for low-thrust guidance"),
+    ):
+        bad = text.replace(f"outputs = {GUIDANCE_OUTPUTS!r}", f"outputs = [{name!r}]")
+        with pytest.raises(DeckError, match=needle) as exc:
+            run_sweep(parse_sweep_deck(bad, str(p)), workers=0)
+        assert "\n" not in str(exc.value)
+    for name, needle in (
+        ("tcm1.dv_max", "unknown guidance output 'dv_max'"),
+        ("tcm1.q_sigma_after", "unknown target 'q'"),
+    ):
+        with pytest.raises(DeckError, match=needle):
+            parse_sweep_deck(text.replace(f"outputs = {GUIDANCE_OUTPUTS!r}", f"outputs = [{name!r}]"), str(p))

@@ -20,7 +20,10 @@ Outputs (final values of each study, after its last event):
 ``position_rss_km`` / ``velocity_rss_km_s`` (assumed 1σ RSS of position / velocity),
 ``true_position_rss_km`` / ``true_velocity_rss_km_s`` (generalized covariance; the study
 must have [gencov]), ``sigma[LABEL]`` (the assumed final 1σ of any covariance label, e.g.
-``sigma[thrust_scale]``, ``sigma[x]``) and ``true_sigma[LABEL]``.
+``sigma[thrust_scale]``, ``sigma[x]``) and ``true_sigma[LABEL]``; per [[guidance]] event NAME
+of the study: ``NAME.dv_mean_m_s`` / ``NAME.dv_99_m_s`` / ``NAME.dv_rms_m_s`` (the correction's
+mean, 99 % and RMS |ΔV|, m/s), ``NAME.<target>_sigma_after`` (the target's 1σ after the
+correction, the target's unit) and ``NAME.propellant_sigma_kg`` (low thrust).
 """
 
 from __future__ import annotations
@@ -45,6 +48,9 @@ __all__ = [
     "check_field_path",
     "check_output_name",
     "FIXED_OUTPUTS",
+    "GUIDANCE_OUTPUTS",
+    "guidance_output",
+    "output_unit",
     "DEFAULT_OUTPUTS",
     "NUMERIC_FIELDS",
     "is_numeric_field",
@@ -59,6 +65,11 @@ FIXED_OUTPUTS = {
 }
 DEFAULT_OUTPUTS = ("position_rss_km", "velocity_rss_km_s")
 _SIGMA_OUTPUT = re.compile(r"^(true_)?sigma\[([^\]]+)\]$")
+#: per [[guidance]] event NAME: NAME.<quantity> -> unit (dV statistics in m/s; low thrust:
+#: the propellant 1σ), and NAME.<target>_sigma_after (the target's 1σ after the correction,
+#: in the target's unit)
+GUIDANCE_OUTPUTS = {"dv_mean_m_s": "m/s", "dv_99_m_s": "m/s", "dv_rms_m_s": "m/s", "propellant_sigma_kg": "kg"}
+_GUIDANCE_OUTPUT = re.compile(r"^([A-Za-z][A-Za-z0-9_\-]*)\.([A-Za-z_0-9]+)$")
 _PART = re.compile(r"^([A-Za-z_][A-Za-z_0-9]*)((?:\[[0-9]+\])*)$")
 MAX_STUDIES = 1_000_000
 Scalar = float | int | bool | str
@@ -156,11 +167,47 @@ def check_field_path(path: str) -> tuple[str | int, ...]:
     return parts
 
 
+def guidance_output(name: str) -> tuple[str, str, str | None] | None:
+    """``"tcm1.dv_99_m_s"`` -> ``("tcm1", "dv_99_m_s", None)``, ``"tcm1.b_dot_t_sigma_after"``
+    -> ``("tcm1", "sigma_after", "b_dot_t")``; None if ``name`` is no guidance output; ValueError
+    for an event output whose quantity or target is unknown."""
+    from fracas.guidance.target_kinds import TARGET_KINDS
+
+    m = _GUIDANCE_OUTPUT.match(name)
+    if m is None:
+        return None
+    event, what = m.group(1), m.group(2)
+    if what in GUIDANCE_OUTPUTS:
+        return event, what, None
+    if what.endswith("_sigma_after"):
+        target = what[: -len("_sigma_after")]
+        if target in TARGET_KINDS:
+            return event, "sigma_after", target
+        raise ValueError(f"output {name!r}: unknown target {target!r} (expected one of: {', '.join(TARGET_KINDS)})")
+    raise ValueError(
+        f"output {name!r}: unknown guidance output {what!r} (expected one of: {', '.join(GUIDANCE_OUTPUTS)}, "
+        "<target>_sigma_after)"
+    )
+
+
+def output_unit(name: str) -> str | None:
+    """The unit of an output known from its name alone (None: the covariance label's unit)."""
+    from fracas.guidance.target_kinds import TARGET_KINDS
+
+    if name in FIXED_OUTPUTS:
+        return FIXED_OUTPUTS[name]
+    g = guidance_output(name)
+    if g is None:
+        return None
+    return GUIDANCE_OUTPUTS[g[1]] if g[2] is None else TARGET_KINDS[g[2]].unit
+
+
 def check_output_name(name: str) -> str:
-    if name in FIXED_OUTPUTS or _SIGMA_OUTPUT.match(name):
+    if name in FIXED_OUTPUTS or _SIGMA_OUTPUT.match(name) or guidance_output(name) is not None:
         return name
     raise ValueError(
-        f"unknown output {name!r} (expected one of: {', '.join(FIXED_OUTPUTS)}, sigma[LABEL], true_sigma[LABEL])"
+        f"unknown output {name!r} (expected one of: {', '.join(FIXED_OUTPUTS)}, sigma[LABEL], true_sigma[LABEL], "
+        f"GUIDANCE_EVENT.{{{', '.join(GUIDANCE_OUTPUTS)}, TARGET_sigma_after}})"
     )
 
 

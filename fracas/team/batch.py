@@ -40,6 +40,7 @@ from fracas.team.transitions import (
     EPS_T,
     TIME_MERGE_S,
     _noise_cells,
+    _stm_nodes,
     augmented_transitions,
     bucket,
     noise_partials,
@@ -192,16 +193,21 @@ def _grid_nodes(study: Study, ref: Reference) -> dict:
     t = np.asarray(ref.times_s, dtype=np.float64)
     x0 = ref.states[0]
     nx = study.nx
-    cells = _noise_cells(study, float(t[0]), float(t[-1]))
-    near = np.abs(t[:, None] - cells[None, :]).min(axis=1) <= TIME_MERGE_S
-    U = np.array(sorted(set(cells.tolist()) | set(t[~near].tolist())))
-    pr = study.problem
-    M = len(U)
-    Up = np.concatenate([U, np.repeat(U[-1:], bucket(M) - M)])
-    traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, x0, Up, ())
-    step_phi = np.array(sens.stm_step)[:M, :nx, :nx]
-    xs = np.asarray(traj.x)[:M]
-    prim = np.asarray(traj.primary)[:M].astype(np.int32)
+    product = getattr(ref, "product", None)
+    got = _stm_nodes(study, product, t) if product is not None else None
+    if got is not None:  # the STM file's grid: no integration (as grid_noise does)
+        cells, U, step_phi, xs, prim = got
+    else:
+        cells = _noise_cells(study, float(t[0]), float(t[-1]))
+        near = np.abs(t[:, None] - cells[None, :]).min(axis=1) <= TIME_MERGE_S
+        U = np.array(sorted(set(cells.tolist()) | set(t[~near].tolist())))
+        pr = study.problem
+        M = len(U)
+        Up = np.concatenate([U, np.repeat(U[-1:], bucket(M) - M)])
+        traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, x0, Up, ())
+        step_phi = np.array(sens.stm_step)[:M, :nx, :nx]
+        xs = np.asarray(traj.x)[:M]
+        prim = np.asarray(traj.primary)[:M].astype(np.int32)
     iu = {float(u): i for i, u in enumerate(U)}
     ic = np.array([iu[float(c)] for c in cells])
     nc = len(cells) - 1

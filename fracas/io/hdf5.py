@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
+import functools
 import hashlib
 import os
 import platform
@@ -114,6 +115,13 @@ def attr_strs(obj: h5py.HLObject, key: str) -> list[str]:
 
 
 def library_versions() -> dict[str, str]:
+    """Versions of Python and the libraries the files depend on (a fresh copy; looked up once
+    per process: the package metadata scan costs 20-40 ms, paid by every sweep study)."""
+    return dict(_library_versions())
+
+
+@functools.cache
+def _library_versions() -> dict[str, str]:
     out = {"python": platform.python_version()}
     for name in LIBRARIES:
         try:

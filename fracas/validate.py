@@ -29,7 +29,14 @@ from fracas.build.trajectory import model_bodies
 from fracas.config.limits import team_size_problems
 from fracas.config.modes import deck_mode, parse_any
 from fracas.config.team import TeamDeck
-from fracas.config.trajectory import TrajectoryDeck, cut, load_deck, read_deck_text, trajectory_hash
+from fracas.config.trajectory import (
+    BACKWARD_TEAM_PROBLEM,
+    TrajectoryDeck,
+    cut,
+    load_deck,
+    read_deck_text,
+    trajectory_hash,
+)
 from fracas.errors import FracasError, OutputPathError
 from fracas.io.atomic import check_output_path
 from fracas.measurements.kinds import check_measurement_label, is_measurement_label
@@ -190,6 +197,9 @@ def _team_checks(deck: TeamDeck) -> list[str]:
             tdeck = load_deck(path)
         except FracasError as exc:
             out += exc.problems
+    if tdeck is not None and tdeck.backward:
+        out.append(_line(src, "ertraj.deck", deck.ertraj.deck, BACKWARD_TEAM_PROBLEM))
+        tdeck = None
     if tdeck is not None:
         out += _trajectory_problems(tdeck)
         out += team_size_problems(deck, tdeck)

@@ -197,3 +197,24 @@ def test_example_decks_run_end_to_end(tmp_path, name):
         coast = (t_days >= 110.0) & (t_days <= 150.0)
         assert np.ptp(data.mass_kg[coast]) == 0.0  # no thrust between arcs
         assert np.linalg.norm(data.r_final_km) / 1.495978707e8 > 1.5  # beyond 1.5 AU after 300 days
+
+
+def test_propagate_backward_deck_end_to_end(tmp_path):
+    """A deck with a negative duration: the trajectory file is written with times running
+    from 0 back to the final time (decreasing), the first row the deck's state."""
+    from fracas.cli import main
+    from fracas.io import read_trajectory_file
+
+    text = LEO.read_text()
+    assert "duration_days = 1.0" in text
+    deck = tmp_path / "back.toml"
+    deck.write_text(text.replace("duration_days = 1.0", "duration_days = -1.0"))
+    out = tmp_path / "back.h5"
+    res = CliRunner().invoke(main, ["propagate", str(deck), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "reached the final time" in res.output
+    d = read_trajectory_file(out)
+    assert d.status == 0
+    assert d.t_s[0] == 0.0 and d.t_s[-1] == pytest.approx(-86400.0, abs=1e-6)
+    assert len(d.t_s) > 2 and np.all(np.diff(d.t_s) < 0)
+    np.testing.assert_array_equal(d.r_km[0], [7000.0, 0.0, 0.0])

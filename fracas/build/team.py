@@ -23,7 +23,7 @@ from fracas.build.guidance import control_a_priori, guidance_specs, guidance_tim
 from fracas.build.trajectory import Problem, build_propagation
 from fracas.config.limits import check_team_sizes
 from fracas.config.team import SIGMA_UNITS, APriori, TeamDeck, ThrustNoise
-from fracas.config.trajectory import TrajectoryDeck, load_deck, trajectory_hash
+from fracas.config.trajectory import BACKWARD_TEAM_PROBLEM, TrajectoryDeck, load_deck, trajectory_hash
 from fracas.constants import DAY_S
 from fracas.errors import ConfigError, DeckError
 from fracas.filters.covariance import Layout
@@ -84,6 +84,8 @@ def trajectory_problem(deck: TeamDeck, src: str) -> tuple[TrajectoryDeck, Proble
     if not path.exists():
         raise _err(src, "ertraj.deck", deck.ertraj.deck, f"no such trajectory deck ({path})")
     tdeck = load_deck(path)
+    if tdeck.backward:
+        raise _err(src, "ertraj.deck", deck.ertraj.deck, BACKWARD_TEAM_PROBLEM)
     check_team_sizes(deck, tdeck)  # refuse a study too big for its trajectory before building anything
     return tdeck, build_propagation(tdeck)
 

@@ -69,18 +69,23 @@ def model_bodies(deck: TrajectoryDeck) -> tuple[str, ...]:
 
 
 def output_times_s(deck: TrajectoryDeck) -> np.ndarray:
-    """Sorted, de-duplicated output times (s from the epoch) from ``[output]``; t = 0 first."""
+    """De-duplicated output times (s from the epoch) from ``[output]`` in the order the
+    propagation meets them: t = 0 first, increasing, or decreasing on a backward deck
+    (``step_days`` is a magnitude applied in the direction of propagation)."""
     out = deck.output
     dur = deck.duration_days
+    sign = -1.0 if dur < 0.0 else 1.0
     days = [0.0, *out.times_days]  # the propagation starts at the first output time
     if out.include_final:
         days.append(dur)
     if out.step_days is not None:
-        n = int(math.floor(dur / out.step_days * (1.0 + 1e-12)))
-        days.extend(k * out.step_days for k in range(n + 1))
-    t = np.unique(np.clip(np.asarray(days, dtype=np.float64), 0.0, dur) * constants.DAY_S)
+        step = abs(out.step_days)
+        n = int(math.floor(abs(dur) / step * (1.0 + 1e-12)))
+        days.extend(sign * k * step for k in range(n + 1))
+    # work on |t| (increasing along the propagation), then restore the sign
+    t = np.unique(np.clip(sign * np.asarray(days, dtype=np.float64), 0.0, abs(dur)) * constants.DAY_S)
     keep = np.concatenate([[True], np.diff(t) > 1e-6])  # merge times within a microsecond
-    return t[keep]
+    return sign * t[keep] + 0.0
 
 
 def _rotation_to_icrf(frame: str, centre: str) -> np.ndarray:
@@ -251,7 +256,7 @@ def build_propagation(deck: TrajectoryDeck) -> Problem:
         from fracas.dynamics.ephemeris import build_ephemeris
 
         try:
-            ephem = build_ephemeris(bodies, epoch_et, epoch_et + t_final)
+            ephem = build_ephemeris(bodies, epoch_et + min(0.0, t_final), epoch_et + max(0.0, t_final))
         except ConfigError as exc:
             raise ConfigError(f"{src}: {exc}") from None
 

@@ -32,6 +32,14 @@ rad.  No JAX here.  Layout (every section but ``[epoch]``, ``[initial_state]``,
     [output]          times_days = [], step_days, include_final = true
                       (t = 0 is always the first output), sensitivities = ["mu[earth]", ...], stm = false
 
+Backward propagation: ``duration_days < 0`` or a ``final_epoch`` before ``[epoch]``.  Every
+time (thrust arcs, impulses, output times) is then in ``[duration, 0]`` days, still measured
+from the epoch; lists stay in increasing time order (an arc is on for start <= t < stop);
+``step_days`` is a magnitude applied in the direction of propagation (a sign, if written,
+must agree with it) and outputs run from t = 0 backward.  Stop conditions "time" and
+"radius" work in both directions; "soi_entry", "closest_approach", primary changes and an
+impulse at t = 0 are refused on a backward deck.
+
 The primary body of the propagation (centre of the Encke conic) is the initial-state
 centre.  :func:`load_deck` turns every problem into :class:`fracas.errors.DeckError` with
 one line ``path: field.path = value: what was expected``.
@@ -78,6 +86,7 @@ __all__ = [
     "load_toml",
     "validation_problems",
     "MAX_NESTING",
+    "BACKWARD_TEAM_PROBLEM",
     "MAX_DECK_BYTES",
 ]
 
@@ -347,8 +356,8 @@ class ThrustArc(_Section):
     in-plane/out-of-plane angles in the velocity frame, or right ascension/declination
     of an inertial (ICRF) direction."""
 
-    start_days: Annotated[float, Field(ge=0)]
-    stop_days: Annotated[float, Field(ge=0)]
+    start_days: float
+    stop_days: float
     frame: Literal["velocity", "inertial"] = "velocity"
     alpha_deg: float = 0.0
     beta_deg: Annotated[float, Field(ge=-90, le=90)] = 0.0
@@ -362,7 +371,7 @@ class ThrustArc(_Section):
 
 
 class Impulse(_Section):
-    time_days: Annotated[float, Field(ge=0)]
+    time_days: float
     dv_km_s: Vector3
     frame: Literal["velocity", "inertial"] = "velocity"
     isp_s: PositiveFloat = 300.0
@@ -428,7 +437,7 @@ class Integrator(_Section):
 
 
 class Stop(_Section):
-    duration_days: PositiveFloat | None = None
+    duration_days: float | None = None  # < 0: backward propagation
     final_epoch: EpochValue | None = None
     condition: Literal["time", "soi_entry", "closest_approach", "radius"] = "time"
     body: BodyName | None = None
@@ -437,6 +446,8 @@ class Stop(_Section):
     @model_validator(mode="after")
     def _consistent(self) -> Stop:
         _exactly_one(self, ("duration_days", "final_epoch"))
+        if self.duration_days == 0.0:
+            raise FieldProblem("duration_days", self.duration_days, "must be nonzero (< 0 propagates backward)")
         if self.condition in ("soi_entry", "closest_approach") and self.body is None:
             raise FieldProblem("body", None, f'required for condition = "{self.condition}"')
         if self.condition == "radius" and self.radius_km is None:
@@ -449,13 +460,16 @@ class Stop(_Section):
 
 
 class Output(_Section):
-    times_days: list[Annotated[float, Field(ge=0)]] = []
-    step_days: PositiveFloat | None = None
+    times_days: list[float] = []
+    step_days: float | None = None  # a magnitude, applied in the direction of propagation
     include_final: bool = True
     sensitivities: list[ParamLabel] = []
     stm: bool = False
 
     _unique = field_validator("sensitivities")(classmethod(lambda cls, v: _no_repeats(v)))
+
+
+BACKWARD_TEAM_PROBLEM = "is a backward trajectory (final time before the epoch); TEAM needs a forward one"
 
 
 class SourcedDeck(_Section):
@@ -503,11 +517,61 @@ class TrajectoryDeck(SourcedDeck):
             return self.stop.duration_days
         return (epoch_to_et(self.stop.final_epoch) - self.epoch.et) / DAY_S
 
+    @property
+    def backward(self) -> bool:
+        """Whether the final time is before the epoch (backward propagation)."""
+        return self.duration_days < 0.0
+
+    def _span_problem(self, loc: tuple, t: float) -> FieldProblem | None:
+        """The problem with a time ``t`` (days) outside the propagation span, if any."""
+        dur = self.duration_days
+        if dur > 0.0:
+            if t < 0.0:
+                return FieldProblem(loc, t, "must be >= 0 (the epoch)")
+            if t > dur * (1 + 1e-12):
+                return FieldProblem(loc, t, f"must be <= the final time, {dur:g} days")
+        else:
+            if t > 0.0:
+                return FieldProblem(loc, t, f"must be <= 0 (the epoch; a backward propagation spans {dur:g} to 0 days)")
+            if t < dur * (1 + 1e-12):
+                return FieldProblem(loc, t, f"must be >= the final time, {dur:g} days (a backward propagation)")
+        return None
+
+    def _backward_checks(self) -> None:
+        """What a backward deck cannot ask for (the core's event functions assume forward time)."""
+        stop = self.stop
+        if stop.condition in ("soi_entry", "closest_approach"):
+            raise FieldProblem(
+                ("stop", "condition"),
+                stop.condition,
+                'not supported on a backward propagation (duration < 0); use "time" or "radius"',
+            )
+        if self.forces.change_primary_at_soi:
+            raise FieldProblem(
+                ("forces", "change_primary_at_soi"), True, "not supported on a backward propagation (duration < 0)"
+            )
+        for k, imp in enumerate(self.impulse):
+            if imp.time_days == 0.0:
+                raise FieldProblem(
+                    ("impulse", k, "time_days"),
+                    imp.time_days,
+                    "must be < 0 on a backward propagation (at the epoch it is ambiguous whether the "
+                    "initial state is before or after the impulse)",
+                )
+
     @model_validator(mode="after")
     def _cross_checks(self) -> TrajectoryDeck:
         dur = self.duration_days
-        if dur <= 0.0:
-            raise FieldProblem(("stop", "final_epoch"), self.stop.final_epoch, "must be after the epoch")
+        if not math.isfinite(dur) or dur == 0.0:
+            field = ("stop", "final_epoch") if self.stop.final_epoch is not None else ("stop", "duration_days")
+            value = self.stop.final_epoch if self.stop.final_epoch is not None else self.stop.duration_days
+            raise FieldProblem(field, value, "must differ from the epoch (a finite, nonzero duration)")
+        step = self.output.step_days
+        if step is not None and (step == 0.0 or (step < 0.0 and dur > 0.0)):
+            expected = "must be nonzero" if step == 0.0 else "must be > 0 on a forward propagation"
+            raise FieldProblem(("output", "step_days"), step, expected + " (it runs in the direction of propagation)")
+        if dur < 0.0:
+            self._backward_checks()
         centre = self.initial_state.centre
         f = self.forces
         if centre in f.third_bodies:
@@ -527,16 +591,15 @@ class TrajectoryDeck(SourcedDeck):
                     arc.start_days,
                     f"must be >= thrust_arc[{k - 1}].stop_days = {prev.stop_days:g} (arcs ordered, not overlapping)",
                 )
-            if arc.stop_days > dur * (1 + 1e-12):
-                raise FieldProblem(
-                    ("thrust_arc", k, "stop_days"), arc.stop_days, f"must be <= the final time, {dur:g} days"
-                )
+            for name in ("start_days", "stop_days"):
+                problem = self._span_problem(("thrust_arc", k, name), getattr(arc, name))
+                if problem is not None:
+                    raise problem
             prev = arc
         for k, imp in enumerate(self.impulse):
-            if imp.time_days > dur * (1 + 1e-12):
-                raise FieldProblem(
-                    ("impulse", k, "time_days"), imp.time_days, f"must be <= the final time, {dur:g} days"
-                )
+            problem = self._span_problem(("impulse", k, "time_days"), imp.time_days)
+            if problem is not None:
+                raise problem
             if k > 0 and imp.time_days < self.impulse[k - 1].time_days:
                 raise FieldProblem(
                     ("impulse", k, "time_days"),
@@ -561,8 +624,9 @@ class TrajectoryDeck(SourcedDeck):
                     ("forces", "conic_bodies", name), name, "must be the centre, a third body or the stop body"
                 )
         for k, t in enumerate(self.output.times_days):
-            if t > dur * (1 + 1e-12):
-                raise FieldProblem(("output", "times_days", k), t, f"must be <= the final time, {dur:g} days")
+            problem = self._span_problem(("output", "times_days", k), t)
+            if problem is not None:
+                raise problem
         if self.stop.condition == "soi_entry" and self.stop.body == centre:
             raise FieldProblem(("stop", "body"), self.stop.body, "must differ from the centre for soi_entry")
         n = output_count(self.output, dur)
@@ -576,17 +640,21 @@ class TrajectoryDeck(SourcedDeck):
             raise FieldProblem(
                 field,
                 value,
-                f"gives {count_text(n)} output times over 0-{dur:g} d "
+                f"gives {count_text(n)} output times over {_span_text(dur)} d "
                 f"(limit {self.limits.max_output_times}, [limits] max_output_times); use a longer step",
             )
         return self
 
 
+def _span_text(dur: float) -> str:
+    return f"0-{dur:g}" if dur >= 0.0 else f"{dur:g}-0"
+
+
 def output_count(out: Output, duration_days: float) -> float:
     """How many output times ``[output]`` asks for (an upper bound, computed without building them)."""
     n = 2.0 + len(out.times_days)
-    if out.step_days is not None:
-        q = duration_days / out.step_days * (1.0 + 1e-12)
+    if out.step_days is not None and out.step_days != 0.0:
+        q = abs(duration_days / out.step_days) * (1.0 + 1e-12)
         n += (math.floor(q) + 1.0) if q < 1e18 else q
     return n
 

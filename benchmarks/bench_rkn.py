@@ -59,14 +59,18 @@ def main():
     from fracas.integrate import rkn
     from fracas.integrate import tableaux as T
 
+    ez = jnp.array([0.0, 0.0, 1.0])
+
     def accel(t, r):
-        x, y, z = r[0], r[1], r[2]
-        ir2 = 1.0 / (x * x + y * y + z * z)
-        ir = jnp.sqrt(ir2)  # sqrt(1/r2), not 1/sqrt(r2): no float64 rsqrt on XLA CPU
+        # vector form (no stacking of components: 1.4x faster compiled) and sqrt(1/r2), not
+        # 1/sqrt(r2): no float64 rsqrt on XLA CPU (../shared/perf-notes.md)
+        ir2 = 1.0 / jnp.dot(r, r)
+        ir = jnp.sqrt(ir2)
         ir3 = ir * ir2
+        z = r[2]
         k = 1.5 * J2 * MU * RE * RE * ir3 * ir2
         z2 = 5.0 * z * z * ir2
-        return -MU * ir3 * r + k * jnp.stack([x * (z2 - 1.0), y * (z2 - 1.0), z * (z2 - 3.0)])
+        return r * (k * (z2 - 1.0) - MU * ir3) - (2.0 * k * z) * ez
 
     rng = np.random.default_rng(1)
     n = args.lanes

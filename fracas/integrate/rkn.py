@@ -26,7 +26,9 @@ error estimate is not finite is rejected and the step shrunk by ``fac_min``.
 Costs: a Nystrom step evaluates the acceleration once per distinct stage (RKN4: 3, DPRKN8: 8
 with its first-same-as-last stage reused, DPRKN12: 17); DOP853 12 per step (FSAL).  When
 writing ``accel`` for XLA CPU prefer ``jnp.sqrt(1.0 / r2)`` to ``1/jnp.sqrt(r2)`` (the latter is
-rewritten into a float64 rsqrt that XLA CPU does not vectorise; ../shared/perf-notes.md).
+rewritten into a float64 rsqrt that XLA CPU does not vectorise; ../shared/perf-notes.md), and
+vector expressions (``r * s - w * e_z``) to stacking components (``jnp.stack([ax, ay, az])``):
+measured 1.4x faster for DPRKN12 LEO + J2 batches (fewer, larger fusions).
 """
 
 from __future__ import annotations

@@ -31,18 +31,17 @@ import numpy as np
 
 from fracas import _jax  # noqa: F401
 from fracas.filters.process_noise import dyno_q
-from fracas.integrate.propagate import propagate_with_sensitivities
 from fracas.team.measure import MeasurementSet, assemble_measurements
 from fracas.team.reference import Reference
 from fracas.team.scan import filter_scan
 from fracas.team.study import Study
 from fracas.team.transitions import (
     EPS_T,
-    TIME_MERGE_S,
-    _noise_cells,
-    _stm_nodes,
     augmented_transitions,
     bucket,
+    cell_inputs,
+    cell_reference,
+    map_cell_noise,
     noise_partials,
     primary_index,
 )
@@ -189,52 +188,14 @@ def _interval_nodes(study: Study, ref: Reference) -> dict:
 
 
 def _grid_nodes(study: Study, ref: Reference) -> dict:
-    """grid_noise's cells, partials and cell transitions (the part that needs no sigma)."""
+    """grid_noise's cells, partials and cell transitions (the part that needs no sigma):
+    :func:`fracas.team.transitions.cell_reference` and ``cell_inputs``, shared with it."""
     t = np.asarray(ref.times_s, dtype=np.float64)
-    x0 = ref.states[0]
-    nx = study.nx
-    product = getattr(ref, "product", None)
-    got = _stm_nodes(study, product, t) if product is not None else None
-    if got is not None:  # the STM file's grid: no integration (as grid_noise does)
-        cells, U, step_phi, xs, prim = got
-    else:
-        cells = _noise_cells(study, float(t[0]), float(t[-1]))
-        near = np.abs(t[:, None] - cells[None, :]).min(axis=1) <= TIME_MERGE_S
-        U = np.array(sorted(set(cells.tolist()) | set(t[~near].tolist())))
-        pr = study.problem
-        M = len(U)
-        Up = np.concatenate([U, np.repeat(U[-1:], bucket(M) - M)])
-        traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, x0, Up, ())
-        step_phi = np.array(sens.stm_step)[:M, :nx, :nx]
-        xs = np.asarray(traj.x)[:M]
-        prim = np.asarray(traj.primary)[:M].astype(np.int32)
-    iu = {float(u): i for i, u in enumerate(U)}
-    ic = np.array([iu[float(c)] for c in cells])
-    nc = len(cells) - 1
-    phic = np.broadcast_to(np.eye(nx), (nc, nx, nx)).copy()
-    for j in range(nc):
-        for i in range(ic[j] + 1, ic[j + 1] + 1):
-            phic[j] = step_phi[i] @ phic[j]
-    dt = np.diff(cells)
-    e = np.minimum(EPS_T, dt / 2)
-    t_nodes = np.concatenate([cells[:-1] + e, cells[1:] - e])
-    x_nodes = np.concatenate([xs[ic[:-1]], xs[ic[1:]]])
-    p_nodes = np.concatenate([prim[ic[:-1]], prim[ic[1:]]])
-    h = noise_partials(study, t_nodes, x_nodes, p_nodes)
+    ci = cell_inputs(study, t, *cell_reference(study, t, ref.states[0], getattr(ref, "product", None)))
+    nc = ci["nc"]
     mp = bucket(nc)
-    args = tuple(_pad_rows(a, mp) for a in (phic, h[:nc], h[nc:], dt))
-    sched = {}
-    for k, tk in enumerate(t):
-        sched[int(np.argmin(np.abs(U - tk)))] = k
-    return {
-        "model": "grid",
-        "m": nc,
-        "args": args,
-        "U": U,
-        "step_phi": step_phi,
-        "cell_at": {int(ic[j + 1]): j for j in range(nc)},
-        "sched": sched,
-    }
+    ci.update(model="grid", m=nc, args=tuple(_pad_rows(ci[k], mp) for k in ("phic", "h0", "h1", "dt")))
+    return ci
 
 
 def _nodes(setup: BatchSetup) -> dict:
@@ -268,17 +229,7 @@ def batch_noise(setup: BatchSetup, studies: list[Study]) -> tuple[np.ndarray, np
     if nd["model"] == "interval":
         Q = np.concatenate([np.zeros((S, 1, nx, nx)), q], axis=1)
     else:
-        U, step_phi, cell_at, sched = nd["U"], nd["step_phi"], nd["cell_at"], nd["sched"]
-        Q = np.zeros((S, K, nx, nx))
-        acc = np.zeros((S, nx, nx))
-        for i in range(1, len(U)):
-            acc = step_phi[i] @ acc @ step_phi[i].T
-            j = cell_at.get(i)
-            if j is not None:
-                acc = acc + q[:, j]
-            if i in sched:
-                Q[:, sched[i]] = 0.5 * (acc + acc.transpose(0, 2, 1))
-                acc = np.zeros((S, nx, nx))
+        Q = map_cell_noise(nd, q, K)
     n = len(noisy)
     Qa[idx], Qt[idx] = Q[:n], Q[n:]
     return Qa, Qt

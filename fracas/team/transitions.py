@@ -261,6 +261,79 @@ def _union(cells: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.array(sorted(set(cells.tolist()) | set(t[~near].tolist())))
 
 
+def cell_reference(study: Study, t: np.ndarray, x0: np.ndarray, product: ReferenceTrajectory | None = None):
+    """The fixed-cell model's reference: (cells, U, step_phi, xs, prim) — the cell ends, the
+    union U of the cell ends and ``t``, Φ over each step of U (nx, nx), the states and
+    primary indices at U.  From ``product`` when its grid supports the cells (no
+    integration), else ``x0`` (the state at t[0]) integrated over U on cells of noise_step_s."""
+    nx = study.nx
+    got = _stm_nodes(study, product, t) if product is not None else None
+    if got is not None:
+        return got
+    cells = _noise_cells(study, float(t[0]), float(t[-1]))
+    U = _union(cells, t)
+    pr = study.problem
+    M = len(U)
+    Up = np.concatenate([U, np.repeat(U[-1:], bucket(M) - M)])  # a few sizes share one compile
+    traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, x0, Up, ())
+    step_phi = np.array(sens.stm_step)[:M, :nx, :nx]
+    xs = np.asarray(traj.x)[:M]
+    prim = np.asarray(traj.primary)[:M].astype(np.int32)
+    return cells, U, step_phi, xs, prim
+
+
+def cell_inputs(study: Study, t, cells, U, step_phi, xs, prim) -> dict:
+    """What DYNO needs over every cell (a, b] and where its noise goes, for any sigma:
+    ``phic`` (nc, nx, nx) Φ(b, a) from the union steps, ``h0``/``h1`` the partials just
+    inside the ends (the state at the end, the time EPS_T inside: one-sided at the thrust
+    switches), ``dt`` (nc,), ``cell_at`` {U index of a cell end: cell}, ``sched`` {U index:
+    index in ``t``}.  Shared by :func:`grid_noise` and the batched sweeps."""
+    nx = study.nx
+    iu = {float(u): i for i, u in enumerate(U)}
+    ic = np.array([iu[float(c)] for c in cells])
+    nc = len(cells) - 1
+    phic = np.broadcast_to(np.eye(nx), (nc, nx, nx)).copy()
+    for j in range(nc):
+        for i in range(ic[j] + 1, ic[j + 1] + 1):
+            phic[j] = step_phi[i] @ phic[j]
+    dt = np.diff(cells)
+    e = np.minimum(EPS_T, dt / 2)
+    t_nodes = np.concatenate([cells[:-1] + e, cells[1:] - e])
+    x_nodes = np.concatenate([xs[ic[:-1]], xs[ic[1:]]])
+    p_nodes = np.concatenate([prim[ic[:-1]], prim[ic[1:]]])
+    h = noise_partials(study, t_nodes, x_nodes, p_nodes)
+    sched = {int(np.argmin(np.abs(U - tk))): k for k, tk in enumerate(t)}
+    return {
+        "nc": nc,
+        "phic": phic,
+        "h0": h[:nc],
+        "h1": h[nc:],
+        "dt": dt,
+        "U": U,
+        "step_phi": step_phi,
+        "cell_at": {int(ic[j + 1]): j for j in range(nc)},
+        "sched": sched,
+    }
+
+
+def map_cell_noise(ci: dict, qc: np.ndarray, K: int) -> np.ndarray:
+    """Q (..., K, nx, nx): the cells' Q̃ ``qc`` (..., nc, nx, nx) mapped from each cell's end
+    to the next time of the schedule and summed there (any leading batch shape)."""
+    U, step_phi, cell_at, sched = ci["U"], ci["step_phi"], ci["cell_at"], ci["sched"]
+    lead, nx = qc.shape[:-3], qc.shape[-1]
+    Q = np.zeros(lead + (K, nx, nx))
+    acc = np.zeros(lead + (nx, nx))
+    for i in range(1, len(U)):
+        acc = step_phi[i] @ acc @ step_phi[i].T
+        j = cell_at.get(i)
+        if j is not None:
+            acc = acc + qc[..., j, :, :]
+        if i in sched:
+            Q[..., sched[i], :, :] = 0.5 * (acc + np.swapaxes(acc, -1, -2))
+            acc = np.zeros(lead + (nx, nx))
+    return Q
+
+
 def grid_noise(study: Study, t: np.ndarray, x0: np.ndarray, product: ReferenceTrajectory | None = None):
     """Q (K, nx, nx) over each interval (t_{k-1}, t_k] of the fixed-cell model (element 0 is
     zero), assumed and true: every cell's DYNO Q̃ mapped from its end to t_k (module docstring).
@@ -276,65 +349,19 @@ def grid_noise(study: Study, t: np.ndarray, x0: np.ndarray, product: ReferenceTr
     zeros = np.zeros((K, nx, nx))
     if not study.has_noise or K < 2:
         return zeros, zeros.copy()
-    got = _stm_nodes(study, product, t) if product is not None else None
-    if got is not None:
-        cells, U, step_phi, xs, prim = got
-    else:
-        cells = _noise_cells(study, float(t[0]), float(t[-1]))
-        U = _union(cells, t)
-        pr = study.problem
-        M = len(U)
-        Up = np.concatenate([U, np.repeat(U[-1:], bucket(M) - M)])  # a few sizes share one compile
-        traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, x0, Up, ())
-        step_phi = np.array(sens.stm_step)[:M, :nx, :nx]
-        xs = np.asarray(traj.x)[:M]
-        prim = np.asarray(traj.primary)[:M].astype(np.int32)
-    return _cell_noise(study, t, cells, U, step_phi, xs, prim)
-
-
-def _cell_noise(study: Study, t, cells, U, step_phi, xs, prim):
-    """DYNO over every cell and the sums mapped to ``t`` (``grid_noise``'s second half)."""
-    K, nx = len(t), study.nx
-    zeros = np.zeros((K, nx, nx))
-    iu = {float(u): i for i, u in enumerate(U)}
-    ic = np.array([iu[float(c)] for c in cells])
-    # DYNO over every cell (a, b]: Φ(b, a) from the union steps, h just inside the ends
-    # (the state at the end, the time EPS_T inside: one-sided at the thrust switches)
-    nc = len(cells) - 1
-    phic = np.broadcast_to(np.eye(nx), (nc, nx, nx)).copy()
-    for j in range(nc):
-        for i in range(ic[j] + 1, ic[j + 1] + 1):
-            phic[j] = step_phi[i] @ phic[j]
-    dt = np.diff(cells)
-    e = np.minimum(EPS_T, dt / 2)
-    t_nodes = np.concatenate([cells[:-1] + e, cells[1:] - e])
-    x_nodes = np.concatenate([xs[ic[:-1]], xs[ic[1:]]])
-    p_nodes = np.concatenate([prim[ic[:-1]], prim[ic[1:]]])
-    h = noise_partials(study, t_nodes, x_nodes, p_nodes)
+    cells, U, step_phi, xs, prim = cell_reference(study, t, x0, product)
+    ci = cell_inputs(study, t, cells, U, step_phi, xs, prim)
+    nc = ci["nc"]
     mp = bucket(nc)
     pad = lambda a: np.concatenate([a, np.zeros((mp - nc,) + a.shape[1:])]) if mp > nc else a  # noqa: E731
-    args = (pad(phic), pad(h[:nc]), pad(h[nc:]))
+    args = (pad(ci["phic"]), pad(ci["h0"]), pad(ci["h1"]))
     out = []
-    cell_end = {int(i) for i in ic[1:]}
-    sched = {}
-    for k, tk in enumerate(t):
-        sched[int(np.argmin(np.abs(U - tk)))] = k
     for sig, tau in (
         (study.noise_sigma_assumed, study.noise_tau_assumed),
         (study.noise_sigma_true, study.noise_tau_true),
     ):
-        qc = np.asarray(_dyno_batch(*args, jnp.asarray(sig), jnp.asarray(tau), jnp.asarray(pad(dt))))[:nc]
-        qc_at = {int(ic[j + 1]): qc[j] for j in range(nc)}
-        Q = zeros.copy()
-        acc = np.zeros((nx, nx))
-        for i in range(1, len(U)):
-            acc = step_phi[i] @ acc @ step_phi[i].T
-            if i in cell_end:
-                acc = acc + qc_at[i]
-            if i in sched:
-                Q[sched[i]] = 0.5 * (acc + acc.T)
-                acc = np.zeros((nx, nx))
-        out.append(Q)
+        qc = np.asarray(_dyno_batch(*args, jnp.asarray(sig), jnp.asarray(tau), jnp.asarray(pad(ci["dt"]))))[:nc]
+        out.append(map_cell_noise(ci, qc, K))
     return out[0], out[1]
 
 

@@ -144,6 +144,56 @@ def load_user_gain(spec: str, src: str) -> Callable:
     return obj
 
 
+def study_numbers(deck: TeamDeck, src: str, nx: int, labels: list[str], nw: int, thrust: bool) -> dict:
+    """The numbers of a study that its deck alone fixes (DATA), as build_case computes them:
+    the diagonal a-priori covariances (assumed, with the ignore parameters at zero, and
+    true; None without [a_priori] sigmas), the Gauss-Markov levels, the observations with
+    their assumed sigmas, the true sigmas and the noise cell step.  ``labels``: the study's
+    parameters in layout order, the last ``nw`` of them ignore parameters.  Shared with
+    :func:`fracas.build.vary.derive_study` (a sweep's studies that differ only in numbers)."""
+    gen = deck.gencov if (deck.gencov is not None and deck.gencov.enabled) else None
+    sigma = {p.label: p.sigma for p in deck.parameter}
+    true_sigma: dict[str, float] = {}
+    if gen is not None:
+        for g in gen.parameter:
+            if g.role == "ignore":
+                sigma[g.label] = g.sigma
+            else:
+                true_sigma[g.label] = g.sigma
+    p_sig_a = np.array([sigma[lab] for lab in labels], dtype=np.float64)
+    p_sig_t = np.array([true_sigma.get(lab, sigma[lab]) for lab in labels], dtype=np.float64)
+    if nw:  # the filter does not know its ignore parameters
+        p_sig_a[-nw:] = 0.0
+    P0a = P0t = None
+    if deck.a_priori is not None and not deck.a_priori.from_punch:
+        xs_a = _state_sigmas(deck.a_priori, nx)
+        xs_t = _state_sigmas(gen.a_priori, nx) if (gen is not None and gen.a_priori is not None) else xs_a
+        P0a = np.diag(np.concatenate([xs_a, p_sig_a]) ** 2)
+        P0t = np.diag(np.concatenate([xs_t, p_sig_t]) ** 2)
+    sig_a, tau_a = _noise(deck.thrust_noise)
+    sig_t, tau_t = _noise(gen.thrust_noise) if (gen is not None and gen.thrust_noise is not None) else (sig_a, tau_a)
+    if (np.any(sig_a > 0) or np.any(sig_t > 0)) and not thrust:
+        raise _err(src, "thrust_noise", None, "the trajectory deck has no thrust ([propulsion] and [[thrust_arc]])")
+    obs, tsig = [], []
+    for t in deck.tracking:
+        _, k = SIGMA_UNITS[t.type]
+        obs.append(trakm.Observation(t.type, tuple(t.stations), t.sigma * k))
+        tsig.append((gen.measurement_sigma.get(t.type, t.sigma) if gen is not None else t.sigma) * k)
+    return {
+        "P0_assumed": P0a,
+        "P0_true": P0t,
+        "noise_sigma_assumed": sig_a,
+        "noise_tau_assumed": tau_a,
+        "noise_sigma_true": sig_t,
+        "noise_tau_true": tau_t,
+        "observations": obs,
+        "true_sigma": np.array(tsig, dtype=np.float64),
+        "noise_step_s": noise_cell_step(  # on the deck's STM grid: in-line and file runs share the cells
+            deck.errcon.noise_step_hours * 3600.0, (deck.stm.grid_hours or 0.0) * 3600.0, np.concatenate([tau_a, tau_t])
+        ),
+    }
+
+
 def build_study(deck: TeamDeck, punched: dict | None = None) -> Study:
     """DATA: validate the deck against the trajectory and the catalogues; build the core's study."""
     return build_case(deck, punched).study
@@ -163,7 +213,6 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
 
     # ---- parameters and roles
     groups: dict[str, list[tuple[str, float, bool]]] = {"s": [], "u": [], "v": [], "w": []}
-    true_sigma: dict[str, float] = {}
     for k, p in enumerate(deck.parameter):
         dyn = _classify(p.label, model, names, src, f"parameter[{k}].label")
         role = {"solve_for": "s", "ignore": "w"}.get(p.role, "u" if dyn else "v")
@@ -174,8 +223,6 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
             if g.role == "ignore":
                 dyn = _classify(g.label, model, names, src, f"gencov.parameter[{k}].label")
                 groups["w"].append((g.label, g.sigma, dyn))
-            else:
-                true_sigma[g.label] = g.sigma
     ordered = groups["s"] + groups["u"] + groups["v"] + groups["w"]
     labels = [lab for lab, _, _ in ordered]
     dynamic = np.array([d for _, _, d in ordered], dtype=bool)
@@ -188,12 +235,9 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
     units = [_unit(lab, d, model) for lab, _, d in ordered]
     layout = Layout(nx, len(groups["s"]), len(groups["u"]), len(groups["v"]), len(groups["w"]))
 
-    # ---- a-priori covariances
+    # ---- a-priori covariances, noise levels, measurement sigmas
     n = layout.n
-    p_sig_a = np.array([s for _, s, _ in ordered], dtype=np.float64)
-    p_sig_t = np.array([true_sigma.get(lab, s) for lab, s, _ in ordered], dtype=np.float64)
-    if layout.nw:  # the filter does not know its ignore parameters
-        p_sig_a[-layout.nw :] = 0.0
+    num = study_numbers(deck, src, nx, labels, layout.nw, bool(model.thrust))
     if punched is not None:
         if punched.get("trajectory_hash") and punched["trajectory_hash"] != trajectory_hash(tdeck):
             raise _err(
@@ -213,29 +257,16 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
                 f"the punched covariance has parameters {list(punched['labels'])}, this study {labels}",
             )
     else:
-        xs_a = _state_sigmas(deck.a_priori, nx)
-        xs_t = _state_sigmas(gen.a_priori, nx) if (gen is not None and gen.a_priori is not None) else xs_a
-        P0a = np.diag(np.concatenate([xs_a, p_sig_a]) ** 2)
-        P0t = np.diag(np.concatenate([xs_t, p_sig_t]) ** 2)
+        P0a, P0t = num["P0_assumed"], num["P0_true"]
 
-    # ---- thrust noise (Gauss-Markov)
-    sig_a, tau_a = _noise(deck.thrust_noise)
-    sig_t, tau_t = _noise(gen.thrust_noise) if (gen is not None and gen.thrust_noise is not None) else (sig_a, tau_a)
-    if (np.any(sig_a > 0) or np.any(sig_t > 0)) and not model.thrust:
-        raise _err(src, "thrust_noise", None, "the trajectory deck has no thrust ([propulsion] and [[thrust_arc]])")
-
-    # ---- observations and their schedule
-    obs, tsig, track_times, specs = [], [], [], []
+    # ---- the tracking entries and their schedule
+    track_times, specs = [], []
     for t in deck.tracking:
-        unit, k = SIGMA_UNITS[t.type]
-        obs.append(trakm.Observation(t.type, tuple(t.stations), t.sigma * k))
         star = None
         if t.type == "star_planet_angle":
             ra, de = math.radians(t.star_ra_deg), math.radians(t.star_dec_deg)
             star = np.array([math.cos(de) * math.cos(ra), math.cos(de) * math.sin(ra), math.sin(de)])
         specs.append(TrackingSpec(t.type, tuple(t.stations), t.body, star))
-        ts = (gen.measurement_sigma.get(t.type, t.sigma) if gen is not None else t.sigma) * k
-        tsig.append(ts)
         track_times.append(range_times(t.start_days * DAY_S, t.stop_days * DAY_S, t.interval_hours * 3600.0))
 
     dur = tdeck.duration_days * DAY_S
@@ -299,14 +330,14 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
         dynamic=dynamic,
         P0_assumed=P0a,
         P0_true=P0t,
-        noise_sigma_assumed=sig_a,
-        noise_tau_assumed=tau_a,
-        noise_sigma_true=sig_t,
-        noise_tau_true=tau_t,
+        noise_sigma_assumed=num["noise_sigma_assumed"],
+        noise_tau_assumed=num["noise_tau_assumed"],
+        noise_sigma_true=num["noise_sigma_true"],
+        noise_tau_true=num["noise_tau_true"],
         stations=stations,
         tracking=specs,
-        observations=obs,
-        true_sigma=np.array(tsig, dtype=np.float64),
+        observations=num["observations"],
+        true_sigma=num["true_sigma"],
         schedule=sched,
         start_s=start,
         stop_s=stop,
@@ -320,9 +351,7 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
         trajectory_end_s=dur,
         pdot_step_s=deck.ertraj.pdot_step_hours * 3600.0,
         noise_model=deck.errcon.process_noise,
-        noise_step_s=noise_cell_step(  # on the deck's STM grid: in-line and file runs share the cells
-            deck.errcon.noise_step_hours * 3600.0, (deck.stm.grid_hours or 0.0) * 3600.0, np.concatenate([tau_a, tau_t])
-        ),
+        noise_step_s=num["noise_step_s"],
         user_gain_spec=deck.filter.user_gain or "",
         trajectory_hash=trajectory_hash(tdeck),
         trajectory_source=tdeck.source_path or "",

@@ -61,6 +61,7 @@ __all__ = [
     "gates_covariance",
     "execution_error_covariance",
     "post_guidance_covariance",
+    "post_correction_covariance",
     "target_covariance",
 ]
 
@@ -220,19 +221,38 @@ def post_guidance_covariance(
     All n×n; sigma_exec (3×3, km²/s²) from :func:`execution_error_covariance`.
     """
     p_c = jnp.asarray(p_control)
-    p_k = jnp.asarray(p_knowledge)
     n = p_c.shape[0]
     b = velocity_selector(n)
     bsb = b @ jnp.asarray(sigma_exec) @ b.T
-    if mode == "report":
+    g_mat = b @ jnp.asarray(gamma)
+    return post_correction_covariance(p_c, p_knowledge, g_mat, mode, cross, n_state) + bsb
+
+
+def post_correction_covariance(
+    p_control, p_knowledge, g_mat, mode: str = "report", cross=None, n_state: int = 6, reset: str = "state"
+) -> jax.Array:
+    """P_c⁺ of any linear correction δX⁺ = (I − G)δX + G e, execution errors excluded
+    (digest (G-7) with BΓ → G: G = BΓ for an impulse, Φ⁻¹SΓ_U for a low-thrust arc
+    written at its initiation).
+
+    ``mode="report"`` with ``reset="state"``: the state rows and columns (the first
+    ``n_state``) become the knowledge's, the parameter block keeps P_c,pp (P-B2);
+    ``reset="all"``: every block becomes the knowledge's.  Other modes, or
+    ``reset="exact"``: (I−G)P_c(I−G)ᵀ + G P_k Gᵀ + (I−G)C_xe Gᵀ + G C_xeᵀ(I−G)ᵀ with the
+    mode's C_xe (``report``: P_k/2).
+    """
+    p_c = jnp.asarray(p_control)
+    p_k = jnp.asarray(p_knowledge)
+    if mode == "report" and reset != "exact":
+        if reset == "all":
+            return p_k
         x = slice(0, n_state)
-        out = p_c.at[x, :].set(p_k[x, :]).at[:, x].set(p_k[:, x])
-        return out + bsb
+        return p_c.at[x, :].set(p_k[x, :]).at[:, x].set(p_k[:, x])
     c = cross_covariance(p_c, p_k, mode, cross)
-    bg = b @ jnp.asarray(gamma)
-    a = jnp.eye(n) - bg
-    cross_term = a @ c @ bg.T
-    return a @ p_c @ a.T + bg @ p_k @ bg.T + cross_term + cross_term.T + bsb
+    g_mat = jnp.asarray(g_mat)
+    a = jnp.eye(p_c.shape[0]) - g_mat
+    cross_term = a @ c @ g_mat.T
+    return a @ p_c @ a.T + g_mat @ p_k @ g_mat.T + cross_term + cross_term.T
 
 
 def target_covariance(psi, p) -> jax.Array:

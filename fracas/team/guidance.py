@@ -183,22 +183,9 @@ def _target_psi_uncached(study: Study, span: ReferenceSpan, g: GuidanceSpec, t_s
 
 
 def _post(p_c, p_k, g_mat, mode, nx, reset="state"):
-    """P_c⁺ for a correction δX⁺ = (I − G)δX + G e (digest (G-7) with BΓ → G); ``report``:
-    the reset to the knowledge, of the state and state-parameter blocks (``reset="state"``,
-    P-B2) or of every block (``"all"``).  ``reset="exact"``: the exact form with the model's
-    C_xe in every mode (the report model's C_xe = P_k/2); used when the law also corrects
-    estimated parameters, which the reset to the knowledge cannot represent."""
-    if mode == "report" and reset != "exact":
-        if reset == "all":
-            return np.array(p_k, dtype=np.float64)
-        out = p_c.copy()
-        out[:nx, :] = p_k[:nx, :]
-        out[:, :nx] = p_k[:, :nx]
-        return out
-    c = np.asarray(imp.cross_covariance(p_c, p_k, mode))
-    a = np.eye(p_c.shape[0]) - g_mat
-    cross = a @ c @ g_mat.T
-    return a @ p_c @ a.T + g_mat @ p_k @ g_mat.T + cross + cross.T
+    """P_c⁺ of the correction δX⁺ = (I − G)δX + G e (numpy):
+    :func:`fracas.guidance.impulsive.post_correction_covariance`."""
+    return np.asarray(imp.post_correction_covariance(p_c, p_k, g_mat, mode, None, nx, reset))
 
 
 def _relative_body_state(study: Study, body: str, centre: str, t_s: float) -> np.ndarray:
@@ -272,6 +259,22 @@ def _noise_between(study: Study, span: ReferenceSpan, t_a: float, t_b: float) ->
     return q
 
 
+def _common(study, g, k, body, t_s, cutoff_s) -> dict:
+    """The fields every event's outcome shares."""
+    return {
+        "name": g.name,
+        "type": g.type,
+        "index": k,
+        "time_s": t_s,
+        "cutoff_s": cutoff_s,
+        "target_time_s": g.target_time_s,
+        "target_body": body,
+        "estimate_model": study.guidance_model,
+        "target_names": list(g.targets),
+        "target_units": [TARGET_KINDS[t].unit for t in g.targets],
+    }
+
+
 def _impulsive(study, span, g, k, p_c, p_k, summary=True):
     nx, mode = study.nx, study.guidance_model
     psi, body = _target_psi(study, span, g, g.time_s)
@@ -284,23 +287,13 @@ def _impulsive(study, span, g, k, p_c, p_k, summary=True):
             np.zeros(3), p_dv, g.sigma_p, g.sigma_pointing_rad, g.sigma_pointing_rad, g.sigma_res_km_s
         )
     )
-    b = np.zeros((study.layout.n, 3))
-    b[_VEL, :] = np.eye(3)
+    b = np.asarray(imp.velocity_selector(study.layout.n))
     p_plus = _sym(_post(p_c, p_k, b @ gamma, mode, nx, _reset(study)) + b @ sig_ex @ b.T)
     x_exec = np.zeros((nx, nx))
     x_exec[_VEL, _VEL] = sig_ex
     out = GuidanceOutcome(
-        name=g.name,
-        type=g.type,
-        index=k,
-        time_s=g.time_s,
-        cutoff_s=g.time_s,
-        target_time_s=g.target_time_s,
-        target_body=body,
-        estimate_model=mode,
+        **_common(study, g, k, body, g.time_s, g.time_s),
         rank=int(gm.rank),
-        target_names=list(g.targets),
-        target_units=[TARGET_KINDS[t].unit for t in g.targets],
         control_labels=["dv_x", "dv_y", "dv_z"],
         control_units=["km/s"] * 3,
         psi=psi,
@@ -372,17 +365,8 @@ def _low_thrust(study, span, g, k, p_c, p_k, summary=True):
     sig_dv = math.sqrt(max(var_dv, 0.0))
     sig_m = math.sqrt(max(float(j_m @ p_u @ j_m), 0.0))
     out = GuidanceOutcome(
-        name=g.name,
-        type=g.type,
-        index=k,
-        time_s=t_i,
-        cutoff_s=t_c,
-        target_time_s=g.target_time_s,
-        target_body=body,
-        estimate_model=mode,
+        **_common(study, g, k, body, t_i, t_c),
         rank=int(rank),
-        target_names=list(g.targets),
-        target_units=[TARGET_KINDS[t].unit for t in g.targets],
         control_labels=list(g.control_labels),
         control_units=list(g.control_units),
         psi=psi_c,
@@ -405,17 +389,8 @@ def _none(study, span, g, k, p_c, p_k, summary=True):
     psi, body = _target_psi(study, span, g, g.time_s)
     before = _sym(psi @ p_c @ psi.T)
     out = GuidanceOutcome(
-        name=g.name,
-        type=g.type,
-        index=k,
-        time_s=g.time_s,
-        cutoff_s=g.time_s,
-        target_time_s=g.target_time_s,
-        target_body=body,
-        estimate_model=study.guidance_model,
+        **_common(study, g, k, body, g.time_s, g.time_s),
         rank=0,
-        target_names=list(g.targets),
-        target_units=[TARGET_KINDS[t].unit for t in g.targets],
         control_labels=[],
         control_units=[],
         psi=psi,

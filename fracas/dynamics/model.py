@@ -38,12 +38,21 @@ FRAME_INERTIAL = 1  # right ascension / declination in ICRF
 
 @dataclass(frozen=True)
 class IntegratorSettings:
-    """Encke/Nystrom control constants (Doc. 4 sec. 4.3; FRACAS INTEG).
+    """How the propagation loop steps (Doc. 4 sec. 4.3; FRACAS INTEG; ``fracas.integrate.highorder``).
 
-    c_nom: step constant in dt_nom = c_nom r_con^(3/2)/sqrt(mu) (dimensionless, 0.3 in Doc. 4)
-    dt_max_s: largest step (s); rect_ratio: rectify when |delta| > ratio |r_con| or
-    |nu| > ratio |v_con|; eps_t_s: time tolerance (s) for the final time and events;
-    max_steps: hard cap on loop iterations (a propagation that hits it reports status 2).
+    formulation: 'encke' (deviations from an osculating conic, FRACAS) or 'cowell' (the state
+    itself); method: 'rkn4' (FRACAS's 4th-order Nystrom), 'dprkn8', 'dprkn12' (embedded
+    RKN 8(6), 12(10)) or 'dop853' (first order: thrust, velocity-dependent forces);
+    step_control: 'tolerance' (embedded error estimate: relative local error per step
+    <= ``tolerance``) or 'c_nom' (FRACAS's rule dt_nom = c_nom r_con^(3/2)/sqrt(mu), the
+    only choice for rkn4).  ``encke`` + ``rkn4`` + ``c_nom`` is FRACAS's integrator.
+
+    c_nom: step constant (dimensionless, 0.3 in Doc. 4); dt_max_s: largest step (s; inf:
+    none); rect_ratio: rectify when |delta| > ratio |r_con| or |nu| > ratio |v_con|;
+    eps_t_s: time tolerance (s) for the final time and events; max_steps: hard cap on loop
+    iterations, accepted and rejected (a propagation that hits it reports status 2).
+    method, formulation and step_control are static (one compiled program each); the
+    numbers are traced (changing them does not recompile).
     """
 
     c_nom: float = 0.3
@@ -51,6 +60,18 @@ class IntegratorSettings:
     rect_ratio: float = 0.01
     eps_t_s: float = 1e-6
     max_steps: int = 200_000
+    tolerance: float = 1e-12
+    method: str = "rkn4"
+    formulation: str = "encke"
+    step_control: str = "c_nom"
+
+    @property
+    def adaptive(self) -> bool:
+        return self.step_control == "tolerance"
+
+    def static_part(self) -> IntegratorSettings:
+        """The settings with every number at its default (the static key of a compiled program)."""
+        return IntegratorSettings(method=self.method, formulation=self.formulation, step_control=self.step_control)
 
 
 @dataclass(frozen=True)

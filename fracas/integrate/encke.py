@@ -74,8 +74,10 @@ class Carry(NamedTuple):
     dt_norm: jax.Array  # s, last normal step (bounds Newton steps while locating)
     done: jax.Array  # bool: stop condition met or failure
     status: jax.Array  # int32
-    n_steps: jax.Array  # int32
+    n_steps: jax.Array  # int32: loop iterations (steps attempted, Newton steps included)
     n_rect: jax.Array  # int32
+    h_next: jax.Array  # s, step size the controller proposes next (magnitude; tolerance control)
+    n_reject: jax.Array  # int32: steps rejected by the error control
 
 
 # ----------------------------------------------------------------------------- bodies
@@ -362,6 +364,21 @@ def _apply_impulses(model, params, c: Carry, t_prev, direction, eps_t) -> Carry:
 
 
 # ---------------------------------------------------------------------- propagation
+def _initial_step(model: ForceModel, params: Params, r, v, primary):
+    """First trial step (s) of tolerance control: a fraction of the osculating time scale
+    r^(3/2)/sqrt(mu), scaled by tol^(1/(q+1)); the controller corrects it within a few steps
+    (it may grow 5x per step), so the guess only needs the right order of magnitude."""
+    st = model.integrator
+    if not st.adaptive:
+        return jnp.zeros(())
+    from fracas.integrate import highorder
+
+    rn = jnp.linalg.norm(r)
+    scale = rn * jnp.sqrt(rn / params.mu[primary])
+    guess = 0.05 * scale * (jnp.asarray(st.tolerance) / 1e-12) ** highorder.control_exponent(st.method)
+    return jax.lax.stop_gradient(jnp.minimum(guess, st.dt_max_s))
+
+
 def init_carry(model: ForceModel, params: Params, ephem, epoch_et, t0, x0) -> tuple[Carry, jax.Array]:
     """Carry at t0 for state x0 = (r km, v km/s, m kg) relative to ``model.primary``.
 
@@ -395,6 +412,8 @@ def init_carry(model: ForceModel, params: Params, ephem, epoch_et, t0, x0) -> tu
         status=zi,
         n_steps=zi,
         n_rect=zi,
+        h_next=_initial_step(model, params, r, v, primary),
+        n_reject=zi,
     )
     if model.n_impulses:
         # impulses exactly at the start time are applied before the first step
@@ -424,14 +443,27 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
 
     has_events = model.stop.kind != STOP_TIME or model.change_primary_at_soi
 
+    adaptive = st.adaptive
+    faithful = st.method == "rkn4" and st.formulation == "encke"
+    if adaptive:
+        from fracas.integrate import highorder
+
+        expo = highorder.control_exponent(st.method)
+
     def normal_step(c: Carry):
         p = c.primary
-        # The nominal step is a control choice, not part of the dynamics: no derivative flows
-        # through it, so sensitivities are the variational equations integrated with the
-        # same steps (FRACAS INTEG integrates the STM alongside the state).  Breaks (thrust
-        # switches, impulses, outputs) keep theirs: d/d(switch time) is a real derivative.
-        rc_n = jax.lax.stop_gradient(jnp.linalg.norm(c.rc))
-        dt_nom = st.c_nom * rc_n * jnp.sqrt(rc_n / jax.lax.stop_gradient(params.mu[p]))
+        if adaptive:
+            # the controller's proposal (no derivative flows through a step-size choice)
+            dt_nom = jax.lax.stop_gradient(c.h_next)
+        else:
+            # The nominal step is a control choice, not part of the dynamics: no derivative
+            # flows through it, so sensitivities are the variational equations integrated
+            # with the same steps (FRACAS INTEG integrates the STM alongside the state).
+            # Breaks (thrust switches, impulses, outputs) keep theirs: d/d(switch time) is a
+            # real derivative.
+            r_n = jnp.linalg.norm(c.rc + c.delta) if st.formulation == "cowell" else jnp.linalg.norm(c.rc)
+            rc_n = jax.lax.stop_gradient(r_n)
+            dt_nom = st.c_nom * rc_n * jnp.sqrt(rc_n / jax.lax.stop_gradient(params.mu[p]))
         # next break in the direction of motion (DETECT)
         ahead = (breaks - c.t) * direction > eps_t
         # (t_end is appended so the min is never over an empty set: no inf tangents)
@@ -440,20 +472,63 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
         return direction * jnp.minimum(jnp.minimum(span, dt_nom), st.dt_max_s)
 
     def take_step(c: Carry, dt):
+        """(state after the step and its impulses, body states at its end, error ratio)."""
         ctl = step_controls(model, params, c.t + 0.5 * dt)
-        (t1, rc1, vc1, d1, n1, m1), body4 = _nystrom_step(model, params, ephem, epoch_et, c, dt, ctl)
+        if faithful:
+            (t1, rc1, vc1, d1, n1, m1), body4 = _nystrom_step(model, params, ephem, epoch_et, c, dt, ctl)
+            err = jnp.zeros(())
+        else:
+            (t1, rc1, vc1, d1, n1, m1), body4, err = highorder.step(
+                model,
+                params,
+                ephem,
+                epoch_et,
+                c,
+                dt,
+                ctl,
+                st.tolerance,
+                perturbation=perturbation,
+                body_states=body_states,
+            )
         new = c._replace(t=t1, rc=rc1, vc=vc1, delta=d1, nu=n1, m=m1, n_steps=c.n_steps + 1)
-        return _apply_impulses(model, params, new, c.t, direction, eps_t), body4
+        return _apply_impulses(model, params, new, c.t, direction, eps_t), body4, err
+
+    def control(c: Carry, new: Carry, dt, err, force_accept):
+        """Accept or reject the trial step ``new`` (tolerance control); returns (carry, accepted).
+
+        Accepted when err <= 1 (or ``force_accept``: Newton steps of an event location, whose
+        sizes are bounded by the last accepted step); h_next = |dt| clip(0.9 err^(-1/(q+1)),
+        0.2, 5), not shrunk below the previous proposal after a step that a break cut short.
+        A rejected step leaves the state as it was.  A step size below eps_t (the controller
+        cannot meet the tolerance: a collision, a singularity) ends the run as non-finite.
+        """
+        if not adaptive:
+            return new, jnp.asarray(True)
+        ok = (err <= 1.0) | force_accept
+        fac = jnp.clip(0.9 * jnp.where(err > 0, err, 1e-300) ** (-expo), 0.2, 5.0)
+        h_prop = jax.lax.stop_gradient(jnp.abs(dt) * fac)
+        cut_short = jnp.abs(dt) < c.h_next * (1.0 - 1e-12)
+        h_prop = jnp.where(ok & cut_short, jnp.maximum(h_prop, c.h_next), h_prop)
+        h_prop = jnp.where(force_accept, c.h_next, h_prop)
+        new = new._replace(h_next=h_prop)
+        rej = c._replace(h_next=h_prop, n_steps=c.n_steps + 1, n_reject=c.n_reject + 1)
+        collapsed = (~ok) & (h_prop < eps_t)
+        rej = rej._replace(done=collapsed, status=jnp.where(collapsed, STATUS_NONFINITE, rej.status).astype(jnp.int32))
+        out = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), new, rej)
+        return out, ok
 
     def check_finite(c: Carry, new: Carry, stop_now):
         finite = jnp.all(jnp.isfinite(new.delta)) & jnp.all(jnp.isfinite(new.nu)) & jnp.isfinite(new.m)
+        finite = finite & jnp.all(jnp.isfinite(new.rc)) & jnp.all(jnp.isfinite(new.vc))
         status = jnp.where(stop_now, STATUS_STOPPED, jnp.where(finite, new.status, STATUS_NONFINITE))
         return new._replace(done=new.done | stop_now | (~finite), status=status.astype(jnp.int32))
 
     def body_plain(c: Carry):
         """Final-time stop only, no primary changes: no event functions are evaluated."""
         c = _rectify(c, st.rect_ratio)
-        new, _ = take_step(c, normal_step(c))
+        dt = normal_step(c)
+        new, _, err = take_step(c, dt)
+        new, _ = control(c, new, dt, err, jnp.asarray(False))
         return check_finite(c, new, jnp.asarray(False))
 
     def body_events(c: Carry):
@@ -482,13 +557,15 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
         located = locating & (jnp.abs(dt_newton) < eps_t)
         dt = jnp.where(locating, dt_newton, dt_normal)
         dt = jnp.where(located, 0.0, dt)
-        new, (pos4, vel4) = take_step(c, dt)
+        new, (pos4, vel4), err = take_step(c, dt)
         new = new._replace(dt_norm=jnp.where(locating, c.dt_norm, dt))
+        new, accepted = control(c, new, dt, err, locating)
         r1 = new.rc + new.delta
         v1 = new.vc + new.nu
         g_new = event_functions(model, params, r1, v1, p, pos4, vel4, radius_sign)
-        # a crossing in this (normal) step starts the location of the earliest event
-        crossed = (c.g_prev > 0.0) & (g_new <= 0.0) & (~locating)
+        g_new = jnp.where(accepted, g_new, c.g_prev)
+        # a crossing in this (normal, accepted) step starts the location of the earliest event
+        crossed = (c.g_prev > 0.0) & (g_new <= 0.0) & (~locating) & accepted
         frac = c.g_prev / jnp.where(crossed, c.g_prev - g_new, 1.0)
         frac = jnp.where(crossed, frac, jnp.inf)
         first = jnp.argmin(frac).astype(jnp.int32)
@@ -497,7 +574,7 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
         # event located: stop (event 0) or change primary (event 1 + b)
         stop_now = located & (c.locating == 0)
         new = jax.tree_util.tree_map(lambda a, b: jnp.where(located, a, b), c, new)
-        new = new._replace(n_steps=c.n_steps + 1)
+        new = new._replace(n_steps=c.n_steps + 1, n_reject=jnp.where(located, c.n_reject, new.n_reject))
         if model.change_primary_at_soi:
             b = c.locating - 1
             is_exit = b == p
@@ -532,6 +609,9 @@ def restart_from_state(model, params, c: Carry, x) -> Carry:
 
     At a conic epoch (tau = 0, e.g. the start) the conic itself is rebuilt from ``x``, so the
     derivative is that of exactly the map a finite-difference run computes."""
+    if model.integrator.formulation == "cowell":  # no conic: the carry holds the state itself
+        z3 = jnp.zeros(3)
+        return c._replace(rc=x[:3], vc=x[3:6], delta=z3, nu=z3, m=x[6], t_rect=c.t, r0=x[:3], v0=x[3:6])
     mu = params.mu[c.primary]
     tau = c.t - c.t_rect
     cs = kepler_fg(c.r0, c.v0, tau, mu)

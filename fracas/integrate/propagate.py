@@ -42,6 +42,7 @@ class Trajectory(NamedTuple):
     status: jax.Array  # 0 final time, 1 stop condition, 2 max steps, 3 non-finite
     n_steps: jax.Array
     n_rect: jax.Array
+    n_reject: jax.Array = 0  # steps rejected by the error control (tolerance step control)
 
 
 class Sensitivities(NamedTuple):
@@ -75,12 +76,14 @@ def _finish(model, outs, c_final, t_out):
         status=c_final.status,
         n_steps=c_final.n_steps,
         n_rect=c_final.n_rect,
+        n_reject=c_final.n_reject,
     )
 
 
 def split_model(model: ForceModel):
     """(static model, dynamic integrator settings): c_nom, dt_max, the rectification ratio,
-    eps_t and max_steps are traced values, so changing them does not recompile."""
+    eps_t, max_steps and the tolerance are traced values, so changing them does not
+    recompile; method, formulation and step control stay static."""
     st = model.integrator
 
     # numpy scalars (creating jax scalars here costs ~0.2 ms each per call); traced values
@@ -94,17 +97,27 @@ def split_model(model: ForceModel):
         scalar(st.rect_ratio, np.float64),
         scalar(st.eps_t_s, np.float64),
         scalar(st.max_steps, np.int32),
+        scalar(st.tolerance, np.float64),
     )
-    return dataclasses.replace(model, integrator=IntegratorSettings()), dyn
+    return dataclasses.replace(model, integrator=st.static_part()), dyn
 
 
 def join_model(static: ForceModel, dyn) -> ForceModel:
     """Inverse of :func:`split_model` inside a trace."""
-    c_nom, dt_max, ratio, eps_t, max_steps = dyn
+    c_nom, dt_max, ratio, eps_t, max_steps, tol = dyn
+    st = static.integrator
     return dataclasses.replace(
         static,
         integrator=IntegratorSettings(
-            c_nom=c_nom, dt_max_s=dt_max, rect_ratio=ratio, eps_t_s=eps_t, max_steps=max_steps
+            c_nom=c_nom,
+            dt_max_s=dt_max,
+            rect_ratio=ratio,
+            eps_t_s=eps_t,
+            max_steps=max_steps,
+            tolerance=tol,
+            method=st.method,
+            formulation=st.formulation,
+            step_control=st.step_control,
         ),
     )
 

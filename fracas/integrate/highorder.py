@@ -1,0 +1,268 @@
+"""High-order steps of the propagation loop: embedded Runge-Kutta(-Nystrom) tableaux in the
+Cowell and the Encke formulation, with the step's local error measured for step control.
+
+``encke.advance`` calls :func:`step` for every method other than FRACAS's own Encke/RKN4
+step (``encke._nystrom_step``, kept as the faithful option).  The loop around it -- breaks at
+thrust switches, impulses and output times, event location, change of primary, mass,
+status codes -- is the same for every method; only the step and the step-size rule differ.
+
+Formulations (``IntegratorSettings.formulation``):
+
+* ``cowell``: the state (r, v) itself is integrated, r'' = -mu r/|r|^3 + a_d(t, r, v, m).
+  The carry holds it in ``rc``, ``vc`` with zero deviations, so the rest of the loop (state
+  extraction, impulses, primary changes) is unchanged; a Cowell carry never rectifies.
+* ``encke``: the deviations (delta, nu) from the osculating conic are integrated with
+  Doc. 4 eq. 4.1-3 (Potter's f(q)), the conic being evaluated at every distinct stage time
+  t + c_i h by Kepler solves chained in increasing c_i (each a short arc from the previous
+  one, warm-started by a third-order prediction and finished by three Newton steps).
+
+Methods (``IntegratorSettings.method``; tableaux and sources in :mod:`fracas.integrate.tableaux`):
+
+* ``dprkn12`` -- Dormand, El-Mikkawy & Prince (1987) RKN 12(10), 17 stages;
+* ``dprkn8`` -- Dormand & Prince RKN 8(6), 9 stages;
+* ``rkn4`` -- the classical 4th-order Nystrom method (no embedded pair: c_nom rule only);
+* ``dop853`` -- Hairer's DOP853 (8(5,3), 12 stages plus the error stage at the new point), a
+  first-order method, for accelerations that depend on velocity or mass (thrust).
+
+The special RKN methods assume y'' = f(t, y): with thrust the acceleration depends on the
+mass, which is itself integrated (m' = mdot(t, r)), i.e. on a first-order variable; such
+models are refused by the configuration and served by ``dop853``.
+
+Error norm.  ``err = max(|e_r| / |r|, |e_v| / |v|, |e_m| / m) / tol``: the embedded estimates
+of the step's position, velocity and mass errors, each relative to the magnitude of the
+state block (for Encke: of the full r = r_con + delta, not of the deviation), so ``tol`` is
+a relative local error per step, independent of units and of the central body.  A step is
+accepted when err <= 1.  DOP853's two estimates are combined as in Hairer's dop853.f.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from fracas import _jax  # noqa: F401
+from fracas.dynamics import forces
+from fracas.dynamics.kepler import kepler_fg
+from fracas.integrate.tableaux import DOP853, DPRKN8, DPRKN12, RKN4, NystromTableau, RungeKuttaTableau
+
+__all__ = ["METHODS", "FORMULATIONS", "tableau_of", "embedded", "control_exponent", "stages_per_step", "step"]
+
+FORMULATIONS = ("encke", "cowell")
+METHODS = {"rkn4": RKN4, "dprkn8": DPRKN8, "dprkn12": DPRKN12, "dop853": DOP853}
+_N_NEWTON = 3  # Newton steps per chained Kepler solve (the gaps between stage nodes are <= 0.5 h)
+
+
+def tableau_of(method: str):
+    return METHODS[method]
+
+
+def embedded(method: str) -> bool:
+    """Whether the method has an embedded error estimate (tolerance step control)."""
+    tab = METHODS[method]
+    return isinstance(tab, RungeKuttaTableau) or tab.bbar_low is not None
+
+
+def control_exponent(method: str) -> float:
+    """1/(q+1) of the step-size controller h_new = h * 0.9 err^(-1/(q+1))."""
+    tab = METHODS[method]
+    if isinstance(tab, RungeKuttaTableau):
+        return 1.0 / tab.order  # dop853.f: the combined estimate behaves as h^8
+    return 1.0 / ((tab.embedded_order or tab.order) + 1)
+
+
+def stages_per_step(method: str) -> int:
+    """Acceleration evaluations per step (distinct stages; DOP853 counts its error stage)."""
+    tab = METHODS[method]
+    if isinstance(tab, RungeKuttaTableau):
+        return tab.stages + 1
+    return sum(1 for d in _duplicates(tab) if d is None)
+
+
+def _lincomb(coeffs, ks):
+    out = None
+    for cj, kj in zip(coeffs, ks):
+        cj = float(cj)
+        if cj == 0.0:
+            continue
+        term = cj * kj
+        out = term if out is None else out + term
+    return out
+
+
+def _duplicates(tab: NystromTableau):
+    dup = []
+    for i in range(tab.stages):
+        found = None
+        for j in range(i):
+            if tab.c[i] == tab.c[j] and np.array_equal(tab.a_bar[i], tab.a_bar[j]):
+                found = j
+                break
+        dup.append(found)
+    return dup
+
+
+def _materialise(k):
+    """Keep a stage value as a value of its own (perf-notes: XLA CPU otherwise re-fuses the
+    cheap part of every stage into each later stage); exact: adds 0 * (a finite sum)."""
+    return k
+
+
+# --------------------------------------------------------------------- stage geometry
+class _Frame:
+    """What a stage needs besides its own state: time, body positions, conic (Encke)."""
+
+    def __init__(self, model, params, ephem, epoch_et, c, h, body_states):
+        self.model, self.params, self.ephem, self.epoch_et = model, params, ephem, epoch_et
+        self.c, self.h = c, h
+        self.body_states = body_states
+        self.mu = params.mu[c.primary]
+        self._pos = {}
+        self._conic = {0.0: (c.rc, c.vc)}
+        self.encke = model.integrator.formulation == "encke"
+
+    def bodies(self, ci: float):
+        if ci not in self._pos:
+            self._pos[ci] = self.body_states(
+                self.model, self.params, self.ephem, self.epoch_et + self.c.t + ci * self.h
+            )
+        return self._pos[ci]
+
+    def prepare_conics(self, nodes):
+        """Conic states at t + c h for every node, chained in increasing |c| from c = 0."""
+        if not self.encke:
+            return
+        from fracas.integrate.encke import _predict_x
+
+        sqrt_mu = jnp.sqrt(self.mu)
+        prev = 0.0
+        for ci in sorted({float(x) for x in nodes} - {0.0}):
+            rp, vp = self._conic[prev]
+            tau = (ci - prev) * self.h
+            xs = _predict_x(0.0, rp, vp, self.mu, sqrt_mu, tau)
+            cs = kepler_fg(rp, vp, tau, self.mu, xs, n_newton=_N_NEWTON, short_arc=True)
+            self._conic[ci] = (cs.r, cs.v)
+            prev = ci
+
+    def conic(self, ci: float):
+        return self._conic[float(ci)]
+
+
+def _accel(frame: _Frame, ci, q, p, m, ctl, perturbation):
+    """(q'' , mdot) at stage node ci for stage state (q, p, m) of the formulation."""
+    c = frame.c
+    t = c.t + ci * frame.h
+    pos, _ = frame.bodies(ci)
+    if frame.encke:
+        rc, vc = frame.conic(ci)
+        r, v = rc + q, vc + p
+    else:
+        r, v = q, p
+    a_free, force, mdot = perturbation(frame.model, frame.params, t, r, v, c.primary, pos, ctl)
+    if frame.encke:
+        from fracas.integrate.encke import _encke_accel
+
+        acc = _encke_accel(frame.mu, rc, q, a_free, force, m)
+    else:
+        acc = forces.point_mass_accel(r, frame.mu) + a_free + force / m
+    return acc, mdot
+
+
+def _norm(x):
+    return jnp.sqrt(jnp.dot(x, x))
+
+
+def _error_ratio(e_r, e_v, e_m, r1, v1, m1, tol):
+    """max(|e_r|/|r|, |e_v|/|v|, |e_m|/m) / tol (module docstring); inf when not finite."""
+    er = _norm(e_r) / _norm(r1)
+    ev = _norm(e_v) / _norm(v1)
+    err = jnp.maximum(er, ev)
+    if e_m is not None:
+        err = jnp.maximum(err, jnp.abs(e_m) / jnp.abs(m1))
+    err = err / tol
+    return jnp.where(jnp.isfinite(err), err, jnp.inf)
+
+
+def step(model, params, ephem, epoch_et, c, dt, ctl, tol, *, perturbation, body_states):
+    """One step of size dt with the model's (method, formulation).
+
+    Returns ((t + dt, rc, vc, delta, nu, m), (body positions, velocities) at t + dt, err)
+    with err the error ratio of the module docstring (0 for a method without an embedded
+    pair).  ``perturbation`` and ``body_states`` are the loop's force-model functions
+    (``encke.perturbation``, ``encke.body_states``), passed in to keep this module below
+    the loop in the import order.
+    """
+    st = model.integrator
+    tab = METHODS[st.method]
+    frame = _Frame(model, params, ephem, epoch_et, c, dt, body_states)
+    nodes = list(tab.c) + [1.0]
+    frame.prepare_conics(nodes)
+    if frame.encke:
+        q, p = c.delta, c.nu
+    else:
+        q, p = c.rc + c.delta, c.vc + c.nu
+    m = c.m
+    h = dt
+    if isinstance(tab, NystromTableau):
+        dup = _duplicates(tab)
+        ks = []
+        mds = []
+        for i in range(tab.stages):
+            if dup[i] is not None:
+                ks.append(ks[dup[i]])
+                mds.append(mds[dup[i]])
+                continue
+            ci = float(tab.c[i])
+            qi = q if ci == 0.0 else q + (ci * h) * p
+            s = _lincomb(tab.a_bar[i, :i], ks)
+            if s is not None:
+                qi = qi + (h * h) * s
+            # velocity at the stage: only used by velocity-dependent forces, which the
+            # special RKN methods exclude (the configuration refuses them); p is a placeholder
+            k, md = _accel(frame, ci, qi, p, m, ctl, perturbation)
+            ks.append(_materialise(k))
+            mds.append(md)
+        q1 = q + h * p + (h * h) * _lincomb(tab.bbar, ks)
+        p1 = p + h * _lincomb(tab.b, ks)
+        m1 = m + h * _lincomb(tab.b, mds) if model.thrust else m
+        if tab.bbar_low is None:
+            err = jnp.zeros(())
+            e_q = e_p = None
+        else:
+            e_q = (h * h) * _lincomb(tab.ebar, ks)
+            e_p = h * _lincomb(tab.e, ks)
+    else:
+        y = jnp.concatenate([q, p, m[None]])
+
+        def f(ci, yi):
+            k, md = _accel(frame, ci, yi[:3], yi[3:6], yi[6], ctl, perturbation)
+            return jnp.concatenate([yi[3:6], k, jnp.reshape(md, (1,))])
+
+        ks = []
+        for i in range(tab.stages):
+            s = _lincomb(tab.a[i, :i], ks)
+            yi = y if s is None else y + h * s
+            ks.append(_materialise(f(float(tab.c[i]), yi)))
+        y1 = y + h * _lincomb(tab.b, ks)
+        ks.append(f(1.0, y1))
+        e5 = h * _lincomb(tab.e, ks)
+        e3 = h * _lincomb(tab.e_aux, ks)
+        q1, p1, m1 = y1[:3], y1[3:6], y1[6]
+    if frame.encke:
+        rc1, vc1 = frame.conic(1.0)
+        r1, v1 = rc1 + q1, vc1 + p1
+        out = (c.t + dt, rc1, vc1, q1, p1, m1)
+    else:
+        r1, v1 = q1, p1
+        z3 = jnp.zeros(3)
+        out = (c.t + dt, q1, p1, z3, z3, m1)
+    if isinstance(tab, NystromTableau):
+        if e_q is not None:
+            err = _error_ratio(e_q, e_p, None, r1, v1, m1, tol)
+    else:
+        # dop853.f: err = err5^2 / sqrt(err5^2 + 0.01 err3^2), per scaled component
+        s5 = _error_ratio(e5[:3], e5[3:6], e5[6] if model.thrust else None, r1, v1, m1, 1.0)
+        s3 = _error_ratio(e3[:3], e3[3:6], e3[6] if model.thrust else None, r1, v1, m1, 1.0)
+        den = jnp.sqrt(s5 * s5 + 0.01 * s3 * s3)
+        err = jnp.where(den > 0, s5 * s5 / jnp.where(den > 0, den, 1.0), 0.0) / tol
+        err = jnp.where(jnp.isfinite(err), err, jnp.inf)
+    return out, frame.bodies(1.0), err

@@ -150,6 +150,29 @@ def _conic_elements(deck: TrajectoryDeck, bodies: tuple[str, ...], mu: np.ndarra
     return elems, et
 
 
+def integrator_settings(ig, thrust: bool) -> IntegratorSettings:
+    """The core's step settings from a deck's ``[integrator]`` (every "auto" resolved).
+
+    dt_max_s unset: 4000 s under FRACAS's c_nom rule (Doc. 4), no limit under tolerance
+    control (the error estimate sizes the steps).
+    """
+    method, formulation, control = ig.resolved(thrust)
+    dt_max = ig.dt_max_s
+    if dt_max is None:
+        dt_max = 4000.0 if control == "c_nom" else math.inf
+    return IntegratorSettings(
+        c_nom=ig.c_nom,
+        dt_max_s=float(dt_max),
+        rect_ratio=ig.rect_ratio,
+        eps_t_s=ig.eps_t_s,
+        max_steps=ig.max_steps,
+        tolerance=ig.tolerance,
+        method=method,
+        formulation=formulation,
+        step_control=control,
+    )
+
+
 def build_propagation(deck: TrajectoryDeck) -> Problem:
     """Validated deck -> :class:`Problem` in canonical units (see the module docstring)."""
     src = _src(deck)
@@ -178,13 +201,7 @@ def build_propagation(deck: TrajectoryDeck) -> Problem:
         conic_bodies=tuple(idx(b) for b in bodies if b in f.conic_bodies),
         n_arcs=len(deck.thrust_arc),
         n_impulses=len(deck.impulse),
-        integrator=IntegratorSettings(
-            c_nom=ig.c_nom,
-            dt_max_s=ig.dt_max_s,
-            rect_ratio=ig.rect_ratio,
-            eps_t_s=ig.eps_t_s,
-            max_steps=ig.max_steps,
-        ),
+        integrator=integrator_settings(ig, bool(deck.thrust_arc)),
         stop=StopCondition(
             kind=deck.stop.condition,
             body=idx(stop_body),

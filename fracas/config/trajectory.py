@@ -24,8 +24,10 @@ rad.  No JAX here.  Layout (every section but ``[epoch]``, ``[initial_state]``,
       [forces.conic_bodies.BODY]  a_km, e, i_deg, raan_deg, argp_deg, mean_anomaly_deg,
                                   epoch = ISO string | Julian date (TDB),
                                   frame = "EME2000" | "ECLIPJ2000" (of the angles)
-    [integrator]      c_nom = 0.3, dt_max_s = 4000, rect_ratio = 0.01, eps_t_s = 1e-6,
-                      max_steps = 200000
+    [integrator]      method = "auto" | "dprkn12" | "dprkn8" | "dop853" | "rkn4",
+                      formulation = "auto" | "cowell" | "encke", step_control = "auto" |
+                      "tolerance" | "c_nom", tolerance = 1e-12, c_nom = 0.3, dt_max_s,
+                      rect_ratio = 0.01, eps_t_s = 1e-6, max_steps = 200000
     [stop]            duration_days | final_epoch (ISO string or Julian date, TDB),
                       condition = "time" | "soi_entry" | "closest_approach" | "radius",
                       body, radius_km
@@ -427,13 +429,72 @@ class Forces(_Section):
 
 
 class Integrator(_Section):
-    """Encke/Nystrom constants (see fracas.dynamics.model.IntegratorSettings)."""
+    """How the propagation steps (see fracas.dynamics.model.IntegratorSettings, docs/integrators.md).
 
+    method: "auto" (DPRKN12 without thrust, DOP853 with thrust -- the special RKN methods
+    need accelerations independent of velocity and mass), "dprkn12", "dprkn8", "dop853" or
+    "rkn4" (FRACAS's 4th-order Nystrom); formulation: "auto" (Cowell for the high-order
+    methods, Encke for rkn4), "cowell" or "encke"; step_control: "auto" (tolerance for the
+    embedded methods, c_nom for rkn4), "tolerance" or "c_nom"; tolerance: relative local
+    error per step (position, velocity and mass errors each relative to their magnitude);
+    dt_max_s: largest step (default: 4000 s under c_nom, none under tolerance control).
+    """
+
+    method: Literal["auto", "dprkn12", "dprkn8", "dop853", "rkn4"] = "auto"
+    formulation: Literal["auto", "cowell", "encke"] = "auto"
+    step_control: Literal["auto", "tolerance", "c_nom"] = "auto"
+    tolerance: Annotated[float, Field(ge=1e-15, le=1e-3)] = 1e-12
     c_nom: Annotated[float, Field(gt=0, le=2)] = 0.3
-    dt_max_s: PositiveFloat = 4000.0
+    dt_max_s: PositiveFloat | None = None
     rect_ratio: Annotated[float, Field(gt=0, lt=1)] = 0.01
     eps_t_s: PositiveFloat = 1e-6
     max_steps: Annotated[int, Field(ge=1, le=100_000_000)] = 200_000
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Integrator:
+        if self.method == "rkn4" and self.step_control == "tolerance":
+            raise FieldProblem(
+                "step_control",
+                "tolerance",
+                'rkn4 has no embedded error estimate: use step_control = "c_nom" (or "auto")',
+            )
+        _, _, control = self.resolved(thrust=False)
+        if "c_nom" in self.model_fields_set and control == "tolerance":
+            raise FieldProblem(
+                "c_nom", self.c_nom, 'applies only with step_control = "c_nom"; under tolerance control set tolerance'
+            )
+        if "tolerance" in self.model_fields_set and control == "c_nom":
+            raise FieldProblem(
+                "tolerance",
+                self.tolerance,
+                'applies only with step_control = "tolerance" (dprkn12, dprkn8, dop853); '
+                "c_nom sets the steps of this deck",
+            )
+        return self
+
+    @property
+    def _c_nom_asked(self) -> bool:
+        return "c_nom" in self.model_fields_set or self.step_control == "c_nom"
+
+    def resolved(self, thrust: bool) -> tuple[str, str, str]:
+        """(method, formulation, step_control) with every "auto" decided.
+
+        method "auto": FRACAS's rkn4 when the deck sets c_nom (or step_control = "c_nom": the
+        deck asks for FRACAS's step rule), else dop853 with thrust arcs and dprkn12 without;
+        formulation "auto": Encke for rkn4 (FRACAS), Cowell for the high-order methods (faster
+        at equal accuracy in the measured cases, benchmarks/results_highorder.txt);
+        step_control "auto": c_nom for rkn4 or when c_nom is set, tolerance otherwise.
+        """
+        method = self.method
+        if method == "auto":
+            method = "rkn4" if self._c_nom_asked else ("dop853" if thrust else "dprkn12")
+        formulation = self.formulation
+        if formulation == "auto":
+            formulation = "encke" if method == "rkn4" else "cowell"
+        control = self.step_control
+        if control == "auto":
+            control = "c_nom" if (method == "rkn4" or "c_nom" in self.model_fields_set) else "tolerance"
+        return method, formulation, control
 
 
 class Stop(_Section):
@@ -583,6 +644,13 @@ class TrajectoryDeck(SourcedDeck):
             )
         if self.thrust_arc and self.propulsion is None:
             raise FieldProblem(("propulsion",), None, "a [propulsion] section is required when thrust arcs are given")
+        if self.thrust_arc and self.integrator.method in ("dprkn12", "dprkn8"):
+            raise FieldProblem(
+                ("integrator", "method"),
+                self.integrator.method,
+                "a special RKN method needs an acceleration independent of velocity and mass; with thrust arcs "
+                'use "dop853" (or "auto"), or "rkn4"',
+            )
         prev = None
         for k, arc in enumerate(self.thrust_arc):
             if prev is not None and arc.start_days < prev.stop_days:

@@ -65,3 +65,12 @@ def srp_accel(r_from_sun, area_m2, mass_kg, cr):
     rr = jnp.dot(r_from_sun, r_from_sun)
     scale = cr * constants.SOLAR_PRESSURE_1AU_N_M2 * area_m2 / mass_kg * 1e-3 * constants.AU_KM**2
     return scale * r_from_sun / (rr * jnp.sqrt(rr))
+
+
+def encke_deviation_accel(mu, rc, delta, a_free, force, m):
+    """delta'' = -(mu/r_con^3)(f(q) r + delta) + a_d (Doc. 4 eq. 4.1-3, Potter's f(q))."""
+    r = rc + delta
+    rc2 = jnp.dot(rc, rc)
+    q = jnp.dot(delta, delta - 2.0 * r) / jnp.dot(r, r)
+    central = -(mu / (rc2 * jnp.sqrt(rc2))) * (potter_f(q) * r + delta)
+    return central + a_free + force / m

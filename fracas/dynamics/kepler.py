@@ -203,3 +203,16 @@ def kepler(r0_vec, v0_vec, tau, mu):
     """Conic state (r km, v km/s) after ``tau`` seconds (convenience wrapper of kepler_fg)."""
     out = kepler_fg(r0_vec, v0_vec, tau, mu)
     return out.r, out.v
+
+
+def predict_universal_anomaly(x, r_vec, v_vec, mu, sqrt_mu, dtau):
+    """Universal anomaly dtau seconds after the conic point (r, v) with anomaly x, to third
+    order: dx/dt = sqrt(mu)/r, d2x/dt2 = -sqrt(mu) rdot/r^2,
+    d3x/dt3 = -sqrt(mu)(rddot/r^2 - 2 rdot^2/r^3), rddot = (v^2 - rdot^2)/r - mu/r^2."""
+    r = jnp.linalg.norm(r_vec)
+    rdot = jnp.dot(r_vec, v_vec) / r
+    rddot = (jnp.dot(v_vec, v_vec) - rdot * rdot) / r - mu / (r * r)
+    d1 = sqrt_mu / r
+    d2 = -sqrt_mu * rdot / (r * r)
+    d3 = -sqrt_mu * (rddot / (r * r) - 2.0 * rdot * rdot / (r * r * r))
+    return x + dtau * (d1 + dtau * (0.5 * d2 + dtau * d3 / 6.0))

@@ -37,7 +37,7 @@ from fracas import (
     constants,
 )
 from fracas.dynamics import forces, propulsion
-from fracas.dynamics.kepler import kepler_fg
+from fracas.dynamics.kepler import kepler_fg, predict_universal_anomaly
 from fracas.dynamics.model import (
     STOP_CLOSEST_APPROACH,
     STOP_RADIUS,
@@ -46,6 +46,7 @@ from fracas.dynamics.model import (
     ForceModel,
     Params,
 )
+from fracas.integrate import highorder
 from fracas.status import RunStatus
 
 # status codes (names kept for compatibility; the enumeration is fracas.status.RunStatus)
@@ -78,6 +79,7 @@ class Carry(NamedTuple):
     n_rect: jax.Array  # int32
     h_next: jax.Array  # s, step size the controller proposes next (magnitude; tolerance control)
     n_reject: jax.Array  # int32: steps rejected by the error control
+    phi: jax.Array  # (7, 7 + np) explicit variational sensitivities, or (0,) when not integrated
 
 
 # ----------------------------------------------------------------------------- bodies
@@ -186,13 +188,7 @@ def total_acceleration(model, params, t, r, v, m, primary, bodies_pos, ctl):
     return forces.point_mass_accel(r, params.mu[primary]) + a + force / m
 
 
-def _encke_accel(mu, rc, delta, a_free, force, m):
-    """delta'' = -(mu/r_con^3)(f(q) r + delta) + a_d (Doc. 4 eq. 4.1-3, Potter's f(q))."""
-    r = rc + delta
-    rc2 = jnp.dot(rc, rc)
-    q = jnp.dot(delta, delta - 2.0 * r) / jnp.dot(r, r)
-    central = -(mu / (rc2 * jnp.sqrt(rc2))) * (forces.potter_f(q) * r + delta)
-    return central + a_free + force / m
+_encke_accel = forces.encke_deviation_accel  # Doc. 4 eq. 4.1-3 (kept under its old name)
 
 
 # ---------------------------------------------------------------------------- events
@@ -242,17 +238,7 @@ def event_functions(model: ForceModel, params: Params, r, v, primary, bodies_pos
 _N_NEWTON = 2  # Newton steps after the predictor: (n dt/2)^4/24 ~ 2e-5 -> 4e-10 -> 2e-19
 
 
-def _predict_x(x, r_vec, v_vec, mu, sqrt_mu, dtau):
-    """Universal anomaly dtau seconds after the conic point (r, v) with anomaly x, to third
-    order: dx/dt = sqrt(mu)/r, d2x/dt2 = -sqrt(mu) rdot/r^2,
-    d3x/dt3 = -sqrt(mu)(rddot/r^2 - 2 rdot^2/r^3), rddot = (v^2 - rdot^2)/r - mu/r^2."""
-    r = jnp.linalg.norm(r_vec)
-    rdot = jnp.dot(r_vec, v_vec) / r
-    rddot = (jnp.dot(v_vec, v_vec) - rdot * rdot) / r - mu / (r * r)
-    d1 = sqrt_mu / r
-    d2 = -sqrt_mu * rdot / (r * r)
-    d3 = -sqrt_mu * (rddot / (r * r) - 2.0 * rdot * rdot / (r * r * r))
-    return x + dtau * (d1 + dtau * (0.5 * d2 + dtau * d3 / 6.0))
+_predict_x = predict_universal_anomaly  # third-order Taylor prediction (kepler module)
 
 
 def _nystrom_step(model, params, ephem, epoch_et, c: Carry, dt, ctl: StepControls):
@@ -371,8 +357,6 @@ def _initial_step(model: ForceModel, params: Params, r, v, primary):
     st = model.integrator
     if not st.adaptive:
         return jnp.zeros(())
-    from fracas.integrate import highorder
-
     rn = jnp.linalg.norm(r)
     scale = rn * jnp.sqrt(rn / params.mu[primary])
     guess = 0.05 * scale * (jnp.asarray(st.tolerance) / 1e-12) ** highorder.control_exponent(st.method)
@@ -414,6 +398,7 @@ def init_carry(model: ForceModel, params: Params, ephem, epoch_et, t0, x0) -> tu
         n_rect=zi,
         h_next=_initial_step(model, params, r, v, primary),
         n_reject=zi,
+        phi=jnp.zeros((0,)),
     )
     if model.n_impulses:
         # impulses exactly at the start time are applied before the first step
@@ -429,8 +414,11 @@ def _switch_primary(model, params, c: Carry, new_p, pos, vel) -> Carry:
     return _rectify(c, 0.0, force=True)
 
 
-def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end, radius_sign) -> Carry:
-    """Integrate from c.t to t_end (either direction), stopping early at the stop condition."""
+def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end, radius_sign, var_labels=None) -> Carry:
+    """Integrate from c.t to t_end (either direction), stopping early at the stop condition.
+
+    ``var_labels`` (static tuple of parameter labels): also integrate the explicit variational
+    equations into ``c.phi`` (7, 7 + np) (``highorder.variational_supported`` models only)."""
     st = model.integrator
     eps_t = st.eps_t_s
     t_end = jnp.asarray(t_end, jnp.float64)
@@ -445,9 +433,9 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
 
     adaptive = st.adaptive
     faithful = st.method == "rkn4" and st.formulation == "encke"
+    if var_labels is not None and not highorder.variational_supported(model):
+        raise ValueError("explicit variational equations: Cowell + a special RKN method, no thrust/impulses/events")
     if adaptive:
-        from fracas.integrate import highorder
-
         expo = highorder.control_exponent(st.method)
 
     def normal_step(c: Carry):
@@ -478,7 +466,7 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
             (t1, rc1, vc1, d1, n1, m1), body4 = _nystrom_step(model, params, ephem, epoch_et, c, dt, ctl)
             err = jnp.zeros(())
         else:
-            (t1, rc1, vc1, d1, n1, m1), body4, err = highorder.step(
+            out, body4, err = highorder.step(
                 model,
                 params,
                 ephem,
@@ -489,7 +477,11 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
                 st.tolerance,
                 perturbation=perturbation,
                 body_states=body_states,
+                var_labels=var_labels,
             )
+            t1, rc1, vc1, d1, n1, m1 = out[:6]
+            if var_labels is not None:
+                c = c._replace(phi=out[6])
         new = c._replace(t=t1, rc=rc1, vc=vc1, delta=d1, nu=n1, m=m1, n_steps=c.n_steps + 1)
         return _apply_impulses(model, params, new, c.t, direction, eps_t), body4, err
 

@@ -13,8 +13,8 @@ Formulations (``IntegratorSettings.formulation``):
   extraction, impulses, primary changes) is unchanged; a Cowell carry never rectifies.
 * ``encke``: the deviations (delta, nu) from the osculating conic are integrated with
   Doc. 4 eq. 4.1-3 (Potter's f(q)), the conic being evaluated at every distinct stage time
-  t + c_i h by Kepler solves chained in increasing c_i (each a short arc from the previous
-  one, warm-started by a third-order prediction and finished by three Newton steps).
+  t + c_i h by one Kepler solve vectorised over the nodes (from the step's starting conic
+  point, warm-started by a third-order prediction and finished by Newton steps).
 
 Methods (``IntegratorSettings.method``; tableaux and sources in :mod:`fracas.integrate.tableaux`):
 
@@ -37,19 +37,32 @@ accepted when err <= 1.  DOP853's two estimates are combined as in Hairer's dop8
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from fracas import _jax  # noqa: F401
 from fracas.dynamics import forces
-from fracas.dynamics.kepler import kepler_fg
+from fracas.dynamics.kepler import kepler_fg, predict_universal_anomaly
 from fracas.integrate.tableaux import DOP853, DPRKN8, DPRKN12, RKN4, NystromTableau, RungeKuttaTableau
 
-__all__ = ["METHODS", "FORMULATIONS", "tableau_of", "embedded", "control_exponent", "stages_per_step", "step"]
+__all__ = [
+    "variational_supported",
+    "METHODS",
+    "FORMULATIONS",
+    "tableau_of",
+    "embedded",
+    "control_exponent",
+    "stages_per_step",
+    "step",
+]
 
 FORMULATIONS = ("encke", "cowell")
 METHODS = {"rkn4": RKN4, "dprkn8": DPRKN8, "dprkn12": DPRKN12, "dop853": DOP853}
-_N_NEWTON = 3  # Newton steps per chained Kepler solve (the gaps between stage nodes are <= 0.5 h)
+# Newton steps of the stage Kepler solves, from a third-order prediction over up to one step:
+# at 1.5 rad of mean motion (the longest LEO steps at tol 1e-8) the prediction is ~0.2 off in
+# x and Newton's quadratic convergence reaches rounding in 5-6 steps; 8 leave a margin.
+_N_NEWTON = 8
 
 
 def tableau_of(method: str):
@@ -128,20 +141,23 @@ class _Frame:
         return self._pos[ci]
 
     def prepare_conics(self, nodes):
-        """Conic states at t + c h for every node, chained in increasing |c| from c = 0."""
+        """Conic states at t + c h for every node: one vectorised Kepler solve over the nodes
+        from the step's starting conic point (a third-order prediction of the universal
+        anomaly, then ``_N_NEWTON`` Newton steps: one compiled solve, not one per node)."""
         if not self.encke:
             return
-        from fracas.integrate.encke import _predict_x
+        todo = sorted({float(x) for x in nodes} - {0.0})
+        rc, vc, mu = self.c.rc, self.c.vc, self.mu
+        sqrt_mu = jnp.sqrt(mu)
 
-        sqrt_mu = jnp.sqrt(self.mu)
-        prev = 0.0
-        for ci in sorted({float(x) for x in nodes} - {0.0}):
-            rp, vp = self._conic[prev]
-            tau = (ci - prev) * self.h
-            xs = _predict_x(0.0, rp, vp, self.mu, sqrt_mu, tau)
-            cs = kepler_fg(rp, vp, tau, self.mu, xs, n_newton=_N_NEWTON, short_arc=True)
-            self._conic[ci] = (cs.r, cs.v)
-            prev = ci
+        def solve(tau):
+            xs = predict_universal_anomaly(0.0, rc, vc, mu, sqrt_mu, tau)
+            cs = kepler_fg(rc, vc, tau, mu, xs, n_newton=_N_NEWTON, short_arc=True)
+            return cs.r, cs.v
+
+        rs, vs = jax.vmap(solve)(jnp.asarray(todo) * self.h)
+        for k, ci in enumerate(todo):
+            self._conic[ci] = (rs[k], vs[k])
 
     def conic(self, ci: float):
         return self._conic[float(ci)]
@@ -159,9 +175,7 @@ def _accel(frame: _Frame, ci, q, p, m, ctl, perturbation):
         r, v = q, p
     a_free, force, mdot = perturbation(frame.model, frame.params, t, r, v, c.primary, pos, ctl)
     if frame.encke:
-        from fracas.integrate.encke import _encke_accel
-
-        acc = _encke_accel(frame.mu, rc, q, a_free, force, m)
+        acc = forces.encke_deviation_accel(frame.mu, rc, q, a_free, force, m)
     else:
         acc = forces.point_mass_accel(r, frame.mu) + a_free + force / m
     return acc, mdot
@@ -182,7 +196,7 @@ def _error_ratio(e_r, e_v, e_m, r1, v1, m1, tol):
     return jnp.where(jnp.isfinite(err), err, jnp.inf)
 
 
-def step(model, params, ephem, epoch_et, c, dt, ctl, tol, *, perturbation, body_states):
+def step(model, params, ephem, epoch_et, c, dt, ctl, tol, *, perturbation, body_states, var_labels=None):
     """One step of size dt with the model's (method, formulation).
 
     Returns ((t + dt, rc, vc, delta, nu, m), (body positions, velocities) at t + dt, err)
@@ -190,6 +204,11 @@ def step(model, params, ephem, epoch_et, c, dt, ctl, tol, *, perturbation, body_
     pair).  ``perturbation`` and ``body_states`` are the loop's force-model functions
     (``encke.perturbation``, ``encke.body_states``), passed in to keep this module below
     the loop in the import order.
+
+    ``var_labels`` (a tuple of parameter labels, or None): also advance ``c.phi`` (7, 7 + np),
+    the sensitivities of (r, v, m) to the state at the start of the segment and to the
+    labelled parameters, by the explicit variational equations with the same stages
+    (:func:`_variational_rkn`); returned as a seventh element of the state tuple.
     """
     st = model.integrator
     tab = METHODS[st.method]
@@ -202,6 +221,8 @@ def step(model, params, ephem, epoch_et, c, dt, ctl, tol, *, perturbation, body_
         q, p = c.rc + c.delta, c.vc + c.nu
     m = c.m
     h = dt
+    if var_labels is not None:
+        return _variational_rkn(model, params, frame, tab, c, dt, ctl, tol, perturbation, var_labels)
     if isinstance(tab, NystromTableau):
         dup = _duplicates(tab)
         ks = []
@@ -266,3 +287,103 @@ def step(model, params, ephem, epoch_et, c, dt, ctl, tol, *, perturbation, body_
         err = jnp.where(den > 0, s5 * s5 / jnp.where(den > 0, den, 1.0), 0.0) / tol
         err = jnp.where(jnp.isfinite(err), err, jnp.inf)
     return out, frame.bodies(1.0), err
+
+
+# ------------------------------------------------------------- variational equations
+def variational_supported(model) -> bool:
+    """Whether :func:`step` can integrate explicit variational equations for this model:
+    Cowell with a special RKN method, no thrust (the mass is constant), no impulses and no
+    located events (stop conditions, primary changes).  Elsewhere the forward-mode AD path
+    (``propagate_with_sensitivities(method="ad")``) serves, and it is the cross-check here."""
+    st = model.integrator
+    return (
+        st.formulation == "cowell"
+        and isinstance(METHODS[st.method], NystromTableau)
+        and not model.thrust
+        and model.n_impulses == 0
+        and model.stop.kind == "time"
+        and not model.change_primary_at_soi
+    )
+
+
+def _stage_jacobians(model, params, frame, ci, r, m, ctl, perturbation, labels):
+    """Acceleration a (3,) at stage node ci and its derivatives: G = da/dr (3, 3), a_m = da/dm
+    (3,), a_p = da/dp (3, np).  The two-body part of G is analytic,
+    mu/r^3 (3 r_hat r_hat^T - I) (the gravity gradient, FRACAS DERY's G); the perturbations
+    (J2, third bodies, SRP) and every parameter column are by forward-mode AD."""
+    from fracas.dynamics.parameters import get_values, set_values
+
+    c = frame.c
+    t = c.t + ci * frame.h
+    p0 = get_values(params, labels, model)
+    mu = frame.mu
+
+    def acc_fn(rr, mm, pp):
+        prm = set_values(params, labels, pp, model) if labels else params
+        pos, _ = frame.body_states(model, prm, frame.ephem, frame.epoch_et + t) if labels else frame.bodies(ci)
+        a_free, force, _ = perturbation(model, prm, t, rr, jnp.zeros(3), c.primary, pos, ctl)
+        # the two-body term enters AD only through the parameters (its r-derivative is analytic)
+        two_body = forces.point_mass_accel(jax.lax.stop_gradient(rr), prm.mu[c.primary])
+        return two_body + a_free + force / mm
+
+    def with_value(rr, mm, pp):
+        a = acc_fn(rr, mm, pp)
+        return a, a
+
+    (g_pert, a_m, a_p), a = jax.jacfwd(with_value, argnums=(0, 1, 2), has_aux=True)(r, m, p0)
+    r2 = jnp.dot(r, r)
+    inv_r = jnp.sqrt(1.0 / r2)
+    u = r * inv_r
+    g_two = (mu * inv_r * inv_r * inv_r) * (3.0 * jnp.outer(u, u) - jnp.eye(3))
+    return a, g_two + g_pert, a_m, jnp.reshape(a_p, (3, len(labels)))
+
+
+def _variational_rkn(model, params, frame, tab, c, dt, ctl, tol, perturbation, labels):
+    """A special-RKN Cowell step of the state and of Phi = d(r, v, m)/d(x_start, p) (7, 7 + np):
+
+        Q'' = G(t, r) Q + a_m M + a_p S,   Q = Phi[0:3], Q' = Phi[3:6], M = Phi[6] (constant)
+
+    (S selects the parameter columns), integrated with the state's own stages and weights, so
+    Phi is the exact derivative of the discrete step map at fixed step sizes -- what the AD
+    path computes, to rounding (FRACAS STMGEN integrates the variational equations alongside
+    the state; tests/integrate/test_variational_stm.py)."""
+    labels = tuple(labels)
+    n_p = len(labels)
+    h = dt
+    r, v, m = c.rc + c.delta, c.vc + c.nu, c.m
+    phi = c.phi
+    q_mat, p_mat, m_row = phi[0:3], phi[3:6], phi[6]
+    sel = jnp.concatenate([jnp.zeros((n_p, 7)), jnp.eye(n_p)], axis=1) if n_p else None
+    dup = _duplicates(tab)
+    ks, kms = [], []
+    for i in range(tab.stages):
+        if dup[i] is not None:
+            ks.append(ks[dup[i]])
+            kms.append(kms[dup[i]])
+            continue
+        ci = float(tab.c[i])
+        ri = r if ci == 0.0 else r + (ci * h) * v
+        qi = q_mat if ci == 0.0 else q_mat + (ci * h) * p_mat
+        s = _lincomb(tab.a_bar[i, :i], ks)
+        if s is not None:
+            ri = ri + (h * h) * s
+            qi = qi + (h * h) * _lincomb(tab.a_bar[i, :i], kms)
+        a, g, a_m, a_p = _stage_jacobians(model, params, frame, ci, ri, m, ctl, perturbation, labels)
+        km = g @ qi + jnp.outer(a_m, m_row)
+        if n_p:
+            km = km + a_p @ sel
+        ks.append(a)
+        kms.append(km)
+    r1 = r + h * v + (h * h) * _lincomb(tab.bbar, ks)
+    v1 = v + h * _lincomb(tab.b, ks)
+    q1 = q_mat + h * p_mat + (h * h) * _lincomb(tab.bbar, kms)
+    p1 = p_mat + h * _lincomb(tab.b, kms)
+    phi1 = jnp.concatenate([q1, p1, m_row[None, :]], axis=0)
+    if tab.bbar_low is None:
+        err = jnp.zeros(())
+    else:
+        e_q = (h * h) * _lincomb(tab.ebar, ks)
+        e_p = h * _lincomb(tab.e, ks)
+        err = _error_ratio(e_q, e_p, None, r1, v1, m, tol)
+    z3 = jnp.zeros(3)
+    return (c.t + dt, r1, v1, z3, z3, m, phi1), frame.bodies(1.0), err

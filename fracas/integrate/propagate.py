@@ -151,15 +151,69 @@ def _propagate(static: ForceModel, dyn, params: Params, ephem, epoch_et_s, x0, t
 
 
 def propagate_with_sensitivities(
-    model: ForceModel, params: Params, ephem, epoch_et_s, x0, t_out, param_labels: Sequence[str] = ()
+    model: ForceModel,
+    params: Params,
+    ephem,
+    epoch_et_s,
+    x0,
+    t_out,
+    param_labels: Sequence[str] = (),
+    method: str = "auto",
 ) -> tuple[Trajectory, Sensitivities]:
-    """As :func:`propagate`, plus STMs and parameter matrices by forward-mode AD (FRACAS STMGEN).
+    """As :func:`propagate`, plus STMs and parameter matrices (FRACAS STMGEN).
 
     ``param_labels``: labels from :mod:`fracas.params` (e.g. ``"mu[sun]"``, ``"thrust_scale"``,
     ``"arc_bias_in_rad[0]"``); the parameter matrices have one column per label.
+
+    ``method``: ``"ad"`` -- forward-mode automatic differentiation through the integrator
+    (every model); ``"variational"`` -- the explicit variational equations integrated with the
+    same steps (``highorder.variational_supported`` models: Cowell, a special RKN method, no
+    thrust, impulses or located events); ``"auto"`` -- variational where supported, else AD.
+    Both give the derivative of the same discrete map at fixed step sizes (equal to rounding;
+    tests/integrate/test_variational_stm.py).
     """
+    from fracas.integrate import highorder
+
     static, dyn = split_model(model)
+    if method not in ("auto", "ad", "variational"):
+        raise ValueError(f"method = {method!r}: expected 'auto', 'ad' or 'variational'")
+    supported = highorder.variational_supported(model)
+    if method == "variational" and not supported:
+        raise ValueError(
+            "explicit variational equations need Cowell + dprkn8/dprkn12, no thrust, impulses or located events"
+        )
+    if method == "variational" or (method == "auto" and supported):
+        return _propagate_var(static, dyn, params, ephem, epoch_et_s, x0, t_out, tuple(param_labels))
     return _propagate_sens(static, dyn, params, ephem, epoch_et_s, x0, t_out, tuple(param_labels))
+
+
+@partial(jax.jit, static_argnums=(0, 7))
+def _propagate_var(static, dyn, params, ephem, epoch_et_s, x0, t_out, param_labels):
+    model = join_model(static, dyn)
+    t_out = jnp.asarray(t_out, jnp.float64)
+    x0 = jnp.asarray(x0, jnp.float64)
+    labels = tuple(param_labels)
+    n_p = len(labels)
+    c0, rs = encke.init_carry(model, params, ephem, epoch_et_s, t_out[0], x0)
+    phi0 = jnp.eye(7, 7 + n_p)
+    c0 = c0._replace(phi=phi0)
+
+    def step(state, t_end):
+        c, stm, par = state
+        c1 = encke.advance(model, params, ephem, epoch_et_s, c._replace(phi=phi0), t_end, rs, var_labels=labels)
+        x1 = encke.state_of(c1)
+        jx, jp = c1.phi[:, :7], c1.phi[:, 7:]
+        stm1 = jx @ stm
+        par1 = jx @ par + jp
+        valid = (~c1.done | (c1.status == encke.STATUS_OK)) & (jnp.abs(c1.t - t_end) < model.integrator.eps_t_s)
+        return (c1, stm1, par1), (x1, c1.t, c1.primary, valid, jx, stm1, jp, par1)
+
+    init = (c0, jnp.eye(7), jnp.zeros((7, n_p)))
+    (c_final, _, _), outs = jax.lax.scan(step, init, t_out)
+    x1, t1, prim, valid, jx, stm, jp, par = outs
+    traj = _finish(model, (x1, t1, prim, valid), c_final, t_out)
+    nanm = lambda a: jnp.where(valid[:, None, None], a, jnp.nan)  # noqa: E731
+    return traj, Sensitivities(nanm(jx), nanm(stm), nanm(jp), nanm(par))
 
 
 @partial(jax.jit, static_argnums=(0, 7))

@@ -325,7 +325,9 @@ def test_build_leo_units_and_overrides():
     np.testing.assert_array_equal(p.x0, [7000.0, 0.0, 0.0, 0.0, 7.5, 1.0, 1000.0])
     assert p.t_out[0] == 0.0 and p.t_out[-1] == constants.DAY_S
     assert np.all(np.diff(p.t_out) > 0)
-    assert p.model.integrator.c_nom == 0.03
+    ig = p.model.integrator  # the deck asks for accuracy: the tolerance, no step limit
+    assert (ig.method, ig.formulation, ig.step_control, ig.tolerance) == ("dprkn12", "cowell", "tolerance", 1e-12)
+    assert ig.dt_max_s == np.inf
     # 2030-01-01T00:00:00 TDB = JD 2462502.5 -> (JD - 2451545) * 86400 s
     assert p.epoch_et_s == (2462502.5 - constants.J2000_JD) * constants.DAY_S
 

@@ -202,7 +202,8 @@ DECK_SHORT = (
     .read_text()
     .replace("duration_days = 1.0", "duration_days = 0.05")
     .replace("step_days = 0.01 ", "step_days = 0.005")
-    .replace("c_nom = 0.03 ", "c_nom = 1.0\ndt_max_s = 13.5 ")
+    .replace('method = "auto"    ', 'method = "rkn4"\nc_nom = 1.0\ndt_max_s = 13.5 ')
+    .replace("tolerance = 1e-12 ", "")
 )
 
 

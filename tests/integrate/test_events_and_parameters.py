@@ -6,12 +6,14 @@ central finite differences (FRACAS PTRAN)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.integrate import solve_ivp
 
 from fracas import constants as C
 from fracas.dynamics.ephemeris import build_ephemeris, calendar_to_et
-from fracas.dynamics.model import ForceModel, IntegratorSettings, StopCondition, default_params
+from fracas.dynamics.model import ForceModel, StopCondition, default_params
 from fracas.integrate.propagate import finite_difference_sensitivities, propagate, propagate_with_sensitivities
+from tests.integrate.methods import KINDS, integrator
 from tests.reference import cowell_rhs_factory, helio_position, helio_velocity, integrate_piecewise
 
 MU = 398600.4418
@@ -20,13 +22,15 @@ DAY = 86400.0
 ET0 = calendar_to_et("2031-03-01T00:00:00")
 
 
-def test_impulses_in_both_frames():
+@pytest.mark.parametrize("kind", KINDS)
+def test_impulses_in_both_frames(kind):
     """Two impulses (velocity frame at 2000 s, inertial at 4000 s, Isp 320 s): the state after
     6000 s matches DOP853 restarted with v += dV at the same times to 1 mm (with no
     perturbation Encke reproduces the conic exactly, so only roundoff and the reference's own
     ~1e-8 km error remain), backward through the impulses returns to the start to 1 mm, and the
-    mass follows the rocket equation to 1e-12 relative."""
-    m = ForceModel(bodies=("earth",), n_impulses=2, integrator=IntegratorSettings(c_nom=0.02))
+    mass follows the rocket equation to 1e-12 relative.  For every kind (tests/integrate/methods.py);
+    dprkn12 at tol 1e-12 stays far inside 1 mm for Cowell too."""
+    m = ForceModel(bodies=("earth",), n_impulses=2, integrator=integrator(kind, c_nom=0.02))
     dv_vel = np.array([0.05, 0.01, -0.02])
     dv_in = np.array([-0.01, 0.03, 0.02])
     p = default_params(
@@ -59,10 +63,12 @@ def test_impulses_in_both_frames():
     assert abs(float(back.x_final[6]) - 1000.0) < 1e-9
 
 
-def test_radius_stop_during_a_thrust_arc():
+@pytest.mark.parametrize("kind", KINDS)
+def test_radius_stop_during_a_thrust_arc(kind):
     """Tangential nuclear-electric thrust raises the orbit until r = 7400 km: the stop lands on
     the radius (1e-6 km) at the DOP853 event time (0.01 s: the event tolerance is 1e-6 s and
-    the integration error ~1e-4 km at 7 km/s)."""
+    the integration error ~1e-4 km at 7 km/s).  For every kind (the high-order kinds use our
+    dop853, since the thrust makes the acceleration velocity- and mass-dependent)."""
     m = ForceModel(
         bodies=("earth",),
         thrust=True,
@@ -70,7 +76,7 @@ def test_radius_stop_during_a_thrust_arc():
         power="nuclear",
         n_arcs=1,
         stop=StopCondition(kind="radius", body=0, radius_km=7400.0),
-        integrator=IntegratorSettings(c_nom=0.02),
+        integrator=integrator(kind, thrust=True, c_nom=0.02),
     )
     p = default_params(
         m,
@@ -99,18 +105,19 @@ def test_radius_stop_during_a_thrust_arc():
     assert abs(float(tr.x_final[6]) - sol.y_events[0][0][6]) < 1e-6
 
 
-def test_leaving_earth_sphere_of_influence():
+@pytest.mark.parametrize("kind", KINDS)
+def test_leaving_earth_sphere_of_influence(kind):
     """Departure at 4 km/s above escape from 7000 km: the primary becomes the Sun where
     |r| = R_SOI(Earth), located to 1e-5 km; the heliocentric state at 10 days matches DOP853
     of the same model (geocentric to the SOI event, then heliocentric with Earth as third
-    body) to 0.01 km."""
+    body) to 0.01 km.  For every kind (change of primary with Cowell and Encke dprkn12 too)."""
     bodies = ("sun", "earth")
     m = ForceModel(
         bodies=bodies,
         primary=1,
         third_bodies=(0,),
         change_primary_at_soi=True,
-        integrator=IntegratorSettings(c_nom=0.02, dt_max_s=3600.0),
+        integrator=integrator(kind, c_nom=0.02, dt_max_s=3600.0),
     )
     p = default_params(m)
     eph = build_ephemeris(bodies, ET0, ET0 + 12 * DAY)
@@ -133,7 +140,7 @@ def test_leaving_earth_sphere_of_influence():
     assert np.linalg.norm(np.asarray(tr.x_final[:3]) - y[:3]) < 0.01
 
 
-def _helio_model():
+def _helio_model(kind="fracas"):
     """Heliocentric coast near 1.3 AU with SRP, Jupiter from DE421 and Mars as an EPHEM body
     (fixed conic elements), 60 days."""
     bodies = ("sun", "mars", "jupiter")
@@ -143,7 +150,7 @@ def _helio_model():
         third_bodies=(1, 2),
         srp=True,
         conic_bodies=(1,),
-        integrator=IntegratorSettings(c_nom=0.05, dt_max_s=DAY, rect_ratio=10.0),
+        integrator=integrator(kind, c_nom=0.05, dt_max_s=DAY, rect_ratio=10.0),
     )
     el_mars = np.array([2.2794e8, 0.0934, np.radians(24.7), np.radians(3.4), np.radians(332.0), np.radians(20.0)])
     p = default_params(
@@ -166,7 +173,8 @@ def _helio_model():
     return m, p, eph, x0
 
 
-def test_ephemeris_and_element_parameters_match_finite_differences():
+@pytest.mark.parametrize("kind", KINDS)
+def test_ephemeris_and_element_parameters_match_finite_differences(kind):
     """d x(60 d) / d(Cr, mu_sun, mu_mars, mu_jupiter, Mars a, e, M) and the STM by AD vs central
     differences, agreeing to 1e-6 of each column's size.  Heliocentric positions (~2e8 km)
     carry ~3e-8 km of roundoff, so each parameter step is sized to move the final position by
@@ -174,8 +182,9 @@ def test_ephemeris_and_element_parameters_match_finite_differences():
     stays below 1e-8 for these nearly linear responses), except Mars's elements, whose effect
     is nonlinear on the 3e6 km miss-distance scale: their steps move Mars ~1e3 km and the
     spacecraft ~0.05 km (truncation ~(1e3/3e6)^2 ~ 1e-7, roundoff ~6e-7).  Rectification is off so the FD
-    quotient has no step-sequence jumps."""
-    m, p, eph, x0 = _helio_model()
+    quotient has no step-sequence jumps.  For every kind (tests/integrate/methods.py; AD through
+    the high-order steps at fixed step sizes, the FD runs choosing their own steps)."""
+    m, p, eph, x0 = _helio_model(kind)
     labels = (
         "cr",
         "mu[sun]",
@@ -201,11 +210,14 @@ def test_ephemeris_and_element_parameters_match_finite_differences():
     assert np.all(np.abs(par_fd).max(axis=0) > 0)
 
 
-def test_inertial_thrust_three_evaluation_step_matches_dop853():
+@pytest.mark.parametrize("kind", KINDS)
+def test_inertial_thrust_three_evaluation_step_matches_dop853(kind):
     """Inertially fixed thrust (RA 30 deg, Dec 10 deg; nuclear power) does not depend on v, so the
     step uses three evaluations with k3 = k2 + F (1/m_C - 1/m_B) (only the stage mass differs).
     Against DOP853 after 3 orbits: position within 1 m, mass within 1e-6 kg (the c_nom 0.02
-    LEO truncation level); the 4-evaluation step gives the same answer to 1 m."""
+    LEO truncation level); the 4-evaluation step gives the same answer to 1 m.  For every kind
+    (the high-order kinds use our dop853, which evaluates the full acceleration at every stage
+    either way, so the velocity_dependent flag must not change its answer beyond 1 m either)."""
     ra, dec = np.radians(30.0), np.radians(10.0)
     u = np.array([np.cos(dec) * np.cos(ra), np.cos(dec) * np.sin(ra), np.sin(dec)])
     common = {
@@ -213,7 +225,7 @@ def test_inertial_thrust_three_evaluation_step_matches_dop853():
         "thrust": True,
         "power": "nuclear",
         "n_arcs": 1,
-        "integrator": IntegratorSettings(c_nom=0.02),
+        "integrator": integrator(kind, thrust=True, c_nom=0.02),
     }  # noqa: E501
     pars = {
         "mu": [MU],

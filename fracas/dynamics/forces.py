@@ -24,8 +24,19 @@ def potter_f(q):
 
 def point_mass_accel(r, mu):
     """Two-body acceleration -mu r/|r|^3 (km/s^2) of a body of GM ``mu`` at the origin."""
-    rr = jnp.dot(r, r)
-    return -mu * r / (rr * jnp.sqrt(rr))
+    inv_r = jnp.sqrt(1.0 / jnp.dot(r, r))  # not 1/sqrt: XLA CPU's float64 rsqrt is scalar (perf-notes)
+    return (-mu * inv_r * inv_r * inv_r) * r
+
+
+def central_j2_accel(r, mu, j2, radius, pole):
+    """-mu r/|r|^3 plus the J2 acceleration of :func:`j2_accel`, sharing one division and one
+    square root (the step of a high-order Cowell integrator is bound by the divider: 2x fewer
+    divisions than the two functions apart; equal to their sum to rounding)."""
+    inv_rr = 1.0 / jnp.dot(r, r)
+    inv_r = jnp.sqrt(inv_rr)
+    s = jnp.dot(r, pole) * inv_r
+    k = -1.5 * mu * j2 * radius * radius * (inv_rr * inv_rr)
+    return r * (inv_r * (k * (1.0 - 5.0 * s * s) - mu * inv_rr)) + (2.0 * k * s) * pole
 
 
 def third_body_accel(r, rho, mu):
@@ -38,8 +49,8 @@ def third_body_accel(r, rho, mu):
     rho2 = jnp.dot(rho, rho)
     q = jnp.dot(r, r - 2.0 * rho) / rho2
     d = rho - r
-    d2 = jnp.dot(d, d)
-    return -mu / (d2 * jnp.sqrt(d2)) * (r + potter_f(q) * rho)
+    inv_d = jnp.sqrt(1.0 / jnp.dot(d, d))
+    return (-mu * inv_d * inv_d * inv_d) * (r + potter_f(q) * rho)
 
 
 def j2_accel(r, mu, j2, radius, pole):
@@ -48,11 +59,10 @@ def j2_accel(r, mu, j2, radius, pole):
     a = -(mu/r^2)(3/2) J2 (R/r)^2 [(1 - 5 sin^2 phi) i_r + 2 sin phi i_pole],
     sin phi = i_r . i_pole (geocentric latitude).
     """
-    rr = jnp.dot(r, r)
-    rn = jnp.sqrt(rr)
-    ir = r / rn
+    inv_rr = 1.0 / jnp.dot(r, r)
+    ir = r * jnp.sqrt(inv_rr)
     s = jnp.dot(ir, pole)
-    k = -1.5 * mu * j2 * radius * radius / (rr * rr)
+    k = -1.5 * mu * j2 * radius * radius * (inv_rr * inv_rr)
     return k * ((1.0 - 5.0 * s * s) * ir + 2.0 * s * pole)
 
 
@@ -62,9 +72,9 @@ def srp_accel(r_from_sun, area_m2, mass_kg, cr):
     a = Cr (S/c) (A/m) (1 AU/r)^2 r_hat, with S/c = 4.54e-6 N/m^2 at 1 AU; r_from_sun is the
     spacecraft position relative to the Sun (km).  N/kg = m/s^2 -> 1e-3 km/s^2.
     """
-    rr = jnp.dot(r_from_sun, r_from_sun)
+    inv_r = jnp.sqrt(1.0 / jnp.dot(r_from_sun, r_from_sun))
     scale = cr * constants.SOLAR_PRESSURE_1AU_N_M2 * area_m2 / mass_kg * 1e-3 * constants.AU_KM**2
-    return scale * r_from_sun / (rr * jnp.sqrt(rr))
+    return (scale * inv_r * inv_r * inv_r) * r_from_sun
 
 
 def encke_deviation_accel(mu, rc, delta, a_free, force, m):

@@ -103,7 +103,7 @@ def _split(model: ForceModel):
 
 
 @functools.lru_cache(maxsize=64)
-def _batched_fn(static: ForceModel, with_sens: bool, labels: tuple, axes: tuple, devices: tuple):
+def _batched_fn(static: ForceModel, with_sens: bool, labels: tuple, axes: tuple, devices: tuple, sens_method="auto"):
     """The jitted, vmapped (and, over several devices, shard_mapped) propagation of one chunk.
 
     ``static`` is the model without its integrator constants, which arrive as the traced
@@ -117,7 +117,7 @@ def _batched_fn(static: ForceModel, with_sens: bool, labels: tuple, axes: tuple,
     if with_sens:
 
         def one(dyn, params, ephem, epoch, x0, t_out):
-            return propagate_with_sensitivities(model_of(dyn), params, ephem, epoch, x0, t_out, labels)
+            return propagate_with_sensitivities(model_of(dyn), params, ephem, epoch, x0, t_out, labels, sens_method)
 
     else:
 
@@ -154,10 +154,47 @@ def _pad_rows(a: np.ndarray, start: int, stop: int, size: int) -> np.ndarray:
     return part
 
 
+#: Default lanes per device and chunk (benchmarks/results_highorder.txt, "chunk size"): a
+#: DPRKN12 LEO chunk's working set stays in the 2 MB L2 of this machine's cores up to ~1000
+#: lanes of state, ~250 with a 7x7 STM; larger chunks fell out of it and ran slower, smaller
+#: ones paid per-call dispatch.
+CHUNK_PER_DEVICE = 1024
+CHUNK_PER_DEVICE_SENS = 256
+
+
+def auto_chunk_size(n_devices: int, with_sensitivities: bool) -> int:
+    """Lanes per chunk for this machine: per-device lanes x devices (see CHUNK_PER_DEVICE)."""
+    per = CHUNK_PER_DEVICE_SENS if with_sensitivities else CHUNK_PER_DEVICE
+    return per * max(1, int(n_devices))
+
+
 def chunk_rows(n: int, chunk_size: int, n_devices: int) -> int:
-    """Rows per chunk: ``min(chunk_size, n)`` rounded up to a multiple of ``n_devices``."""
-    rows = max(1, min(int(chunk_size), int(n)))
+    """Rows per chunk: ``chunk_size``, or for a smaller batch the next power of two >= n (so
+    batches of many sizes share a few compiled programs), as a multiple of ``n_devices``."""
+    n = max(1, int(n))
+    chunk_size = max(1, int(chunk_size))
+    rows = chunk_size if n >= chunk_size else min(chunk_size, 1 << (n - 1).bit_length())
     return -(-rows // n_devices) * n_devices
+
+
+def step_count_proxy(x0s: np.ndarray, mu: float, span_s: float) -> np.ndarray:
+    """A cheap estimate of how many steps each lane needs, to group similar lanes in a chunk.
+
+    Revolutions over the span times a factor for eccentricity ((1 + e)/(1 - e))^(3/4) (the
+    ratio of the apoapsis and periapsis time scales, to the power at which the step count of
+    a high-order method grows); for unbound states the span over the time scale r^1.5/sqrt(mu).
+    """
+    r = x0s[:, :3]
+    v = x0s[:, 3:6]
+    rn = np.linalg.norm(r, axis=1)
+    energy = 0.5 * np.einsum("ij,ij->i", v, v) - mu / rn
+    h = np.cross(r, v)
+    e = np.sqrt(np.maximum(0.0, 1.0 + 2.0 * energy * np.einsum("ij,ij->i", h, h) / mu**2))
+    bound = (energy < 0) & (e < 1)
+    a = np.where(bound, -mu / (2.0 * np.where(energy < 0, energy, -1.0)), rn)
+    period = 2.0 * np.pi * np.sqrt(a**3 / mu)
+    ecc = np.where(bound, ((1.0 + e) / np.maximum(1.0 - e, 1e-6)) ** 0.75, 1.0)
+    return abs(span_s) / period * ecc
 
 
 def propagate_batch(
@@ -167,12 +204,14 @@ def propagate_batch(
     epoch_et_s,
     x0s,
     t_out,
-    chunk_size: int = 4096,
+    chunk_size: int | None = None,
     with_sensitivities: bool = False,
     param_labels: Sequence[str] = (),
     params_axes=None,
     devices: Sequence | None = None,
     progress: Callable[[int, int], None] | None = None,
+    group_lanes: bool = False,
+    sensitivity_method: str = "auto",
 ):
     """Propagate every row of ``x0s`` (N, 7) through ``t_out`` (shared output times).
 
@@ -184,6 +223,12 @@ def propagate_batch(
     to compare against a sharded run).  ``progress(done, total)`` is called after every chunk
     (the command line and Monte Carlo drivers hang a progress bar on it).  Returns a
     ``Trajectory``, or ``(Trajectory, Sensitivities)`` when ``with_sensitivities``.
+
+    ``chunk_size``: lanes per compiled call (None: :func:`auto_chunk_size` for the devices).
+    ``group_lanes``: sort the lanes by :func:`step_count_proxy` before chunking (results come
+    back in the caller's order), so that lanes needing many steps share chunks and the others
+    do not idle behind them (a vmapped loop runs every lane until its chunk's slowest is done).
+    ``sensitivity_method``: "auto" | "ad" | "variational" (see ``propagate_with_sensitivities``).
     """
     x0s = np.asarray(x0s, dtype=np.float64)
     if x0s.ndim != 2 or x0s.shape[1] != 7:
@@ -199,8 +244,21 @@ def propagate_batch(
     for f, v, a in zip(Params._fields, params, axes):
         if a == 0 and (v.ndim == 0 or v.shape[0] != n):
             raise ValueError(f"params.{f} is batched (params_axes) but its axis 0 is not N = {n}")
+    order = None
+    if group_lanes and n > 1:
+        t_arr = np.asarray(t_out, np.float64)
+        mu_p = (
+            float(np.asarray(params.mu)[model.primary])
+            if axes[0] is None
+            else float(np.mean(params.mu[:, model.primary]))
+        )
+        order = np.argsort(step_count_proxy(x0s, mu_p, float(t_arr[-1] - t_arr[0])), kind="stable")
+        x0s = x0s[order]
+        params = Params(*[v[order] if a == 0 else v for v, a in zip(params, axes)])
     static, dyn = _split(model)
-    fn = _batched_fn(static, bool(with_sensitivities), tuple(param_labels), axes, devs)
+    fn = _batched_fn(static, bool(with_sensitivities), tuple(param_labels), axes, devs, sensitivity_method)
+    if chunk_size is None:
+        chunk_size = auto_chunk_size(len(devs), with_sensitivities)
     rows = chunk_rows(n, chunk_size, len(devs))
     t_out = jnp.asarray(t_out, jnp.float64)
     epoch = jnp.asarray(epoch_et_s, jnp.float64)
@@ -233,6 +291,10 @@ def propagate_batch(
         pending = nxt
     collect(pending)
     out = jax.tree_util.tree_map(lambda *a: np.concatenate(a, axis=0), *pieces)
+    if order is not None:
+        inverse = np.empty_like(order)
+        inverse[order] = np.arange(n)
+        out = jax.tree_util.tree_map(lambda a: a[inverse], out)
     return out
 
 
@@ -240,4 +302,12 @@ def _to_host(n_valid, out):
     return jax.tree_util.tree_map(lambda a: np.asarray(a)[:n_valid], out)
 
 
-__all__ = ["propagate_batch", "host_devices", "chunk_rows", "Trajectory", "Sensitivities"]
+__all__ = [
+    "propagate_batch",
+    "host_devices",
+    "chunk_rows",
+    "auto_chunk_size",
+    "step_count_proxy",
+    "Trajectory",
+    "Sensitivities",
+]

@@ -143,16 +143,18 @@ def acting_third_bodies(model: ForceModel) -> tuple[int, ...]:
     return tuple(model.third_bodies)
 
 
-def perturbation(model: ForceModel, params: Params, t, r, v, primary, bodies_pos, ctl: StepControls):
+def perturbation(model: ForceModel, params: Params, t, r, v, primary, bodies_pos, ctl: StepControls, with_j2=True):
     """Perturbing acceleration split as (a_free, force, mdot) so that a_d = a_free + force/m.
 
     a_free (km/s^2): J2 of the primary and third bodies; force (kg km/s^2): thrust and
     solar radiation pressure; mdot (kg/s): propellant flow (FRACAS GRAVFO, EP, POWER).
+    ``with_j2=False`` leaves J2 out (a Cowell step adds it with the central term,
+    ``forces.central_j2_accel``).
     """
     a = jnp.zeros(3)
     force = jnp.zeros(3)
     mdot = jnp.zeros(())
-    if model.j2:
+    if model.j2 and with_j2:
         a = a + forces.j2_accel(r, params.mu[primary], params.j2[primary], params.radius[primary], params.pole[primary])
     rp = bodies_pos[primary]
     for b in acting_third_bodies(model):

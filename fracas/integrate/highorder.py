@@ -128,7 +128,9 @@ class _Frame:
         self.model, self.params, self.ephem, self.epoch_et = model, params, ephem, epoch_et
         self.c, self.h = c, h
         self.body_states = body_states
-        self.mu = params.mu[c.primary]
+        # without primary changes the primary is the model's (static): plain slices, no gathers
+        self.primary = c.primary if model.change_primary_at_soi else model.primary
+        self.mu = params.mu[self.primary]
         self._pos = {}
         self._conic = {0.0: (c.rc, c.vc)}
         self.encke = model.integrator.formulation == "encke"
@@ -173,11 +175,21 @@ def _accel(frame: _Frame, ci, q, p, m, ctl, perturbation):
         r, v = rc + q, vc + p
     else:
         r, v = q, p
-    a_free, force, mdot = perturbation(frame.model, frame.params, t, r, v, c.primary, pos, ctl)
+    fused_j2 = frame.model.j2 and not frame.encke
+    a_free, force, mdot = perturbation(
+        frame.model, frame.params, t, r, v, frame.primary, pos, ctl, with_j2=not fused_j2
+    )
+    has_force = frame.model.srp or frame.model.thrust  # else force is zero: skip force/m
     if frame.encke:
-        acc = forces.encke_deviation_accel(frame.mu, rc, q, a_free, force, m)
+        acc = forces.encke_deviation_accel(frame.mu, rc, q, a_free, force if has_force else 0.0, m)
     else:
-        acc = forces.point_mass_accel(r, frame.mu) + a_free + force / m
+        if fused_j2:
+            prm, b = frame.params, frame.primary
+            acc = forces.central_j2_accel(r, frame.mu, prm.j2[b], prm.radius[b], prm.pole[b]) + a_free
+        else:
+            acc = forces.point_mass_accel(r, frame.mu) + a_free
+        if has_force:
+            acc = acc + force / m
     return acc, mdot
 
 
@@ -187,9 +199,8 @@ def _norm(x):
 
 def _error_ratio(e_r, e_v, e_m, r1, v1, m1, tol):
     """max(|e_r|/|r|, |e_v|/|v|, |e_m|/m) / tol (module docstring); inf when not finite."""
-    er = _norm(e_r) / _norm(r1)
-    ev = _norm(e_v) / _norm(v1)
-    err = jnp.maximum(er, ev)
+    # ratios of squares, one square root: no float64 rsqrt (perf-notes)
+    err = jnp.sqrt(jnp.maximum(jnp.dot(e_r, e_r) / jnp.dot(r1, r1), jnp.dot(e_v, e_v) / jnp.dot(v1, v1)))
     if e_m is not None:
         err = jnp.maximum(err, jnp.abs(e_m) / jnp.abs(m1))
     err = err / tol
@@ -321,9 +332,9 @@ def _stage_jacobians(model, params, frame, ci, r, m, ctl, perturbation, labels):
     def acc_fn(rr, mm, pp):
         prm = set_values(params, labels, pp, model) if labels else params
         pos, _ = frame.body_states(model, prm, frame.ephem, frame.epoch_et + t) if labels else frame.bodies(ci)
-        a_free, force, _ = perturbation(model, prm, t, rr, jnp.zeros(3), c.primary, pos, ctl)
+        a_free, force, _ = perturbation(model, prm, t, rr, jnp.zeros(3), frame.primary, pos, ctl)
         # the two-body term enters AD only through the parameters (its r-derivative is analytic)
-        two_body = forces.point_mass_accel(jax.lax.stop_gradient(rr), prm.mu[c.primary])
+        two_body = forces.point_mass_accel(jax.lax.stop_gradient(rr), prm.mu[frame.primary])
         return two_body + a_free + force / mm
 
     def with_value(rr, mm, pp):

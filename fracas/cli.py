@@ -143,7 +143,11 @@ def propagate(
         from fracas.status import RunStatus
 
         if data.status in (RunStatus.MAX_STEPS, RunStatus.NONFINITE):
-            hint = " (raise integrator.max_steps or c_nom)" if data.status == RunStatus.MAX_STEPS else ""
+            hint = (
+                " (raise integrator.max_steps, or loosen integrator.tolerance / raise c_nom)"
+                if data.status == RunStatus.MAX_STEPS
+                else ""
+            )
             raise NumericalError(
                 f"{deck}: propagation ended early at t = {data.t_final_s / DAY_S:.6g} days with status "
                 f"{data.status} ({data.status_text}){hint}; partial results written to {path}"

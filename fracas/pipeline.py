@@ -109,12 +109,20 @@ def trajectory_data(problem: Problem, traj, sens) -> TrajectoryData:
         status=int(traj.status),
         n_steps=int(traj.n_steps),
         n_rect=int(traj.n_rect),
+        n_reject=int(traj.n_reject),
+        integrator=describe_integrator(problem.model.integrator),
         centre=problem.centre,
         title=problem.title,
         epoch_tdb=et_to_calendar(problem.epoch_et_s),
         sensitivities=sdata,
         provenance=provenance(problem.source_text, problem.source_path),
     )
+
+
+def describe_integrator(st) -> str:
+    """One line naming the method, formulation and step control (the results file, the summary)."""
+    rule = f"tolerance {st.tolerance:g}" if st.adaptive else f"c_nom {st.c_nom:g}"
+    return f"{st.method}, {st.formulation}, {rule}"
 
 
 def propagate_deck(

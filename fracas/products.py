@@ -428,6 +428,8 @@ class TrajectoryData:
     centre: str = ""
     title: str = ""
     epoch_tdb: str = ""
+    n_reject: int = 0  # steps rejected by the error control (tolerance step control)
+    integrator: str = ""  # e.g. "dprkn12, cowell, tolerance 1e-12" (fracas.integrate.highorder)
     sensitivities: SensitivityData | None = None
     provenance: dict[str, Any] = field(default_factory=dict)
 

@@ -13,6 +13,13 @@ from fracas import (
 )
 
 
+def dot3(a, b):
+    """a . b of two 3-vectors as an elementwise product and a sum: under ``vmap`` this fuses
+    with its neighbours, where ``jnp.dot`` becomes a batched dot_general that XLA CPU runs as
+    a separate, unvectorised kernel (measured 2x on a DPRKN12 LEO batch)."""
+    return jnp.sum(a * b, axis=-1)
+
+
 def potter_f(q):
     """Potter's f(q) = (1+q)^(3/2) - 1 = q (3 + 3q + q^2) / (1 + (1+q)^(3/2)), cancellation-free.
 
@@ -24,7 +31,7 @@ def potter_f(q):
 
 def point_mass_accel(r, mu):
     """Two-body acceleration -mu r/|r|^3 (km/s^2) of a body of GM ``mu`` at the origin."""
-    inv_r = jnp.sqrt(1.0 / jnp.dot(r, r))  # not 1/sqrt: XLA CPU's float64 rsqrt is scalar (perf-notes)
+    inv_r = jnp.sqrt(1.0 / dot3(r, r))  # not 1/sqrt: XLA CPU's float64 rsqrt is scalar (perf-notes)
     return (-mu * inv_r * inv_r * inv_r) * r
 
 
@@ -32,9 +39,9 @@ def central_j2_accel(r, mu, j2, radius, pole):
     """-mu r/|r|^3 plus the J2 acceleration of :func:`j2_accel`, sharing one division and one
     square root (the step of a high-order Cowell integrator is bound by the divider: 2x fewer
     divisions than the two functions apart; equal to their sum to rounding)."""
-    inv_rr = 1.0 / jnp.dot(r, r)
+    inv_rr = 1.0 / dot3(r, r)
     inv_r = jnp.sqrt(inv_rr)
-    s = jnp.dot(r, pole) * inv_r
+    s = dot3(r, pole) * inv_r
     k = -1.5 * mu * j2 * radius * radius * (inv_rr * inv_rr)
     return r * (inv_r * (k * (1.0 - 5.0 * s * s) - mu * inv_rr)) + (2.0 * k * s) * pole
 
@@ -46,10 +53,10 @@ def third_body_accel(r, rho, mu):
     a = -(mu/d^3) [r + f(q) rho] with q = r.(r - 2 rho)/rho^2 and d = |rho - r|, which does not
     cancel when |r| << |rho| (Battin 1964 eq. 8.61; FRACAS GRAVFO).
     """
-    rho2 = jnp.dot(rho, rho)
-    q = jnp.dot(r, r - 2.0 * rho) / rho2
+    rho2 = dot3(rho, rho)
+    q = dot3(r, r - 2.0 * rho) / rho2
     d = rho - r
-    inv_d = jnp.sqrt(1.0 / jnp.dot(d, d))
+    inv_d = jnp.sqrt(1.0 / dot3(d, d))
     return (-mu * inv_d * inv_d * inv_d) * (r + potter_f(q) * rho)
 
 
@@ -59,9 +66,9 @@ def j2_accel(r, mu, j2, radius, pole):
     a = -(mu/r^2)(3/2) J2 (R/r)^2 [(1 - 5 sin^2 phi) i_r + 2 sin phi i_pole],
     sin phi = i_r . i_pole (geocentric latitude).
     """
-    inv_rr = 1.0 / jnp.dot(r, r)
+    inv_rr = 1.0 / dot3(r, r)
     ir = r * jnp.sqrt(inv_rr)
-    s = jnp.dot(ir, pole)
+    s = dot3(ir, pole)
     k = -1.5 * mu * j2 * radius * radius * (inv_rr * inv_rr)
     return k * ((1.0 - 5.0 * s * s) * ir + 2.0 * s * pole)
 
@@ -72,7 +79,7 @@ def srp_accel(r_from_sun, area_m2, mass_kg, cr):
     a = Cr (S/c) (A/m) (1 AU/r)^2 r_hat, with S/c = 4.54e-6 N/m^2 at 1 AU; r_from_sun is the
     spacecraft position relative to the Sun (km).  N/kg = m/s^2 -> 1e-3 km/s^2.
     """
-    inv_r = jnp.sqrt(1.0 / jnp.dot(r_from_sun, r_from_sun))
+    inv_r = jnp.sqrt(1.0 / dot3(r_from_sun, r_from_sun))
     scale = cr * constants.SOLAR_PRESSURE_1AU_N_M2 * area_m2 / mass_kg * 1e-3 * constants.AU_KM**2
     return (scale * inv_r * inv_r * inv_r) * r_from_sun
 
@@ -80,7 +87,7 @@ def srp_accel(r_from_sun, area_m2, mass_kg, cr):
 def encke_deviation_accel(mu, rc, delta, a_free, force, m):
     """delta'' = -(mu/r_con^3)(f(q) r + delta) + a_d (Doc. 4 eq. 4.1-3, Potter's f(q))."""
     r = rc + delta
-    rc2 = jnp.dot(rc, rc)
-    q = jnp.dot(delta, delta - 2.0 * r) / jnp.dot(r, r)
+    rc2 = dot3(rc, rc)
+    q = dot3(delta, delta - 2.0 * r) / dot3(r, r)
     central = -(mu / (rc2 * jnp.sqrt(rc2))) * (potter_f(q) * r + delta)
     return central + a_free + force / m

@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 
 from fracas import _jax  # noqa: F401  (float64, compilation cache)
+from fracas.dynamics.forces import dot3
 
 _SERIES_XI = 0.1  # |xi| below which C, S come from their Taylor series (no cancellation)
 _MAX_ITER = 60
@@ -169,8 +170,8 @@ def kepler_fg(
     sf = stumpff_reduced if short_arc else stumpff
     r0 = jnp.linalg.norm(r0_vec)
     sqrt_mu = jnp.sqrt(mu)
-    sigma0 = jnp.dot(r0_vec, v0_vec) / sqrt_mu
-    alpha = 2.0 / r0 - jnp.dot(v0_vec, v0_vec) / mu
+    sigma0 = dot3(r0_vec, v0_vec) / sqrt_mu
+    alpha = 2.0 / r0 - dot3(v0_vec, v0_vec) / mu
     if x_start is None:
         x_start = initial_guess(r0, sigma0, alpha, sqrt_mu, tau)
     sg = jax.lax.stop_gradient
@@ -210,8 +211,8 @@ def predict_universal_anomaly(x, r_vec, v_vec, mu, sqrt_mu, dtau):
     order: dx/dt = sqrt(mu)/r, d2x/dt2 = -sqrt(mu) rdot/r^2,
     d3x/dt3 = -sqrt(mu)(rddot/r^2 - 2 rdot^2/r^3), rddot = (v^2 - rdot^2)/r - mu/r^2."""
     r = jnp.linalg.norm(r_vec)
-    rdot = jnp.dot(r_vec, v_vec) / r
-    rddot = (jnp.dot(v_vec, v_vec) - rdot * rdot) / r - mu / (r * r)
+    rdot = dot3(r_vec, v_vec) / r
+    rddot = (dot3(v_vec, v_vec) - rdot * rdot) / r - mu / (r * r)
     d1 = sqrt_mu / r
     d2 = -sqrt_mu * rdot / (r * r)
     d3 = -sqrt_mu * (rddot / (r * r) - 2.0 * rdot * rdot / (r * r * r))

@@ -21,12 +21,13 @@ from fracas import (
     _jax,  # noqa: F401
     constants,
 )
+from fracas.dynamics.forces import dot3
 
 
 def power_kw(p0_kw, r_from_sun_km, t_s, decay_s, solar: bool):
     """Available power (kW): solar (1/r^2 from 1 AU) or nuclear (exponential decay) (FRACAS POWER)."""
     if solar:
-        rr = jnp.dot(r_from_sun_km, r_from_sun_km)
+        rr = dot3(r_from_sun_km, r_from_sun_km)
         return p0_kw * constants.AU_KM**2 / rr
     return p0_kw * jnp.exp(-t_s / decay_s)
 

@@ -219,7 +219,7 @@ def event_functions(model: ForceModel, params: Params, r, v, primary, bodies_pos
         if stop.kind == STOP_SOI_ENTRY:
             gs = jnp.where(primary == b, _INACTIVE, dist - params.soi_radius[b])
         elif stop.kind == STOP_CLOSEST_APPROACH:
-            gs = -jnp.dot(rb, vb)
+            gs = -forces.dot3(rb, vb)
         elif stop.kind == STOP_RADIUS:
             gs = radius_sign * (dist - stop.radius_km)
         else:  # pragma: no cover - validated upstream
@@ -440,6 +440,11 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
     if adaptive:
         expo = highorder.control_exponent(st.method)
 
+    def rectify(c: Carry) -> Carry:
+        # a Cowell carry has no deviations to rectify (impulses and primary changes still
+        # restart it through _rectify(force=True), which only moves the velocity into vc)
+        return c if st.formulation == "cowell" else _rectify(c, st.rect_ratio)
+
     def normal_step(c: Carry):
         p = c.primary
         if adaptive:
@@ -519,14 +524,14 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
 
     def body_plain(c: Carry):
         """Final-time stop only, no primary changes: no event functions are evaluated."""
-        c = _rectify(c, st.rect_ratio)
+        c = rectify(c)
         dt = normal_step(c)
         new, _, err = take_step(c, dt)
         new, _ = control(c, new, dt, err, jnp.asarray(False))
         return check_finite(c, new, jnp.asarray(False))
 
     def body_events(c: Carry):
-        c = _rectify(c, st.rect_ratio)
+        c = rectify(c)
         p = c.primary
         dt_normal = normal_step(c)
         # Newton step on the event being located: dt = -g/gdot, gdot = dg/dt along the motion

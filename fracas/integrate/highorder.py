@@ -114,10 +114,23 @@ def _duplicates(tab: NystromTableau):
     return dup
 
 
+@jax.custom_batching.custom_vmap
 def _materialise(k):
     """Keep a stage value as a value of its own (perf-notes: XLA CPU otherwise re-fuses the
-    cheap part of every stage into each later stage); exact: adds 0 * (a finite sum)."""
+    cheap part of every stage into each later stage).  The identity; under ``vmap`` it adds
+    0 x (the sum over every lane, non-finite values mapped to 0), a reduction across the
+    batch that the stage's consumers cannot fuse through, so the stage is computed once for
+    all lanes and stored (measured 1.3-1.7x on DPRKN12 LEO batches)."""
     return k
+
+
+@_materialise.def_vmap
+def _materialise_vmap(axis_size, in_batched, k):
+    (batched,) = in_batched
+    if not batched:
+        return k, False
+    # nan_to_num: a lane that failed (NaN/inf) must not poison the others through the sum
+    return k + 0.0 * jnp.nan_to_num(jnp.sum(k), nan=0.0, posinf=0.0, neginf=0.0), True
 
 
 # --------------------------------------------------------------------- stage geometry
@@ -194,13 +207,15 @@ def _accel(frame: _Frame, ci, q, p, m, ctl, perturbation):
 
 
 def _norm(x):
-    return jnp.sqrt(jnp.dot(x, x))
+    return jnp.sqrt(forces.dot3(x, x))
 
 
 def _error_ratio(e_r, e_v, e_m, r1, v1, m1, tol):
     """max(|e_r|/|r|, |e_v|/|v|, |e_m|/m) / tol (module docstring); inf when not finite."""
     # ratios of squares, one square root: no float64 rsqrt (perf-notes)
-    err = jnp.sqrt(jnp.maximum(jnp.dot(e_r, e_r) / jnp.dot(r1, r1), jnp.dot(e_v, e_v) / jnp.dot(v1, v1)))
+    err = jnp.sqrt(
+        jnp.maximum(forces.dot3(e_r, e_r) / forces.dot3(r1, r1), forces.dot3(e_v, e_v) / forces.dot3(v1, v1))
+    )
     if e_m is not None:
         err = jnp.maximum(err, jnp.abs(e_m) / jnp.abs(m1))
     err = err / tol
@@ -342,7 +357,7 @@ def _stage_jacobians(model, params, frame, ci, r, m, ctl, perturbation, labels):
         return a, a
 
     (g_pert, a_m, a_p), a = jax.jacfwd(with_value, argnums=(0, 1, 2), has_aux=True)(r, m, p0)
-    r2 = jnp.dot(r, r)
+    r2 = forces.dot3(r, r)
     inv_r = jnp.sqrt(1.0 / r2)
     u = r * inv_r
     g_two = (mu * inv_r * inv_r * inv_r) * (3.0 * jnp.outer(u, u) - jnp.eye(3))

@@ -6,7 +6,8 @@ Layout (``docs/trajectory_file.md`` is the reference; every dataset has ``units`
                                    centre, frame = "ICRF", bodies
     /trajectory/            epoch_et_s, t_s, r_km, v_km_s, mass_kg, primary,
                             primary_index, status, t_final_s, r_final_km, v_final_km_s,
-                            mass_final_kg, primary_final, n_steps, n_rect
+                            mass_final_kg, primary_final, n_steps, n_rect, n_reject
+                            (attrs: integrator, epoch_tdb)
     /sensitivities/         (optional) t_s, stm, stm_step, par, par_step
     /provenance/            attrs + deck_text + libraries/
 
@@ -123,6 +124,8 @@ def write_trajectory_file(path: str | os.PathLike, data: TrajectoryData) -> Path
             write(g, "primary_final", data.primary_final, "none")
             write(g, "n_steps", np.int64(data.n_steps), "1", meaning="integration steps taken")
             write(g, "n_rect", np.int64(data.n_rect), "1", meaning="Encke rectifications")
+            write(g, "n_reject", np.int64(data.n_reject), "1", meaning="steps rejected by the error control")
+            set_attr(g, "integrator", data.integrator)
 
             s = data.sensitivities
             if s is not None:
@@ -220,6 +223,8 @@ def read_trajectory_file(path: str | os.PathLike, *, verify: bool = True) -> Tra
                 status=status,
                 n_steps=c.scalar("trajectory/n_steps", integer=True),
                 n_rect=c.scalar("trajectory/n_rect", integer=True),
+                n_reject=c.scalar("trajectory/n_reject", integer=True) if "n_reject" in g else 0,
+                integrator=attr_text(g, "integrator") or "",
                 centre=attr_text(f, "centre") or "",
                 title=attr_text(f, "title") or "",
                 epoch_tdb=epoch_tdb,

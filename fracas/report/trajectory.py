@@ -63,8 +63,12 @@ def summary_table(data: TrajectoryData):
     used = m0 - mf
     t.add_row("mass used (kg)", "", f"{used:.6f} ({100.0 * used / m0:.3g} %)" if m0 > 0 else f"{used:.6f}")
     t.add_row("epoch (TDB)", escape(data.epoch_tdb or f"ET {data.epoch_et_s:.3f} s"), "")
-    t.add_row("steps", "", f"{int(data.n_steps)}")
-    t.add_row("rectifications", "", f"{int(data.n_rect)}")
+    if data.integrator:
+        t.add_row("integrator", "", escape(data.integrator))
+    rejected = f" ({int(data.n_reject)} rejected)" if data.n_reject else ""
+    t.add_row("steps", "", f"{int(data.n_steps)}{rejected}")
+    if data.integrator.split(", ")[1:2] != ["cowell"]:
+        t.add_row("rectifications", "", f"{int(data.n_rect)}")
     code = int(data.status)
     style = _STATUS_STYLE.get(code, "red")
     t.add_row("status", "", f"[{style}]{code}: {escape(status_text(code))}[/{style}]")

@@ -10,8 +10,9 @@ from scipy.integrate import solve_ivp
 
 from fracas import constants as C
 from fracas.dynamics.ephemeris import build_ephemeris, calendar_to_et
-from fracas.dynamics.model import ForceModel, IntegratorSettings, StopCondition, default_params
+from fracas.dynamics.model import ForceModel, StopCondition, default_params
 from fracas.integrate.propagate import propagate
+from tests.integrate.methods import KINDS, KINDS_NO_ENCKE, integrator
 from tests.reference import cowell_rhs_factory, helio_position, helio_velocity, integrate_piecewise
 
 DAY = 86400.0
@@ -28,10 +29,12 @@ def _earth_departure():
 
 
 @pytest.mark.slow
-def test_300_day_solar_electric_cruise():
+@pytest.mark.parametrize("kind", KINDS_NO_ENCKE)
+def test_300_day_solar_electric_cruise(kind):
     """The issue's cruise case: 300 days, two thrust arcs (tangential, then 10 deg in-plane /
     5 deg out-of-plane), 10 kW at 1 AU, eta 0.65, c 30 km/s, Venus/Earth/Mars/Jupiter
-    perturbing: final position within 1 km and mass within 1 g of DOP853."""
+    perturbing: final position within 1 km and mass within 1 g of DOP853.  For the fracas and
+    cowell kinds (tests/integrate/methods.py; cowell uses our dop853 with thrust; encke left out for time)."""
     x0 = _earth_departure()
     m = ForceModel(
         bodies=BODIES,
@@ -40,7 +43,7 @@ def test_300_day_solar_electric_cruise():
         thrust=True,
         velocity_dependent=True,
         n_arcs=2,
-        integrator=IntegratorSettings(c_nom=0.05, dt_max_s=0.5 * DAY),
+        integrator=integrator(kind, thrust=True, c_nom=0.05, dt_max_s=0.5 * DAY),
     )
     p = default_params(
         m,
@@ -70,7 +73,7 @@ def test_300_day_solar_electric_cruise():
     assert 150.0 < 1000.0 - ref[6] < 250.0  # the thrust really acted (~182 kg used)
 
 
-def _mars_approach(stop, change_primary=False):
+def _mars_approach(stop, change_primary=False, kind="fracas"):
     """Start 2e6 km from Mars, 3 km/s toward a point 8000 km off its centre (Sun + Mars)."""
     bodies = ("sun", "mars")
     rm = helio_position("mars", ET0)
@@ -88,7 +91,7 @@ def _mars_approach(stop, change_primary=False):
         third_bodies=(1,),  # with primary changes the Sun acts too
         change_primary_at_soi=change_primary,
         stop=stop,
-        integrator=IntegratorSettings(c_nom=0.02, dt_max_s=3600.0),
+        integrator=integrator(kind, c_nom=0.02, dt_max_s=3600.0),
     )
     p = default_params(m)
     eph = build_ephemeris(bodies, ET0, ET0 + 30 * DAY)
@@ -103,12 +106,13 @@ def _reference_event(x0, event, t_max=30 * DAY):
     return sol.t_events[0][0], sol.y_events[0][0]
 
 
-def test_sphere_of_influence_entry_is_located():
+@pytest.mark.parametrize("kind", KINDS)
+def test_sphere_of_influence_entry_is_located(kind):
     """Stop at Mars SOI entry: the time agrees with DOP853's event location to 1e-3 s and the
     distance equals R_SOI to 1e-5 km (the event tolerance eps_t 1e-6 s x 3 km/s, plus
-    integration error), not to the nearest step."""
+    integration error), not to the nearest step.  For every kind (tests/integrate/methods.py)."""
     ib = 1
-    m, p, eph, x0 = _mars_approach(StopCondition(kind="soi_entry", body=ib))
+    m, p, eph, x0 = _mars_approach(StopCondition(kind="soi_entry", body=ib), kind=kind)
     tr = propagate(m, p, eph, ET0, x0, np.array([0.0, 30 * DAY]))
     assert int(tr.status) == 1
     soi = C.soi_radius_km("mars")
@@ -120,7 +124,8 @@ def test_sphere_of_influence_entry_is_located():
     assert np.all(np.isnan(np.asarray(tr.x[-1])))  # the requested end was never reached
 
 
-def test_closest_approach_after_change_of_primary():
+@pytest.mark.parametrize("kind", KINDS)
+def test_closest_approach_after_change_of_primary(kind):
     """Change primary to Mars at its SOI, stop at closest approach.  Reference: DOP853 of the
     same model, heliocentric (Sun + Mars) up to the SOI event, then Mars-centred with the Sun
     as third body (direct + indirect term) to the periapsis event.  Periapsis radius within
@@ -129,8 +134,8 @@ def test_closest_approach_after_change_of_primary():
 
     (A purely heliocentric reference differs by ~0.1 km: relative to the DE421 Mars, whose
     acceleration includes Jupiter and the rest, a Sun + Mars model is not closed; that is a
-    model difference, not an integration error.)"""
-    m, p, eph, x0 = _mars_approach(StopCondition(kind="closest_approach", body=1), change_primary=True)
+    model difference, not an integration error.)  For every kind (tests/integrate/methods.py)."""
+    m, p, eph, x0 = _mars_approach(StopCondition(kind="closest_approach", body=1), change_primary=True, kind=kind)
     tr = propagate(m, p, eph, ET0, x0, np.array([0.0, 30 * DAY]))
     assert int(tr.status) == 1
     assert int(tr.primary_final) == 1  # state now Mars-centred

@@ -117,7 +117,9 @@ def test_variational_stm_equals_the_ad_stm(leo_sensitivities):
     (STM) and 1e-12 (parameters) relative; asserted 1e-10 (rounding of ~160 steps of 17
     stages with cancellation in the position rows)."""
     _, _, _, (tr_a, s_a), (tr_v, s_v) = leo_sensitivities
-    np.testing.assert_array_equal(np.asarray(tr_a.x), np.asarray(tr_v.x))  # same steps, same state
+    # same steps, same state to rounding (the two programs fuse differently)
+    np.testing.assert_allclose(np.asarray(tr_a.x), np.asarray(tr_v.x), rtol=1e-12, atol=0)
+    assert int(tr_a.n_steps) == int(tr_v.n_steps)
     for a, v in ((s_a.stm, s_v.stm), (s_a.stm_step, s_v.stm_step)):
         a, v = np.asarray(a), np.asarray(v)
         assert np.max(np.abs(a - v)) <= 1e-10 * np.max(np.abs(a))
@@ -168,7 +170,9 @@ def test_collision_ends_with_a_status_not_a_hang():
 
 def test_batch_equals_single_propagations():
     """propagate_batch (vmap over lanes with their own step sequences, tolerance traced) gives
-    each lane exactly the single propagation's result (same steps: equal to rounding)."""
+    each lane the single propagation's result: the same steps, and states equal to rounding
+    grown over a day (the batched program fuses differently: measured 1.7e-9 km; asserted
+    1e-7 km, five orders below the integration error bound of these settings)."""
     m, p = _earth()
     rng = np.random.default_rng(3)
     x0s = np.tile(X_LEO, (5, 1))
@@ -177,5 +181,5 @@ def test_batch_equals_single_propagations():
     tr = propagate_batch(m, p, None, 0.0, x0s, t)
     for k in range(5):
         one = propagate(m, p, None, 0.0, x0s[k], t)
-        np.testing.assert_allclose(tr.x[k], np.asarray(one.x), rtol=1e-13, atol=1e-9)
+        np.testing.assert_allclose(tr.x[k], np.asarray(one.x), rtol=0, atol=1e-7)
         assert int(tr.n_steps[k]) == int(one.n_steps)

@@ -13,14 +13,22 @@ the derivative.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fracas.dynamics.model import ForceModel, IntegratorSettings, default_params
+from fracas.dynamics.model import ForceModel, default_params
 from fracas.integrate.propagate import finite_difference_sensitivities, propagate_with_sensitivities
+from tests.integrate.methods import KINDS_NO_ENCKE, integrator
 
 MU = 398600.4418
 X0 = np.array([7000.0, 0.0, 0.0, 0.0, 7.5, 1.0, 1000.0])
+
+
+# det Phi - 1 for dprkn12 at tol 1e-12 over 6000 s is the integration error of the STM
+# (relative local error <= tol per step, summed over the run): measured 1.1e-12 Cowell,
+# 8.3e-13 Encke (7e-14, 8e-14 at tol 1e-13); bound with a 100x margin.
+DET_BOUND_HIGH_ORDER = 1e-10
 
 
 def _col_rel_err(ad, fd):
@@ -28,12 +36,26 @@ def _col_rel_err(ad, fd):
     return np.abs(ad - fd).max(axis=0) / scale
 
 
-def leo_j2(ratio=10.0, c_nom=0.02):
-    m = ForceModel(bodies=("earth",), j2=True, integrator=IntegratorSettings(c_nom=c_nom, rect_ratio=ratio))
+def leo_j2(ratio=10.0, c_nom=0.02, kind="fracas"):
+    m = ForceModel(bodies=("earth",), j2=True, integrator=integrator(kind, c_nom=c_nom, rect_ratio=ratio))
     return m, default_params(m, mu=[MU], pole=[[0.0, 0.0, 1.0]])
 
 
-def spiral():
+def _ad_and_variational(kind, *args):
+    """propagate_with_sensitivities by AD; for Cowell also by the variational equations,
+    which must give the same derivative of the same discrete map (1e-10 relative; ~4e-13
+    measured)."""
+    tr, s = propagate_with_sensitivities(*args, method="ad")
+    if kind == "cowell":
+        _, v = propagate_with_sensitivities(*args, method="variational")
+        for a, b in ((s.stm[-1], v.stm[-1]), (s.par[-1], v.par[-1])):
+            a, b = np.asarray(a), np.asarray(b)
+            if a.size:
+                assert np.abs(a - b).max() / np.abs(a).max() < 1e-10
+    return tr, s
+
+
+def spiral(kind="fracas"):
     """Near-Earth spiral: J2, two thrust arcs (velocity frame, nuclear power so the thrust does
     not need an ephemeris), mass flow: every thrust parameter has a non-zero column."""
     m = ForceModel(
@@ -43,7 +65,7 @@ def spiral():
         velocity_dependent=True,
         power="nuclear",
         n_arcs=2,
-        integrator=IntegratorSettings(c_nom=0.02, rect_ratio=10.0),
+        integrator=integrator(kind, thrust=True, c_nom=0.02, rect_ratio=10.0),
     )
     p = default_params(
         m,
@@ -62,12 +84,15 @@ def spiral():
     return m, p
 
 
-def test_stm_and_gravity_parameters_match_finite_differences():
-    """LEO with J2 over 6000 s: every STM column and d/dmu, d/dJ2 vs central differences."""
-    m, p = leo_j2()
+@pytest.mark.parametrize("kind", KINDS_NO_ENCKE)
+def test_stm_and_gravity_parameters_match_finite_differences(kind):
+    """LEO with J2 over 6000 s: every STM column and d/dmu, d/dJ2 vs central differences.
+    For the fracas and cowell kinds (tests/integrate/methods.py; encke left out for time); for
+    Cowell the variational equations give the AD result to 1e-10 (measured 3.5e-15)."""
+    m, p = leo_j2(kind=kind)
     t_out = np.array([0.0, 6000.0])
     labels = ("mu[earth]", "j2[earth]")
-    _, s = propagate_with_sensitivities(m, p, None, 0.0, X0, t_out, labels)
+    _, s = _ad_and_variational(kind, m, p, None, 0.0, X0, t_out, labels)
     stm_fd, par_fd = finite_difference_sensitivities(m, p, None, 0.0, X0, t_out, labels)
     err_stm = _col_rel_err(np.asarray(s.stm[-1])[:, :6], stm_fd[:, :6])
     err_par = _col_rel_err(np.asarray(s.par[-1]), par_fd)
@@ -75,10 +100,22 @@ def test_stm_and_gravity_parameters_match_finite_differences():
     assert err_par.max() < 1e-6, err_par
 
 
-def test_thrust_parameters_match_finite_differences():
+_COWELL_THRUST_FD = (
+    "open: dop853 Cowell thrust-parameter columns differ from central FD by up to 2.8e-5 relative "
+    "(bias_in 1.9e-5, arc_bias_in[0] 2.8e-5, thrust_scale 7.8e-6) at tol 1e-12, 4.5e-5 at 1e-13: "
+    "not truncation; STM and mu columns agree (< 1e-6)"
+)
+
+
+@pytest.mark.parametrize(
+    "kind", ["fracas", pytest.param("cowell", marks=pytest.mark.xfail(strict=True, reason=_COWELL_THRUST_FD))]
+)
+def test_thrust_parameters_match_finite_differences(kind):
     """Every thrust parameter (overall and per-arc proportionality and pointing biases,
-    exhaust velocity, power, efficiency, switch times) and the mass column vs FD."""
-    m, p = spiral()
+    exhaust velocity, power, efficiency, switch times) and the mass column vs FD.  For the
+    fracas kind, and for cowell (our dop853, AD only: thrust has no variational path) as an
+    expected failure until the open discrepancy below is resolved."""
+    m, p = spiral(kind)
     t_out = np.array([0.0, 6000.0])
     labels = (
         "thrust_scale",
@@ -106,10 +143,20 @@ def test_thrust_parameters_match_finite_differences():
     assert np.all(np.abs(par_fd).max(axis=0) > 0)  # every column is live
 
 
-def test_ballistic_stm_is_volume_preserving():
+@pytest.mark.parametrize("kind", KINDS_NO_ENCKE)
+def test_ballistic_stm_is_volume_preserving(kind):
     """Liouville: det Phi(t, t0) = 1 for a Hamiltonian flow (no thrust).  The Nystrom map is
     not symplectic, so det deviates at truncation order: < 1e-8 at c_nom 0.01 (measured
-    ~1e-10), and the deviation shrinks with the step (>= 10x for c_nom 0.04 -> 0.02)."""
+    ~1e-10), and the deviation shrinks with the step (>= 10x for c_nom 0.04 -> 0.02).
+    The high-order kinds (dprkn12, tol 1e-12; not symplectic either) deviate by their
+    integration error of the STM: < DET_BOUND_HIGH_ORDER (see there); for Cowell the
+    variational equations give the AD STM to 1e-10."""
+    if kind != "fracas":
+        m, p = leo_j2(ratio=0.01, kind=kind)
+        _, s = _ad_and_variational(kind, m, p, None, 0.0, X0, np.array([0.0, 6000.0]))
+        dev = abs(np.linalg.det(np.asarray(s.stm[-1])[:6, :6]) - 1.0)
+        assert dev < DET_BOUND_HIGH_ORDER, dev
+        return
     devs = []
     for c in (0.04, 0.02, 0.01):
         m, p = leo_j2(ratio=0.01, c_nom=c)
@@ -119,13 +166,15 @@ def test_ballistic_stm_is_volume_preserving():
     assert devs[0] / devs[1] > 10.0, devs
 
 
+@pytest.mark.parametrize("kind", KINDS_NO_ENCKE)
 @settings(max_examples=8, deadline=None)
 @given(frac=st.floats(min_value=0.05, max_value=0.95))
-def test_stm_composition(frac):
+def test_stm_composition(kind, frac):
     """Phi(t2, t0) = Phi(t2, t1) Phi(t1, t0), each factor from a run with an extra output at
     t1 (which breaks the step sequence there): equal to integration accuracy, 1e-6 relative
-    at c_nom 0.01; the parameter matrices compose the same way."""
-    m, p = leo_j2(ratio=0.01, c_nom=0.01)
+    at c_nom 0.01; the parameter matrices compose the same way.  For the fracas and cowell kinds
+    (Cowell at tol 1e-12 through method 'auto', i.e. the variational equations)."""
+    m, p = leo_j2(ratio=0.01, c_nom=0.01, kind=kind)
     t2 = 6000.0
     t1 = frac * t2
     labels = ("j2[earth]",)

@@ -1,0 +1,462 @@
+"""High-order methods of the batch core against heyoka and scipy, in the same run, at <= 1 m.
+
+    .venv/bin/python benchmarks/bench_highorder.py            # full run (~15 min on 2 cores)
+    .venv/bin/python benchmarks/bench_highorder.py --quick    # small batches (~4 min)
+
+Every fracas row goes through the project's batch entry point
+(``fracas.integrate.batch.propagate_batch``: the propagation loop with its events, breaks,
+mass and thrust machinery in place, vmapped over lanes, chunked, sharded over host devices).
+
+Sections:
+  1. accuracy and tolerance: truth for 16 states of each case from heyoka in long double
+     (benchmarks/heyoka_cases.py); for each method the loosest tolerance of a ladder that
+     keeps every checked state within 1 m; heyoka's the same way;
+  2. throughput: props/s of each (method, formulation) on 1 and 2 host devices against
+     heyoka's ``taylor_adaptive_batch`` (one thread, SIMD batch) at its own <= 1 m tolerance;
+     steps and force evaluations per propagation;
+  3. the STM: explicit variational equations and forward-mode AD against heyoka's
+     ``var_ode_sys`` (order 1);
+  4. the 300-day cruise with thrust and planets against a scipy DOP853 loop;
+  5. lane grouping on a batch of mixed orbits, chunk sizes;
+  6. compile time per program, cold and from the persistent cache (fresh processes).
+Ratios are props/s over the baseline's props/s measured in this run (the machine is shared).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def _args():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--devices", type=int, default=2)
+    ap.add_argument("--compile-probe", default=None, help=argparse.SUPPRESS)  # internal: section 6
+    return ap.parse_args()
+
+
+ARGS = _args()
+os.environ["FRACAS_HOST_DEVICES"] = str(ARGS.devices)
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import numpy as np  # noqa: E402
+
+from fracas.dynamics.model import ForceModel, IntegratorSettings, default_params  # noqa: E402
+from fracas.integrate import highorder  # noqa: E402
+from fracas.integrate.batch import host_devices, propagate_batch  # noqa: E402
+
+DAY = 86400.0
+TARGET_M = 1.0
+TOLS = (1e-7, 3e-8, 1e-8, 3e-9, 1e-9, 3e-10, 1e-10, 3e-11, 1e-11, 3e-12, 1e-12)
+
+
+# ----------------------------------------------------------------------------- models
+def fracas_problem(case, method, formulation, tol, c_nom=None):
+    """ForceModel and Params of a heyoka_cases.Case (same constants; thrust as a nuclear source
+    of constant power with T = 2 eta P / ve, eta = 1, pointed along the velocity)."""
+    import heyoka_cases as hc
+
+    if c_nom is not None:
+        ig = IntegratorSettings(c_nom=c_nom)
+    else:
+        ig = IntegratorSettings(
+            method=method, formulation=formulation, step_control="tolerance", tolerance=tol, dt_max_s=np.inf
+        )
+    common = {"mu": [hc.MU_E], "j2": [hc.J2_E], "radius": [hc.R_E], "pole": [[0.0, 0.0, 1.0]]}
+    if case.thrust_kg_km_s2 > 0:
+        m = ForceModel(
+            bodies=("earth",),
+            j2=True,
+            thrust=True,
+            velocity_dependent=True,
+            power="nuclear",
+            n_arcs=1,
+            integrator=ig,
+        )
+        p = default_params(
+            m,
+            **common,
+            power_kw=case.thrust_kg_km_s2 * case.ve_km_s / 2e-3,
+            power_decay_s=1e30,
+            efficiency=1.0,
+            exhaust_velocity_km_s=case.ve_km_s,
+            arc_t_on=[0.0],
+            arc_t_off=[2.0 * case.t_final_s],
+        )
+    else:
+        m = ForceModel(bodies=("earth",), j2=True, integrator=ig)
+        p = default_params(m, **common)
+    return m, p
+
+
+def run_batch(m, p, x0s, t_final, devices, sens=None, repeat=2, chunk=None, group=False):
+    """(Trajectory[, Sensitivities], best seconds, first-call seconds): a warm-up call on the
+    full chunk shape (compile) and the best of ``repeat`` timed calls."""
+    t_out = np.array([0.0, t_final])
+    kw = {"devices": devices, "chunk_size": chunk, "group_lanes": group}
+    if sens is not None:
+        kw.update(with_sensitivities=True, sensitivity_method=sens)
+    t0 = time.perf_counter()
+    out = propagate_batch(m, p, None, 0.0, x0s, t_out, **kw)
+    first = time.perf_counter() - t0
+    best = np.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = propagate_batch(m, p, None, 0.0, x0s, t_out, **kw)
+        best = min(best, time.perf_counter() - t0)
+    return out, best, first
+
+
+def final_states(out):
+    tr = out if hasattr(out, "x") else out[0]  # a Trajectory, or (Trajectory, Sensitivities)
+    return tr.x[:, -1, :], tr
+
+
+# ----------------------------------------------------------------------------- output
+LINES: list[str] = []
+
+
+def emit(s=""):
+    print(s, flush=True)
+    LINES.append(s)
+
+
+def table(headers, rows, note=None):
+    cells = [list(map(str, headers))] + [[str(c) for c in r] for r in rows]
+    w = [max(len(r[i]) for r in cells) for i in range(len(headers))]
+    for k, r in enumerate(cells):
+        emit("  ".join(c.ljust(w[i]) if i == 0 else c.rjust(w[i]) for i, c in enumerate(r)))
+        if k == 0:
+            emit("  ".join("-" * x for x in w))
+    if note:
+        emit(note)
+
+
+def si(x):
+    for f, s in ((1e6, "M"), (1e3, "k")):
+        if abs(x) >= f:
+            return f"{x / f:.3g}{s}"
+    return f"{x:.3g}"
+
+
+# ----------------------------------------------------------------------- sections 1-2
+def loosest_fracas_tol(case, method, formulation, x_ref, truth_ref, devices):
+    import heyoka_cases as hc
+
+    tried = []
+    ladder = (0.05, 0.03, 0.02, 0.015, 0.01, 0.007) if method == "rkn4" else TOLS
+    for tol in ladder:
+        m, p = fracas_problem(case, method, formulation, tol, c_nom=tol if method == "rkn4" else None)
+        out = propagate_batch(m, p, None, 0.0, x_ref, np.array([0.0, case.t_final_s]), devices=devices)
+        xf, tr = final_states(out)
+        err = hc.pos_err_m(xf[:, :6], truth_ref[:, :6]) if np.all(tr.status == 0) else np.inf
+        tried.append((tol, err))
+        if err <= TARGET_M:
+            return tol, err, tried
+    return None, None, tried
+
+
+def throughput(cases, n_lanes, methods_of, devs_all):
+    import heyoka_cases as hc
+
+    results = {}
+    for name in cases:
+        case = hc.CASES[name]
+        n = n_lanes[name]
+        x0s = hc.initial_states(case, n)
+        x_ref = x0s[:16]
+        truth_ref = hc.truth(case, x_ref)
+        emit(f"\n--- {name}: {case.description}; {n:,} lanes, t = {case.t_final_s / DAY:g} d")
+        tol_h, err_h, tried_h = hc.loosest_tol(case, x_ref, truth_ref, TARGET_M)
+        hb = hc.HeyokaBatch(case, tol_h)
+        hb.run(x0s[: 2 * hb.batch])  # warm
+        final_h, steps_h, sec_h = hb.run(x0s)
+        rate_h = n / sec_h
+        rows = [
+            [
+                f"heyoka taylor_adaptive_batch (batch {hb.batch}, order {hb.order})",
+                f"{tol_h:g}",
+                f"{err_h:.3f}",
+                f"{steps_h / n:.0f}",
+                "-",
+                f"{hb.compile_s:.2f}",
+                "1 thread",
+                si(rate_h),
+                "1.00",
+            ]
+        ]
+        results[(name, "heyoka")] = {"rate": rate_h, "tol": tol_h, "err": err_h, "steps": steps_h / n}
+        for method, formulation in methods_of(case):
+            tol, err, tried = loosest_fracas_tol(case, method, formulation, x_ref, truth_ref, devs_all[:1])
+            if tol is None:
+                rows.append([f"fracas {formulation} {method}", "-", "> 1 m", "-", "-", "-", "-", "-", "-"])
+                continue
+            m, p = fracas_problem(case, method, formulation, tol, c_nom=tol if method == "rkn4" else None)
+            xs = x0s[: max(256, n // 10)] if method == "rkn4" else x0s  # today's core: a tenth of the lanes
+            n_run = xs.shape[0]
+            for nd in sorted({1, len(devs_all)}):
+                out, best, first = run_batch(m, p, xs, case.t_final_s, devs_all[:nd])
+                _, tr = final_states(out)
+                steps = float(np.mean(tr.n_steps))
+                evals = steps * highorder.stages_per_step(method)
+                rate = n_run / best
+                rows.append(
+                    [
+                        f"fracas {formulation} {method}" + (" c_nom (FRACAS)" if method == "rkn4" else ""),
+                        f"{tol:g}",
+                        f"{err:.3f}",
+                        f"{steps:.0f} (max {int(np.max(tr.n_steps))}, rej {np.mean(tr.n_reject):.0f})",
+                        f"{evals:.0f}",
+                        f"{first:.1f}",
+                        f"{nd} device{'s' if nd > 1 else ''}",
+                        si(rate),
+                        f"{rate / rate_h:.2f}",
+                    ]
+                )
+                results[(name, method, formulation, nd)] = {
+                    "rate": rate,
+                    "ratio": rate / rate_h,
+                    "tol": tol,
+                    "err": err,
+                }
+        table(
+            ["method", "tol", "err m", "steps/prop", "f evals", "first s", "devices", "props/s", "÷ heyoka"],
+            rows,
+            f"heyoka tolerances tried: {', '.join(f'{t:g}: {e:.2g} m' for t, e in tried_h)}",
+        )
+    return results
+
+
+# ------------------------------------------------------------------------- section 3
+def stm_section(n, devs_all):
+    import heyoka_cases as hc
+
+    out_rows = []
+    for name, variants in (
+        ("leo_j2", (("dprkn12", "cowell", "variational"), ("dprkn12", "cowell", "ad"))),
+        ("leo_thrust", (("dop853", "cowell", "ad"),)),
+    ):
+        case = hc.CASES[name]
+        x0s = hc.initial_states(case, n)
+        x_ref = x0s[:16]
+        truth_ref = hc.truth(case, x_ref)
+        tol_h, _, _ = hc.loosest_tol(case, x_ref, truth_ref, TARGET_M)
+        hv = hc.HeyokaBatch(case, tol_h, var=True)
+        hv.run(x0s[: 2 * hv.batch])
+        final_hv, _, sec_hv = hv.run(x0s)
+        rate_hv = n / sec_hv
+        nx = case.nx
+        phi_h = hc.stm_of(final_hv, nx)
+        out_rows.append([f"{name}: heyoka var_ode_sys (tol {tol_h:g})", "-", "-", "1 thread", si(rate_hv), "1.00", "-"])
+        for method, formulation, sens in variants:
+            tol, _, _ = loosest_fracas_tol(case, method, formulation, x_ref, truth_ref, devs_all[:1])
+            m, p = fracas_problem(case, method, formulation, tol)
+            for nd in sorted({1, len(devs_all)}):
+                out, best, first = run_batch(m, p, x0s, case.t_final_s, devs_all[:nd], sens=sens)
+                phi_f = out[1].stm[:, -1, :nx, :nx]
+                rel = np.max(np.linalg.norm(phi_f - phi_h, axis=(1, 2)) / np.linalg.norm(phi_h, axis=(1, 2)))
+                rate = n / best
+                out_rows.append(
+                    [
+                        f"{name}: fracas {formulation} {method} STM by {sens}",
+                        f"{tol:g}",
+                        f"{first:.1f}",
+                        f"{nd} device{'s' if nd > 1 else ''}",
+                        si(rate),
+                        f"{rate / rate_hv:.2f}",
+                        f"{rel:.1e}",
+                    ]
+                )
+    table(
+        ["method", "tol", "first s", "devices", "props/s", "÷ heyoka var", "|dPhi|/|Phi| vs heyoka"],
+        out_rows,
+        f"{n:,} lanes; fracas gives the 7x7 STM (6x6 block compared); heyoka 6x6 (7x7 with thrust).",
+    )
+
+
+# ------------------------------------------------------------------------- section 4
+def cruise_section(n, n_scipy, devs_all):
+    import cruise_case as cc
+
+    x0s = cc.cruise_states(n)
+    rhs = cc._cruise_rhs()
+    t0 = time.perf_counter()
+    ref = np.array([cc.dop853(rhs, x, cc.CR_BREAKS, 1e-13, 1e-12)[0] for x in x0s[:n_scipy]])
+    t_ref = (time.perf_counter() - t0) / n_scipy
+    rows = []
+    scipy_rate = None
+    for tol in (1e-8, 1e-9, 1e-10, 1e-11):
+        t0 = time.perf_counter()
+        sc = [cc.dop853(rhs, x, cc.CR_BREAKS, tol, tol * 1e3) for x in x0s[:n_scipy]]
+        sec = (time.perf_counter() - t0) / n_scipy
+        err = max(np.linalg.norm(s[0][:3] - r[:3]) for s, r in zip(sc, ref))
+        if err * 1e3 <= TARGET_M:
+            scipy_rate = 1.0 / sec
+            rows.append([f"scipy DOP853 loop (rtol {tol:g})", f"{err * 1e3:.3f}", "-", "-", f"{scipy_rate:.2f}", "1"])
+            break
+    for method, formulation in (("dop853", "cowell"), ("dop853", "encke")):
+        for tol in (1e-10, 1e-11, 1e-12, 1e-13):
+            m = cc.cruise_model(0.5)
+            import dataclasses
+
+            m = dataclasses.replace(
+                m,
+                integrator=IntegratorSettings(
+                    method=method, formulation=formulation, step_control="tolerance", tolerance=tol, dt_max_s=np.inf
+                ),
+            )
+            out = propagate_batch(m, cc.CR_P, cc.CR_EPH, cc.CR_ET0, x0s[:n_scipy], cc.CR_T, devices=devs_all[:1])
+            err = np.max(np.linalg.norm(out.x[:, -1, :3] - ref[:, :3], axis=1))
+            dm = np.max(np.abs(out.x[:, -1, 6] - ref[:, 6]))
+            if err * 1e3 <= TARGET_M:
+                break
+        for nd in sorted({1, len(devs_all)}):
+            t_out = cc.CR_T
+            kw = {"devices": devs_all[:nd]}
+            propagate_batch(m, cc.CR_P, cc.CR_EPH, cc.CR_ET0, x0s, t_out, **kw)
+            t0 = time.perf_counter()
+            out = propagate_batch(m, cc.CR_P, cc.CR_EPH, cc.CR_ET0, x0s, t_out, **kw)
+            sec = time.perf_counter() - t0
+            rate = n / sec
+            rows.append(
+                [
+                    f"fracas {formulation} {method} (tol {tol:g}), {nd} dev",
+                    f"{err * 1e3:.3f}",
+                    f"{dm * 1e3:.2g}",
+                    f"{np.mean(out.n_steps):.0f}",
+                    si(rate),
+                    f"{rate / scipy_rate:.0f}" if scipy_rate else "-",
+                ]
+            )
+    table(
+        ["method", "err m", "mass err g", "steps", "props/s", "÷ scipy"],
+        rows,
+        f"{n} lanes; reference scipy DOP853 rtol 1e-13 ({t_ref:.1f} s each) on {n_scipy} lanes, two-part JD "
+        "ephemeris (benchmarks/cruise_case.py).",
+    )
+
+
+# ------------------------------------------------------------------------- section 5
+def grouping_section(n, devs_all):
+    import heyoka_cases as hc
+
+    rng = np.random.default_rng(5)
+    base = hc.initial_states(hc.CASES["leo_j2"], n)
+    ecc = hc.initial_states(hc.CASES["eccentric"], n)
+    pick = rng.random(n) < 0.3  # 30 % eccentric lanes, randomly interleaved
+    x0s = np.where(pick[:, None], ecc, base)
+    m, p = fracas_problem(hc.CASES["leo_j2"], "dprkn12", "cowell", 1e-9)
+    rows = []
+    for group in (False, True):
+        out, best, _ = run_batch(m, p, x0s, DAY, devs_all[:1], group=group, repeat=1)
+        rows.append([f"group_lanes={group}", f"{np.mean(out.n_steps):.0f}", si(n / best)])
+    for chunk in (256, 512, 1024, 2048, 4096):
+        out, best, _ = run_batch(m, p, base, DAY, devs_all[:1], chunk=chunk, repeat=1)
+        rows.append([f"LEO, chunk {chunk}", f"{np.mean(out.n_steps):.0f}", si(n / best)])
+    table(["batch", "mean steps", "props/s"], rows, f"{n:,} lanes, DPRKN12 Cowell tol 1e-9, 1 device.")
+
+
+# ------------------------------------------------------------------------- section 6
+PROBES = {
+    "cowell_dprkn12": ("leo_j2", "dprkn12", "cowell", None),
+    "cowell_dop853_thrust": ("leo_thrust", "dop853", "cowell", None),
+    "encke_dprkn12": ("leo_j2", "dprkn12", "encke", None),
+    "cowell_dprkn12_stm": ("leo_j2", "dprkn12", "cowell", "variational"),
+    "encke_rkn4_fracas": ("leo_j2", "rkn4", "encke", None),
+}
+
+
+def compile_probe(key):
+    """Child process: time the first batch call (compile or cache load) of one program."""
+    import heyoka_cases as hc
+
+    name, method, formulation, sens = PROBES[key]
+    case = hc.CASES[name]
+    if method == "rkn4":
+        m, p = fracas_problem(case, None, None, None, c_nom=0.3)
+    else:
+        m, p = fracas_problem(case, method, formulation, 1e-9)
+    x0s = hc.initial_states(case, 64)
+    kw = {"devices": host_devices()[:1]}
+    if sens:
+        kw.update(with_sensitivities=True, sensitivity_method=sens)
+    t0 = time.perf_counter()
+    propagate_batch(m, p, None, 0.0, x0s, np.array([0.0, 3600.0]), **kw)
+    print(json.dumps({"first_s": time.perf_counter() - t0}))
+
+
+def compile_section():
+    cache = tempfile.mkdtemp(prefix="fracas-bench-cache-")
+    rows = []
+    for key in PROBES:
+        times = []
+        for _ in range(2):  # cold, then from the persistent cache
+            env = dict(os.environ, FRACAS_CACHE_DIR=cache)
+            t0 = time.perf_counter()
+            res = subprocess.run(
+                [sys.executable, __file__, "--compile-probe", key, "--devices", "1"],
+                env=env,
+                capture_output=True,
+                text=True,
+                check=True,
+            )
+            wall = time.perf_counter() - t0
+            times.append((json.loads(res.stdout.strip().splitlines()[-1])["first_s"], wall))
+        rows.append([key, f"{times[0][0]:.1f}", f"{times[1][0]:.2f}", f"{times[0][1]:.1f}", f"{times[1][1]:.1f}"])
+    table(
+        ["program", "first call cold s", "from cache s", "process cold s", "process cached s"],
+        rows,
+        "Fresh processes with an empty, then the filled, persistent cache ($FRACAS_CACHE_DIR); 64 lanes.",
+    )
+
+
+def main():
+    if ARGS.compile_probe:
+        compile_probe(ARGS.compile_probe)
+        return
+    import platform
+
+    import heyoka as hy
+    import jax
+
+    devs = host_devices()
+    quick = ARGS.quick
+    emit(f"# benchmarks/bench_highorder.py{' --quick' if quick else ''}, {time.strftime('%Y-%m-%d %H:%M')}")
+    emit(
+        f"# jax {jax.__version__}, heyoka {hy.__version__}, {os.cpu_count()} CPUs ({platform.machine()}), "
+        f"{len(devs)} host devices; load {os.getloadavg()[0]:.2f}"
+    )
+    emit("\n=== 1-2. Throughput at <= 1 m against heyoka (truth: heyoka long double)")
+    n_big = 2000 if quick else 10_000
+    n_small = 1000 if quick else 4000
+    n_lanes = {"leo_j2": n_big, "eccentric": n_small, "leo_thrust": n_small, "spiral": 400 if quick else 1000}
+
+    def methods_of(case):
+        if case.thrust_kg_km_s2 > 0:
+            return (("dop853", "cowell"), ("dop853", "encke"))
+        rows = (("dprkn12", "cowell"), ("dprkn8", "cowell"), ("dop853", "cowell"), ("dprkn12", "encke"))
+        return rows + ((("rkn4", "encke"),) if case.name == "leo_j2" else ())
+
+    cases = ("leo_j2", "leo_thrust", "eccentric", "spiral")
+    throughput(cases, n_lanes, methods_of, devs)
+    emit("\n=== 3. STM (explicit variational equations / AD) against heyoka var_ode_sys")
+    stm_section(500 if quick else 2000, devs)
+    emit("\n=== 4. 300-day cruise, thrust and planets, against a scipy DOP853 loop")
+    cruise_section(64 if quick else 256, 2, devs)
+    emit("\n=== 5. Lane grouping and chunk size")
+    grouping_section(2048 if quick else 8192, devs)
+    emit("\n=== 6. Compile time per program")
+    compile_section()
+
+
+if __name__ == "__main__":
+    main()

@@ -100,21 +100,17 @@ def test_stm_and_gravity_parameters_match_finite_differences(kind):
     assert err_par.max() < 1e-6, err_par
 
 
-_COWELL_THRUST_FD = (
-    "open: dop853 Cowell thrust-parameter columns differ from central FD by up to 2.8e-5 relative "
-    "(bias_in 1.9e-5, arc_bias_in[0] 2.8e-5, thrust_scale 7.8e-6) at tol 1e-12, 4.5e-5 at 1e-13: "
-    "not truncation; STM and mu columns agree (< 1e-6)"
-)
-
-
-@pytest.mark.parametrize(
-    "kind", ["fracas", pytest.param("cowell", marks=pytest.mark.xfail(strict=True, reason=_COWELL_THRUST_FD))]
-)
+@pytest.mark.parametrize("kind", ["fracas", "cowell"])
 def test_thrust_parameters_match_finite_differences(kind):
     """Every thrust parameter (overall and per-arc proportionality and pointing biases,
-    exhaust velocity, power, efficiency, switch times) and the mass column vs FD.  For the
-    fracas kind, and for cowell (our dop853, AD only: thrust has no variational path) as an
-    expected failure until the open discrepancy below is resolved."""
+    exhaust velocity, power, efficiency, switch times) and the mass column vs FD, for the
+    fracas kind and for cowell (DOP853, AD only: thrust has no variational path).
+
+    For DOP853 the proportionality and pointing columns take 1e-4 steps, not 1e-6: at 1e-6
+    the perturbation moves the final state by only ~1e-5 km, and the runs' rounding
+    (~1e-9 km, different stage arithmetic from RKN4) left 1e-5 .. 5e-5 relative noise in the
+    difference whatever the step control (tolerance or c_nom); at 1e-4 the columns agree to
+    5e-8 .. 5e-7 (truncation h^2 ~ 1e-8 relative)."""
     m, p = spiral(kind)
     t_out = np.array([0.0, 6000.0])
     labels = (
@@ -134,7 +130,8 @@ def test_thrust_parameters_match_finite_differences(kind):
     _, s = propagate_with_sensitivities(m, p, None, 0.0, X0, t_out, labels)
     # switch times: 1 s steps; the FD error of these columns is roundoff-bound (~1e-9 km / h,
     # measured 5e-8 relative at h = 1 s, 1.3e-6 at 0.01 s), the h^2 truncation is ~1e-10
-    steps = [1e-6, 1e-6, 1e-6, 1e-5, 1e-5, 1e-6, 1e-6, 1e-6, 1e-6, 1.0, 1.0, 1e-1]
+    small = 1e-6 if kind == "fracas" else 1e-4
+    steps = [small, small, small, 1e-5, 1e-5, 1e-6, small, small, small, 1.0, 1.0, 1e-1]
     stm_fd, par_fd = finite_difference_sensitivities(m, p, None, 0.0, X0, t_out, labels, param_steps=steps)
     err_stm = _col_rel_err(np.asarray(s.stm[-1]), stm_fd)
     err_par = _col_rel_err(np.asarray(s.par[-1]), par_fd)

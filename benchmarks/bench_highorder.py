@@ -419,6 +419,68 @@ def compile_section():
     )
 
 
+# ------------------------------------------------------------------------- section 7
+def ceiling_section(measured_rate_1dev, steps_per_prop):
+    """What this CPU allows for a DPRKN12 LEO + J2 propagation, from rates measured here in
+    XLA (not from data sheets): lane-divisions+square-roots and lane-FMAs per second on one
+    core, against the counts one propagation needs."""
+    import jax
+    import jax.numpy as jnp
+
+    from fracas.integrate.tableaux import DPRKN12 as tab
+
+    n, k = 1024, 2000
+    x0 = jnp.linspace(1.0, 2.0, n)
+
+    @jax.jit
+    def divsqrt(x):
+        return jax.lax.fori_loop(0, k, lambda i, y: jnp.sqrt(1.0 / y) + 1.0, x)
+
+    @jax.jit
+    def fma(x):
+        def body(i, ys):
+            return tuple(y * 0.999 + 0.001 for y in ys)  # 8 independent chains: throughput, not latency
+
+        return sum(jax.lax.fori_loop(0, k, body, tuple(x + j for j in range(8))))
+
+    rates = {}
+    for name, f, ops in (("div+sqrt", divsqrt, 1), ("fma", fma, 8)):
+        f(x0).block_until_ready()
+        best = np.inf
+        for _ in range(3):
+            t0 = time.perf_counter()
+            f(x0).block_until_ready()
+            best = min(best, time.perf_counter() - t0)
+        rates[name] = n * k * ops / best  # lane-operations per second (one core)
+    nnz = lambda a: int(np.count_nonzero(a))  # noqa: E731
+    stages = highorder.stages_per_step("dprkn12")
+    couple = sum(nnz(tab.a_bar[i, :i]) for i in range(tab.stages))
+    fma_step = 3 * (couple + 2 * tab.stages + nnz(tab.bbar) + nnz(tab.b) + nnz(tab.ebar) + nnz(tab.e))
+    fma_step += stages * 12 + 30  # central + J2 per stage (~12 FMA-equivalents), error norm and control
+    div_step = stages + 4  # one division and one square root per stage; error norm, control
+    per_prop_div = div_step * steps_per_prop
+    per_prop_fma = fma_step * steps_per_prop
+    ceil_div = rates["div+sqrt"] / per_prop_div
+    ceil_fma = rates["fma"] / per_prop_fma
+    ceil = min(ceil_div, ceil_fma)
+    table(
+        ["quantity", "value"],
+        [
+            ["lane div+sqrt pairs/s, one core (XLA, measured)", si(rates["div+sqrt"])],
+            ["lane FMAs/s, one core (XLA, measured)", si(rates["fma"])],
+            [f"per propagation ({steps_per_prop:.0f} steps): div+sqrt pairs", f"{per_prop_div:.0f}"],
+            ["per propagation: FMAs (tableau couplings, weights, forces)", f"{per_prop_fma:.0f}"],
+            ["ceiling from the divider, props/s per core", si(ceil_div)],
+            ["ceiling from the FMA ports, props/s per core", si(ceil_fma)],
+            ["two cores (x2)", si(2 * ceil)],
+            ["measured, one device", si(measured_rate_1dev)],
+            ["measured / one-core ceiling", f"{measured_rate_1dev / ceil:.0%}"],
+        ],
+        "Counts: DPRKN12's nonzero couplings and weights (3 components each), 12 FMA-equivalents per\n"
+        "central + J2 evaluation, one division and one square root per stage; rates measured here.",
+    )
+
+
 def main():
     if ARGS.compile_probe:
         compile_probe(ARGS.compile_probe)
@@ -447,7 +509,7 @@ def main():
         return rows + ((("rkn4", "encke"),) if case.name == "leo_j2" else ())
 
     cases = ("leo_j2", "leo_thrust", "eccentric", "spiral")
-    throughput(cases, n_lanes, methods_of, devs)
+    res = throughput(cases, n_lanes, methods_of, devs)
     emit("\n=== 3. STM (explicit variational equations / AD) against heyoka var_ode_sys")
     stm_section(500 if quick else 2000, devs)
     emit("\n=== 4. 300-day cruise, thrust and planets, against a scipy DOP853 loop")
@@ -456,6 +518,10 @@ def main():
     grouping_section(2048 if quick else 8192, devs)
     emit("\n=== 6. Compile time per program")
     compile_section()
+    emit("\n=== 7. The ceiling on this CPU (DPRKN12 Cowell, LEO + J2)")
+    best = res.get(("leo_j2", "dprkn12", "cowell", 1))
+    if best:
+        ceiling_section(best["rate"], best["steps"])
 
 
 if __name__ == "__main__":

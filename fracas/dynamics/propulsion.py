@@ -39,11 +39,17 @@ def thrust_magnitude(power, efficiency, exhaust_velocity_km_s):
 
 def velocity_frame(r, v):
     """EP's rotation matrix [v_hat, (h x v)_hat, h_hat] (columns), h = r x v (FRACAS EP)."""
-    h = jnp.cross(r, v)
-    x = v / jnp.linalg.norm(v)
-    z = h / jnp.linalg.norm(h)
-    y = jnp.cross(z, x)
+    x, y, z = _frame_axes(r, v)
     return jnp.stack([x, y, z], axis=1)
+
+
+def _frame_axes(r, v):
+    """The three axes of :func:`velocity_frame` (unit vectors by sqrt(1/|.|^2): no float64
+    rsqrt, which XLA CPU does not vectorise)."""
+    h = jnp.cross(r, v)
+    x = v * jnp.sqrt(1.0 / dot3(v, v))
+    z = h * jnp.sqrt(1.0 / dot3(h, h))
+    return x, jnp.cross(z, x), z
 
 
 def angles_to_unit(alpha, beta):
@@ -55,5 +61,7 @@ def angles_to_unit(alpha, beta):
 def thrust_direction(r, v, alpha, beta, inertial):
     """Unit thrust vector in the inertial frame; ``inertial`` (0/1 float) selects RA/Dec pointing."""
     u_local = angles_to_unit(alpha, beta)
-    u_vel = velocity_frame(r, v) @ u_local
+    x, y, z = _frame_axes(r, v)
+    # the frame applied as a sum of axes, not a matrix product (a batched dot_general under vmap)
+    u_vel = x * u_local[0] + y * u_local[1] + z * u_local[2]
     return jnp.where(inertial > 0.5, u_local, u_vel)

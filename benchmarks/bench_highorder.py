@@ -294,12 +294,12 @@ def cruise_section(n, n_scipy, devs_all):
     t_ref = (time.perf_counter() - t0) / n_scipy
     rows = []
     scipy_rate = None
-    for tol in (1e-8, 1e-9, 1e-10, 1e-11):
+    for tol in (1e-10, 1e-11, 1e-12, 1e-13):
         t0 = time.perf_counter()
         sc = [cc.dop853(rhs, x, cc.CR_BREAKS, tol, tol * 1e3) for x in x0s[:n_scipy]]
         sec = (time.perf_counter() - t0) / n_scipy
         err = max(np.linalg.norm(s[0][:3] - r[:3]) for s, r in zip(sc, ref))
-        if err * 1e3 <= TARGET_M:
+        if err * 1e3 <= TARGET_M or tol == 1e-13:  # 1e-13: the reference itself (error 0 by definition)
             scipy_rate = 1.0 / sec
             rows.append([f"scipy DOP853 loop (rtol {tol:g})", f"{err * 1e3:.3f}", "-", "-", f"{scipy_rate:.2f}", "1"])
             break
@@ -351,9 +351,11 @@ def grouping_section(n, devs_all):
 
     rng = np.random.default_rng(5)
     base = hc.initial_states(hc.CASES["leo_j2"], n)
-    ecc = hc.initial_states(hc.CASES["eccentric"], n)
-    pick = rng.random(n) < 0.3  # 30 % eccentric lanes, randomly interleaved
-    x0s = np.where(pick[:, None], ecc, base)
+    high = base.copy()  # the same orbits scaled to a = 26,600 km (12 h): ~7x fewer steps per day
+    high[:, :3] *= 3.8
+    high[:, 3:6] /= np.sqrt(3.8)
+    pick = rng.random(n) < 0.5  # half and half, randomly interleaved
+    x0s = np.where(pick[:, None], high, base)
     m, p = fracas_problem(hc.CASES["leo_j2"], "dprkn12", "cowell", 1e-9)
     rows = []
     for group in (False, True):
@@ -362,7 +364,11 @@ def grouping_section(n, devs_all):
     for chunk in (256, 512, 1024, 2048, 4096):
         out, best, _ = run_batch(m, p, base, DAY, devs_all[:1], chunk=chunk, repeat=1)
         rows.append([f"LEO, chunk {chunk}", f"{np.mean(out.n_steps):.0f}", si(n / best)])
-    table(["batch", "mean steps", "props/s"], rows, f"{n:,} lanes, DPRKN12 Cowell tol 1e-9, 1 device.")
+    table(
+        ["batch", "mean steps", "props/s"],
+        rows,
+        f"{n:,} lanes, DPRKN12 Cowell tol 1e-9, 1 device; grouping rows: LEO and 12 h orbits interleaved 50/50.",
+    )
 
 
 # ------------------------------------------------------------------------- section 6

@@ -278,22 +278,33 @@ def step(model, params, ephem, epoch_et, c, dt, ctl, tol, *, perturbation, body_
             e_q = (h * h) * _lincomb(tab.ebar, ks)
             e_p = h * _lincomb(tab.e, ks)
     else:
-        y = jnp.concatenate([q, p, m[None]])
-
-        def f(ci, yi):
-            k, md = _accel(frame, ci, yi[:3], yi[3:6], yi[6], ctl, perturbation)
-            return jnp.concatenate([yi[3:6], k, jnp.reshape(md, (1,))])
-
-        ks = []
+        # the stages of (q, p, m) kept as three arrays (no concatenation per stage: XLA CPU
+        # copies); k_q of a stage is its velocity p_i, k_p its acceleration, k_m its mass flow
+        varying_mass = model.thrust
+        kq, kp, km = [], [], []
         for i in range(tab.stages):
-            s = _lincomb(tab.a[i, :i], ks)
-            yi = y if s is None else y + h * s
-            ks.append(_materialise(f(float(tab.c[i]), yi)))
-        y1 = y + h * _lincomb(tab.b, ks)
-        ks.append(f(1.0, y1))
-        e5 = h * _lincomb(tab.e, ks)
-        e3 = h * _lincomb(tab.e_aux, ks)
-        q1, p1, m1 = y1[:3], y1[3:6], y1[6]
+            row = tab.a[i, :i]
+            sq = _lincomb(row, kq)
+            qi = q if sq is None else q + h * sq
+            sp = _lincomb(row, kp)
+            pi = p if sp is None else p + h * sp
+            mi = m
+            if varying_mass and sp is not None:
+                mi = m + h * _lincomb(row, km)
+            k, md = _accel(frame, float(tab.c[i]), qi, pi, mi, ctl, perturbation)
+            kq.append(pi)
+            kp.append(_materialise(k))
+            km.append(md)
+        q1 = q + h * _lincomb(tab.b, kq)
+        p1 = p + h * _lincomb(tab.b, kp)
+        m1 = m + h * _lincomb(tab.b, km) if varying_mass else m
+        k_end, md_end = _accel(frame, 1.0, q1, p1, m1, ctl, perturbation)
+        kq.append(p1)
+        kp.append(k_end)
+        km.append(md_end)
+        e5 = [h * _lincomb(tab.e, kq), h * _lincomb(tab.e, kp), h * _lincomb(tab.e, km) if varying_mass else None]
+        e3 = [h * _lincomb(tab.e_aux, kq), h * _lincomb(tab.e_aux, kp)]
+        e3.append(h * _lincomb(tab.e_aux, km) if varying_mass else None)
     if frame.encke:
         rc1, vc1 = frame.conic(1.0)
         r1, v1 = rc1 + q1, vc1 + p1
@@ -307,8 +318,8 @@ def step(model, params, ephem, epoch_et, c, dt, ctl, tol, *, perturbation, body_
             err = _error_ratio(e_q, e_p, None, r1, v1, m1, tol)
     else:
         # dop853.f: err = err5^2 / sqrt(err5^2 + 0.01 err3^2), per scaled component
-        s5 = _error_ratio(e5[:3], e5[3:6], e5[6] if model.thrust else None, r1, v1, m1, 1.0)
-        s3 = _error_ratio(e3[:3], e3[3:6], e3[6] if model.thrust else None, r1, v1, m1, 1.0)
+        s5 = _error_ratio(e5[0], e5[1], e5[2], r1, v1, m1, 1.0)
+        s3 = _error_ratio(e3[0], e3[1], e3[2], r1, v1, m1, 1.0)
         den = jnp.sqrt(s5 * s5 + 0.01 * s3 * s3)
         err = jnp.where(den > 0, s5 * s5 / jnp.where(den > 0, den, 1.0), 0.0) / tol
         err = jnp.where(jnp.isfinite(err), err, jnp.inf)
@@ -334,34 +345,59 @@ def variational_supported(model) -> bool:
 
 def _stage_jacobians(model, params, frame, ci, r, m, ctl, perturbation, labels):
     """Acceleration a (3,) at stage node ci and its derivatives: G = da/dr (3, 3), a_m = da/dm
-    (3,), a_p = da/dp (3, np).  The two-body part of G is analytic,
-    mu/r^3 (3 r_hat r_hat^T - I) (the gravity gradient, FRACAS DERY's G); the perturbations
-    (J2, third bodies, SRP) and every parameter column are by forward-mode AD."""
-    from fracas.dynamics.parameters import get_values, set_values
-
+    (3,) or None (no force), a_p = da/dp (3, np) or None.  The two-body part of G is analytic,
+    mu/r^3 (3 r_hat r_hat^T - I) (the gravity gradient, FRACAS DERY's G), as is a_m =
+    -force/m^2; the perturbations (J2, third bodies, SRP) are differentiated by forward-mode
+    AD in r, and every parameter column by AD in the parameter."""
     c = frame.c
     t = c.t + ci * frame.h
-    p0 = get_values(params, labels, model)
     mu = frame.mu
+    zero_v = jnp.zeros(3)
+    pos, _ = frame.bodies(ci)
+    has_force = model.srp or model.thrust
+    a, _ = _accel(frame, ci, r, zero_v, m, ctl, perturbation)  # the state path's own value
 
-    def acc_fn(rr, mm, pp):
-        prm = set_values(params, labels, pp, model) if labels else params
-        pos, _ = frame.body_states(model, prm, frame.ephem, frame.epoch_et + t) if labels else frame.bodies(ci)
-        a_free, force, _ = perturbation(model, prm, t, rr, jnp.zeros(3), frame.primary, pos, ctl)
-        # the two-body term enters AD only through the parameters (its r-derivative is analytic)
-        two_body = forces.point_mass_accel(jax.lax.stop_gradient(rr), prm.mu[frame.primary])
-        return two_body + a_free + force / mm
+    def pert(rr):
+        a_free, force, _ = perturbation(model, params, t, rr, zero_v, frame.primary, pos, ctl)
+        return a_free + force / m if has_force else a_free
 
-    def with_value(rr, mm, pp):
-        a = acc_fn(rr, mm, pp)
-        return a, a
+    has_pert = model.j2 or bool(encke_acting_bodies(model)) or has_force
+    g = jax.jacfwd(pert)(r) if has_pert else jnp.zeros((3, 3))
+    inv_rr = 1.0 / forces.dot3(r, r)
+    inv_r = jnp.sqrt(inv_rr)
+    k3 = mu * inv_rr * inv_r
+    # 3 mu r r^T / r^5 - mu / r^3 I, as broadcasts (no batched dot_general under vmap)
+    g = g + (3.0 * k3 * inv_rr) * (r[:, None] * r[None, :]) - k3 * jnp.eye(3)
+    a_m = None
+    if has_force:
+        _, force, _ = perturbation(model, params, t, r, zero_v, frame.primary, pos, ctl)
+        a_m = -force / (m * m)
+    a_p = None
+    if labels:
+        from fracas.dynamics.parameters import get_values, set_values
 
-    (g_pert, a_m, a_p), a = jax.jacfwd(with_value, argnums=(0, 1, 2), has_aux=True)(r, m, p0)
-    r2 = forces.dot3(r, r)
-    inv_r = jnp.sqrt(1.0 / r2)
-    u = r * inv_r
-    g_two = (mu * inv_r * inv_r * inv_r) * (3.0 * jnp.outer(u, u) - jnp.eye(3))
-    return a, g_two + g_pert, a_m, jnp.reshape(a_p, (3, len(labels)))
+        def acc_p(pp):
+            prm = set_values(params, labels, pp, model)
+            pos_p, _ = frame.body_states(model, prm, frame.ephem, frame.epoch_et + t)
+            a_free, force, _ = perturbation(model, prm, t, r, zero_v, frame.primary, pos_p, ctl)
+            return forces.point_mass_accel(r, prm.mu[frame.primary]) + a_free + force / m
+
+        a_p = jnp.reshape(jax.jacfwd(acc_p)(get_values(params, labels, model)), (3, len(labels)))
+    return a, g, a_m, a_p
+
+
+def encke_acting_bodies(model):
+    """Third bodies acting on the spacecraft (``encke.acting_third_bodies``, restated here to
+    keep this module below the loop in the import order)."""
+    if model.change_primary_at_soi:
+        return tuple(range(len(model.bodies)))
+    return tuple(model.third_bodies)
+
+
+def _matmul3(g, q):
+    """g (3, 3) @ q (3, n) as three broadcast products (a batched dot_general under vmap runs
+    as a separate, unvectorised kernel on XLA CPU)."""
+    return g[:, 0:1] * q[0:1, :] + g[:, 1:2] * q[1:2, :] + g[:, 2:3] * q[2:3, :]
 
 
 def _variational_rkn(model, params, frame, tab, c, dt, ctl, tol, perturbation, labels):
@@ -379,7 +415,6 @@ def _variational_rkn(model, params, frame, tab, c, dt, ctl, tol, perturbation, l
     r, v, m = c.rc + c.delta, c.vc + c.nu, c.m
     phi = c.phi
     q_mat, p_mat, m_row = phi[0:3], phi[3:6], phi[6]
-    sel = jnp.concatenate([jnp.zeros((n_p, 7)), jnp.eye(n_p)], axis=1) if n_p else None
     dup = _duplicates(tab)
     ks, kms = [], []
     for i in range(tab.stages):
@@ -395,11 +430,13 @@ def _variational_rkn(model, params, frame, tab, c, dt, ctl, tol, perturbation, l
             ri = ri + (h * h) * s
             qi = qi + (h * h) * _lincomb(tab.a_bar[i, :i], kms)
         a, g, a_m, a_p = _stage_jacobians(model, params, frame, ci, ri, m, ctl, perturbation, labels)
-        km = g @ qi + jnp.outer(a_m, m_row)
+        km = _matmul3(g, qi)
+        if a_m is not None:
+            km = km + a_m[:, None] * m_row[None, :]
         if n_p:
-            km = km + a_p @ sel
-        ks.append(a)
-        kms.append(km)
+            km = km + jnp.concatenate([jnp.zeros((3, 7)), a_p], axis=1)
+        ks.append(_materialise(a))
+        kms.append(_materialise(km))
     r1 = r + h * v + (h * h) * _lincomb(tab.bbar, ks)
     v1 = v + h * _lincomb(tab.b, ks)
     q1 = q_mat + h * p_mat + (h * h) * _lincomb(tab.bbar, kms)

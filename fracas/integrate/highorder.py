@@ -39,11 +39,11 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from fracas import _jax  # noqa: F401
 from fracas.dynamics import forces
 from fracas.dynamics.kepler import kepler_fg, predict_universal_anomaly
+from fracas.integrate import rkn as _rkn
 from fracas.integrate.tableaux import DOP853, DPRKN8, DPRKN12, RKN4, NystromTableau, RungeKuttaTableau
 
 __all__ = [
@@ -91,27 +91,9 @@ def stages_per_step(method: str) -> int:
     return sum(1 for d in _duplicates(tab) if d is None)
 
 
-def _lincomb(coeffs, ks):
-    out = None
-    for cj, kj in zip(coeffs, ks):
-        cj = float(cj)
-        if cj == 0.0:
-            continue
-        term = cj * kj
-        out = term if out is None else out + term
-    return out
-
-
-def _duplicates(tab: NystromTableau):
-    dup = []
-    for i in range(tab.stages):
-        found = None
-        for j in range(i):
-            if tab.c[i] == tab.c[j] and np.array_equal(tab.a_bar[i], tab.a_bar[j]):
-                found = j
-                break
-        dup.append(found)
-    return dup
+# the tableau helpers of the pure kernels (fracas.integrate.rkn): one definition
+_lincomb = _rkn._lincomb
+_duplicates = _rkn._duplicate_stages
 
 
 @jax.custom_batching.custom_vmap

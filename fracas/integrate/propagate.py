@@ -187,6 +187,25 @@ def propagate_with_sensitivities(
     return _propagate_sens(static, dyn, params, ephem, epoch_et_s, x0, t_out, tuple(param_labels))
 
 
+def _compose(model, c1, x1, jx, jp, stm, par, t_end):
+    """One output of the sensitivity scans: stm[k] = stm_step[k] stm[k-1], par[k] = stm_step[k]
+    par[k-1] + par_step[k], and whether the segment reached its end time."""
+    stm1 = jx @ stm
+    par1 = jx @ par + jp
+    valid = (~c1.done | (c1.status == encke.STATUS_OK)) & (jnp.abs(c1.t - t_end) < model.integrator.eps_t_s)
+    return (c1, stm1, par1), (x1, c1.t, c1.primary, valid, jx, stm1, jp, par1)
+
+
+def _scan_segments(model, step, c0, n_p, t_out):
+    """Run ``step`` over the output times; NaN sensitivities after an early stop."""
+    init = (c0, jnp.eye(7), jnp.zeros((7, n_p)))
+    (c_final, _, _), outs = jax.lax.scan(step, init, t_out)
+    x1, t1, prim, valid, jx, stm, jp, par = outs
+    traj = _finish(model, (x1, t1, prim, valid), c_final, t_out)
+    nanm = lambda a: jnp.where(valid[:, None, None], a, jnp.nan)  # noqa: E731
+    return traj, Sensitivities(nanm(jx), nanm(stm), nanm(jp), nanm(par))
+
+
 @partial(jax.jit, static_argnums=(0, 7))
 def _propagate_var(static, dyn, params, ephem, epoch_et_s, x0, t_out, param_labels):
     model = join_model(static, dyn)
@@ -203,17 +222,9 @@ def _propagate_var(static, dyn, params, ephem, epoch_et_s, x0, t_out, param_labe
         c1 = encke.advance(model, params, ephem, epoch_et_s, c._replace(phi=phi0), t_end, rs, var_labels=labels)
         x1 = encke.state_of(c1)
         jx, jp = c1.phi[:, :7], c1.phi[:, 7:]
-        stm1 = jx @ stm
-        par1 = jx @ par + jp
-        valid = (~c1.done | (c1.status == encke.STATUS_OK)) & (jnp.abs(c1.t - t_end) < model.integrator.eps_t_s)
-        return (c1, stm1, par1), (x1, c1.t, c1.primary, valid, jx, stm1, jp, par1)
+        return _compose(model, c1, x1, jx, jp, stm, par, t_end)
 
-    init = (c0, jnp.eye(7), jnp.zeros((7, n_p)))
-    (c_final, _, _), outs = jax.lax.scan(step, init, t_out)
-    x1, t1, prim, valid, jx, stm, jp, par = outs
-    traj = _finish(model, (x1, t1, prim, valid), c_final, t_out)
-    nanm = lambda a: jnp.where(valid[:, None, None], a, jnp.nan)  # noqa: E731
-    return traj, Sensitivities(nanm(jx), nanm(stm), nanm(jp), nanm(par))
+    return _scan_segments(model, step, c0, n_p, t_out)
 
 
 @partial(jax.jit, static_argnums=(0, 7))
@@ -237,17 +248,9 @@ def _propagate_sens(static, dyn, params, ephem, epoch_et_s, x0, t_out, param_lab
         cs = jax.lax.stop_gradient(c)
         (jx, jp), c1 = jax.jacfwd(lambda xx, pp: seg(xx, pp, cs, t_end), argnums=(0, 1), has_aux=True)(x, p_sel)
         x1 = encke.state_of(c1)
-        stm1 = jx @ stm
-        par1 = jx @ par + jp
-        valid = (~c1.done | (c1.status == encke.STATUS_OK)) & (jnp.abs(c1.t - t_end) < model.integrator.eps_t_s)
-        return (c1, stm1, par1), (x1, c1.t, c1.primary, valid, jx, stm1, jp, par1)
+        return _compose(model, c1, x1, jx, jp, stm, par, t_end)
 
-    init = (c0, jnp.eye(7), jnp.zeros((7, n_p)))
-    (c_final, _, _), outs = jax.lax.scan(step, init, t_out)
-    x1, t1, prim, valid, jx, stm, jp, par = outs
-    traj = _finish(model, (x1, t1, prim, valid), c_final, t_out)
-    nanm = lambda a: jnp.where(valid[:, None, None], a, jnp.nan)  # noqa: E731
-    return traj, Sensitivities(nanm(jx), nanm(stm), nanm(jp), nanm(par))
+    return _scan_segments(model, step, c0, n_p, t_out)
 
 
 def finite_difference_sensitivities(

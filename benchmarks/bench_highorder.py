@@ -129,12 +129,8 @@ def final_states(out):
 
 
 # ----------------------------------------------------------------------------- output
-LINES: list[str] = []
-
-
 def emit(s=""):
     print(s, flush=True)
-    LINES.append(s)
 
 
 def table(headers, rows, note=None):

@@ -120,6 +120,14 @@ class ForceModel:
     def body_index(self, name: str) -> int:
         return self.bodies.index(name)
 
+    def acting_third_bodies(self) -> tuple[int, ...]:
+        """Bodies that can act as point-mass perturbers (the current primary is masked at run
+        time).  With primary changes every body gravitates: the primary left behind at a sphere
+        of influence (e.g. the Sun after entering Mars's) must keep acting as a third body."""
+        if self.change_primary_at_soi:
+            return tuple(range(len(self.bodies)))
+        return tuple(self.third_bodies)
+
 
 class Params(NamedTuple):
     """Every dynamic number of a propagation (a pytree of float64 arrays).

@@ -133,14 +133,8 @@ def step_controls(model: ForceModel, params: Params, t_mid) -> StepControls:
 
 
 def acting_third_bodies(model: ForceModel) -> tuple[int, ...]:
-    """Bodies that can act as point-mass perturbers (the current primary is masked at run time).
-
-    With primary changes every body of the model gravitates: the primary left behind at a
-    sphere of influence (e.g. the Sun after entering Mars's) must keep acting as a third body.
-    """
-    if model.change_primary_at_soi:
-        return tuple(range(len(model.bodies)))
-    return tuple(model.third_bodies)
+    """``ForceModel.acting_third_bodies`` (kept as a function for existing callers)."""
+    return model.acting_third_bodies()
 
 
 def perturbation(model: ForceModel, params: Params, t, r, v, primary, bodies_pos, ctl: StepControls, with_j2=True):

@@ -188,10 +188,6 @@ def _accel(frame: _Frame, ci, q, p, m, ctl, perturbation):
     return acc, mdot
 
 
-def _norm(x):
-    return jnp.sqrt(forces.dot3(x, x))
-
-
 def _error_ratio(e_r, e_v, e_m, r1, v1, m1, tol):
     """max(|e_r|/|r|, |e_v|/|v|, |e_m|/m) / tol (module docstring); inf when not finite."""
     # ratios of squares, one square root: no float64 rsqrt (perf-notes)
@@ -343,7 +339,7 @@ def _stage_jacobians(model, params, frame, ci, r, m, ctl, perturbation, labels):
         a_free, force, _ = perturbation(model, params, t, rr, zero_v, frame.primary, pos, ctl)
         return a_free + force / m if has_force else a_free
 
-    has_pert = model.j2 or bool(encke_acting_bodies(model)) or has_force
+    has_pert = model.j2 or bool(model.acting_third_bodies()) or has_force
     g = jax.jacfwd(pert)(r) if has_pert else jnp.zeros((3, 3))
     inv_rr = 1.0 / forces.dot3(r, r)
     inv_r = jnp.sqrt(inv_rr)
@@ -366,14 +362,6 @@ def _stage_jacobians(model, params, frame, ci, r, m, ctl, perturbation, labels):
 
         a_p = jnp.reshape(jax.jacfwd(acc_p)(get_values(params, labels, model)), (3, len(labels)))
     return a, g, a_m, a_p
-
-
-def encke_acting_bodies(model):
-    """Third bodies acting on the spacecraft (``encke.acting_third_bodies``, restated here to
-    keep this module below the loop in the import order)."""
-    if model.change_primary_at_soi:
-        return tuple(range(len(model.bodies)))
-    return tuple(model.third_bodies)
 
 
 def _matmul3(g, q):

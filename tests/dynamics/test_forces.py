@@ -33,6 +33,27 @@ def test_j2_is_gradient_of_the_zonal_potential():
         np.testing.assert_allclose(a, g, rtol=1e-7, atol=1e-15)
 
 
+def test_central_plus_j2_is_gradient_of_the_potential():
+    """forces.central_j2_accel (one shared division) = grad(mu/r + V_2) (V_2 as in the J2 test
+    above, a = +grad V), by central differences with h = 1e-3 km: truncation ~h^2/r^2 ~ 1e-14;
+    roundoff of differences of mu/r (~1e-16 x 60 km^2/s^2 / 2e-3 km ~ 3e-12 km/s^2) is
+    ~1e-9 of the ~8e-3 km/s^2 total, so 1e-8 relative is asserted.  Also dot3 = np.dot."""
+    rng = np.random.default_rng(2)
+    pole = np.array([0.1, -0.2, 1.0])
+    pole /= np.linalg.norm(pole)
+
+    def potential(r):
+        return MU / np.linalg.norm(r) + _j2_potential(r, pole)
+
+    for _ in range(5):
+        r = rng.normal(size=3)
+        r = r / np.linalg.norm(r) * rng.uniform(6600, 40000)
+        g = np.array([(potential(r + e) - potential(r - e)) / 2e-3 for e in np.eye(3) * 1e-3])
+        a = np.asarray(forces.central_j2_accel(r, MU, J2, RE, pole))
+        np.testing.assert_allclose(a, g, rtol=1e-8)
+        assert np.isclose(float(forces.dot3(r, pole)), r @ pole, rtol=1e-15, atol=0)
+
+
 def test_third_body_matches_direct_formula_and_keeps_digits():
     """Battin's form equals mu[(rho-r)/|rho-r|^3 - rho/rho^3] where the direct form is exact
     (comparable distances), and at |r| << |rho| it stays accurate where the direct form

@@ -54,6 +54,11 @@ __all__ = [
     "parse_label",
     "param_unit",
     "parameter_kind",
+    "ControlKind",
+    "CONTROL_KINDS",
+    "STATE_CONTROLS",
+    "VINF_CONTROLS",
+    "parse_control",
 ]
 
 # --- index kinds: how a label's [..] part addresses its Params field ------------------
@@ -273,3 +278,98 @@ def param_unit(label: str, model) -> str:
     """Unit string of a label (canonical units)."""
     field, idx = parse_label(label, model)
     return _BY_FIELD[field].unit_at(idx)
+
+
+# --- TOM controls (FRACAS $DATA control codes) ------------------------------------------
+@dataclass(frozen=True)
+class ControlKind:
+    """One kind of TOM control: the decision-vector entries a TOM deck may name.
+
+    ``name``: as a deck spells it (before any ``[..]``); ``index``: "none", "arc", "impulse"
+    or "impulse_axis" (like :class:`ParamKind`); ``unit``: the unit a deck writes (days for
+    times, deg for angles), ``canonical``: the core's unit, ``to_canonical``: the factor
+    between them; ``label``: the :data:`PARAMETER_KINDS` name it sets ("" for the initial
+    state and the final time, which are not parameters); ``bounds``: physical bounds in the
+    deck unit (None: open).
+    """
+
+    name: str
+    index: str
+    unit: str
+    canonical: str
+    to_canonical: float
+    description: str
+    label: str = ""
+    bounds: tuple[float | None, float | None] = (None, None)
+
+
+_DEG = _PI / 180.0
+_DAY = 86400.0
+_CONTROLS = (
+    ControlKind("x0", "none", "km", "km", 1.0, "initial position x relative to the deck's centre (ICRF)"),
+    ControlKind("y0", "none", "km", "km", 1.0, "initial position y relative to the deck's centre (ICRF)"),
+    ControlKind("z0", "none", "km", "km", 1.0, "initial position z relative to the deck's centre (ICRF)"),
+    ControlKind("vx0", "none", "km/s", "km/s", 1.0, "initial velocity x relative to the deck's centre (ICRF)"),
+    ControlKind("vy0", "none", "km/s", "km/s", 1.0, "initial velocity y relative to the deck's centre (ICRF)"),
+    ControlKind("vz0", "none", "km/s", "km/s", 1.0, "initial velocity z relative to the deck's centre (ICRF)"),
+    ControlKind(
+        "vinf", "none", "km/s", "km/s", 1.0, "launch excess speed relative to the departure body", bounds=(0.0, None)
+    ),
+    ControlKind("vinf_ra", "none", "deg", "rad", _DEG, "right ascension of the launch excess velocity (ICRF)"),
+    ControlKind(
+        "vinf_dec", "none", "deg", "rad", _DEG, "declination of the launch excess velocity (ICRF)", bounds=(-90.0, 90.0)
+    ),
+    ControlKind("final_time", "none", "days", "s", _DAY, "final (arrival) time from the epoch; stop = time only"),
+    ControlKind(
+        "exhaust_velocity_km_s", "none", "km/s", "km/s", 1.0, "exhaust velocity c", "exhaust_velocity_km_s", (0.0, None)
+    ),
+    ControlKind("thrust_scale", "none", "1", "1", 1.0, "overall thrust level", "thrust_scale", (0.0, None)),
+    ControlKind("arc_t_on", "arc", "days", "s", _DAY, "arc start", "arc_t_on"),
+    ControlKind("arc_t_off", "arc", "days", "s", _DAY, "arc end", "arc_t_off"),
+    ControlKind(
+        "arc_duration",
+        "arc",
+        "days",
+        "s",
+        _DAY,
+        "arc duration (moves the end; the start stays)",
+        "arc_t_off",
+        (0.0, None),
+    ),
+    ControlKind("arc_alpha", "arc", "deg", "rad", _DEG, "arc in-plane angle / right ascension", "arc_alpha"),
+    ControlKind(
+        "arc_beta", "arc", "deg", "rad", _DEG, "arc out-of-plane angle / declination", "arc_beta", (-90.0, 90.0)
+    ),
+    ControlKind("arc_throttle", "arc", "1", "1", 1.0, "arc thrust level", "arc_throttle", (0.0, 1.0)),
+    ControlKind("impulse_t", "impulse", "days", "s", _DAY, "time of an impulse", "impulse_t"),
+    ControlKind("impulse_dv", "impulse_axis", "km/s", "km/s", 1.0, "impulse dV component (its frame)", "impulse_dv"),
+)
+#: name -> :class:`ControlKind`
+CONTROL_KINDS: dict[str, ControlKind] = {k.name: k for k in _CONTROLS}
+STATE_CONTROLS = ("x0", "y0", "z0", "vx0", "vy0", "vz0")
+VINF_CONTROLS = ("vinf", "vinf_ra", "vinf_dec")
+
+
+def parse_control(name: str, n_arcs: int, n_impulses: int) -> tuple[ControlKind, tuple[int, ...]]:
+    """(kind, index) of a TOM control name such as ``arc_t_off[1]`` or ``impulse_dv[0,2]``.
+
+    KeyError naming what exists when the name or its index is unknown."""
+    m = _LABEL.match(name.strip())
+    kind = CONTROL_KINDS.get(m.group(1)) if m else None
+    if kind is None:
+        raise KeyError(f"unknown control {name!r}; known: {', '.join(CONTROL_KINDS)} (arc and impulse kinds take [k])")
+    parts = [s.strip() for s in m.group(2).split(",")] if m.group(2) else []
+    want = {"none": 0, "arc": 1, "impulse": 1, "impulse_axis": 2}[kind.index]
+    if len(parts) != want or not all(p.isdigit() for p in parts):
+        form = {"none": kind.name, "arc": f"{kind.name}[k]", "impulse": f"{kind.name}[k]"}.get(
+            kind.index, f"{kind.name}[k,axis]"
+        )
+        raise KeyError(f"control {name!r}: expected {form}")
+    idx = tuple(int(p) for p in parts)
+    if kind.index == "arc" and idx[0] >= n_arcs:
+        raise KeyError(f"control {name!r}: arc {idx[0]} does not exist ({n_arcs} thrust arcs)")
+    if kind.index in ("impulse", "impulse_axis") and idx[0] >= n_impulses:
+        raise KeyError(f"control {name!r}: impulse {idx[0]} does not exist ({n_impulses} impulses)")
+    if kind.index == "impulse_axis" and idx[1] > 2:
+        raise KeyError(f"control {name!r}: axis must be 0, 1 or 2")
+    return kind, idx

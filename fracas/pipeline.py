@@ -36,6 +36,7 @@ __all__ = [
     "load_team",
     "build_stm",
     "run_team",
+    "run_tom",
     "reference_from_stm",
     "stm_product",
     "default_output",
@@ -52,8 +53,12 @@ def default_output(deck_path: str | Path | None, folder: str = "out") -> Path:
 
 
 def run(deck, **kw):
-    """Run a deck (path or validated config) in the mode it names: ``propagate`` or ``team``."""
+    """Run a deck (path or validated config) in the mode it names: ``propagate``, ``team`` or ``tom``."""
+    from fracas.config.tom import TomDeck
+
     cfg = load_any(deck) if isinstance(deck, (str, Path)) else deck
+    if isinstance(cfg, TomDeck):
+        return run_tom(cfg, kw.get("output"), kw.get("on_stage"), kw.get("plot"))
     if isinstance(cfg, TrajectoryDeck):
         return propagate_deck(cfg, kw.get("output"), kw.get("on_stage"), kw.get("plot"))
     return run_team(cfg, kw.get("stm"), kw.get("output"), kw.get("on_stage"), kw.get("plot"))
@@ -344,3 +349,267 @@ def run_team(
             f"integration stopped before the target (status {int(RunStatus.OUTSIDE_TRAJECTORY)}){written}"
         )
     return product, out, ref.source
+
+
+# ----------------------------------------------------------------------------- TOM
+def _tom_outputs(cfg, output, plot, reference_deck):
+    stem = Path(cfg.source_path or "deck").stem
+    ts = cfg.tom
+    res = (
+        Path(output)
+        if output is not None
+        else (cfg.resolve(ts.results) if ts.results else Path("out") / f"{stem}_tom.h5")
+    )
+    ref = (
+        Path(reference_deck)
+        if reference_deck is not None
+        else (cfg.resolve(ts.reference_deck) if ts.reference_deck else Path("out") / f"{stem}_reference.toml")
+    )
+    png = Path(plot) if plot is not None else (cfg.resolve(ts.plot) if ts.plot else None)
+    return res, ref, png
+
+
+def _grid_tables(case, say):
+    """GRID (FRACAS GRID): E over single increments of each control and over every pair,
+    all trajectories in one batched core call."""
+    prob = case.problem
+    steps = case.deck.grid.steps
+    gammas = np.arange(-steps, steps + 1, dtype=float)
+    m = len(case.u0)
+    du = case.grid_increments
+    lanes = []
+    for j in range(m):
+        for g in gammas:
+            u = case.u0.copy()
+            u[j] += g * du[j]
+            lanes.append(u)
+    pairs = [(a, b) for a in range(m) for b in range(a + 1, m)] if case.deck.grid.pairs else []
+    for a, b in pairs:
+        for ga in gammas:
+            for gb in gammas:
+                u = case.u0.copy()
+                u[a] += ga * du[a]
+                u[b] += gb * du[b]
+                lanes.append(u)
+    lanes = np.clip(np.array(lanes), case.lower, case.upper)
+    say(f"GRID: {len(lanes)} trajectories in one batch")
+    t0 = time.perf_counter()
+    vals, _, ok = prob.evaluate_batch(lanes)
+    dt = time.perf_counter() - t0
+    err = np.array([prob.targets.error(v) for v in vals]) / prob.targets.tolerance
+    e_idx = np.where(ok, np.sum(err**2, axis=1), np.inf)
+    g_n = len(gammas)
+    single = e_idx[: m * g_n].reshape(m, g_n)
+    tables = {}
+    pos = m * g_n
+    for a, b in pairs:
+        tables[(a, b)] = e_idx[pos : pos + g_n * g_n].reshape(g_n, g_n)
+        pos += g_n * g_n
+    return {"single": single, "gammas": gammas, "pairs": tables}, len(lanes), dt
+
+
+def run_tom(
+    deck,
+    output: str | Path | None = None,
+    on_stage: Stage | None = None,
+    plot: str | Path | None = None,
+    on_iteration: Callable | None = None,
+    reference_deck: str | Path | None = None,
+):
+    """``fracas run`` on a TOM deck: build -> search (projected gradient, or the NLP
+    cross-check) -> verification by re-propagation -> TomProduct -> results file, the
+    optimized reference deck (for TEAM's [ertraj] and ``fracas propagate``) and the plot.
+
+    "Converged" is declared only when the plain core, re-run at the final controls, puts
+    every target within its tolerance and (when optimizing) the search's own optimality
+    test passed; the search's flag alone is never taken.  Returns (TomProduct, results
+    path, reference-deck path or None).  A failure at the starting controls (nothing usable)
+    raises NumericalError; any later failure ends the search with the best iterate written.
+    """
+    from fracas.build.tom import build_tom, reference_deck_text
+    from fracas.config.tom import load_tom_deck
+    from fracas.errors import FracasError
+    from fracas.io.atomic import atomic_path
+    from fracas.io.tom_results import write_tom_results
+    from fracas.products import TomProduct
+    from fracas.tom import nlp, search
+
+    say = _say(on_stage)
+    t0 = time.perf_counter()
+    cfg = load_tom_deck(deck) if isinstance(deck, (str, Path)) else deck
+    out, ref_path, png = _tom_outputs(cfg, output, plot, reference_deck)
+    check_output_path(out, "results file")
+    submode = cfg.tom.submode
+    if submode != "grid":
+        check_output_path(ref_path, "reference deck")
+    if png is not None:
+        check_output_path(png, "plot")
+    say("building the TOM problem")
+    case = build_tom(cfg)
+    prob = case.problem
+    tg = prob.targets
+    say("propagating the starting trajectory")
+    start = prob.outcome(case.u0)
+    if not start.evaluation.ok:
+        from fracas.status import status_text
+
+        raise NumericalError(
+            f"{cfg.source_path}: the trajectory at the starting controls failed ({status_text(start.status)}, "
+            f"stopped at {start.t_final / DAY_S:.6g} d): nothing usable to optimize from"
+        )
+    sp = search.Problem(
+        u0=case.u0,
+        desired=tg.desired,
+        tolerance=tg.tolerance,
+        scale=case.scale,
+        lower=case.lower,
+        upper=case.upper,
+        floor=case.floor,
+        evaluate=prob.evaluate,
+        sensitivities=prob.sensitivities,
+        target_error=tg.error,
+        given_S=case.given_s,
+        given_G=case.given_g,
+        labels=case.control_names,
+        target_labels=tg.names,
+    )
+    grid = None
+    t1 = time.perf_counter()
+    timing: dict[str, float] = {}
+    if submode == "grid":
+        grid, n_lanes, dt = _grid_tables(case, say)
+        timing["grid_s"] = dt
+        timing["grid_trajectories_per_s"] = n_lanes / dt if dt > 0 else float("nan")
+        res = search.SearchResult(
+            u=case.u0,
+            evaluation=start.evaluation,
+            history=[],
+            stop_reason=f"GRID: {n_lanes} trajectories tabulated (choose the next start from the tables)",
+            search_converged=False,
+            n_evaluations=n_lanes + 1,
+            n_sensitivity_evaluations=0,
+            time_sensitivities_s=0.0,
+            time_line_search_s=0.0,
+            time_bookkeeping_s=0.0,
+        )
+    elif submode == "nominal":
+        res = search.SearchResult(
+            u=case.u0,
+            evaluation=start.evaluation,
+            history=[],
+            stop_reason="nominal: the starting controls evaluated (no search)",
+            search_converged=False,
+            n_evaluations=1,
+            n_sensitivity_evaluations=0,
+            time_sensitivities_s=0.0,
+            time_line_search_s=0.0,
+            time_bookkeeping_s=0.0,
+        )
+    else:
+        say(f"searching ({cfg.tom.optimizer}, {cfg.tom.sensitivities} sensitivities)")
+        try:
+            if cfg.tom.optimizer == "projected_gradient":
+                res = search.projected_gradient(sp, case.settings, on_iteration)
+            else:
+                res = nlp.solve_nlp(sp, cfg.tom.optimizer, case.settings, on_iteration)
+        except ValueError as exc:
+            raise FracasError(f"{cfg.source_path}: {exc}") from None
+    t2 = time.perf_counter()
+
+    # ---- verification: the plain core at the final controls, afresh
+    say("verifying: re-propagating the final controls")
+    prob._cache.clear()
+    final = prob.outcome(res.u)
+    u_final = np.asarray(res.u, float)
+    ev = final.evaluation
+    err = tg.error(ev.targets) if ev.ok else np.full(tg.n_targets, np.nan)
+    targets_met = bool(ev.ok and np.all(np.abs(err) <= tg.tolerance))
+    optimizing = submode in ("target_optimize", "optimize", "auto")
+    reason = res.stop_reason
+    if submode in ("grid", "nominal"):
+        converged = False
+    else:
+        converged = bool(res.search_converged and targets_met)
+        if res.search_converged and not targets_met:
+            worst = int(np.nanargmax(np.abs(err) / tg.tolerance)) if ev.ok else 0
+            reason = (
+                f"{reason}; but re-propagation misses {tg.names[worst]} by "
+                f"{abs(err[worst]) / tg.tolerance[worst]:.3g} tolerances: NOT converged"
+            )
+        elif not res.search_converged and targets_met and optimizing:
+            reason = f"{reason} (targets are met; the optimality test was not)"
+    s_deck = g_deck = None
+    if ev.ok and submode != "grid":
+        say("sensitivities at the final controls")
+        _, s_mat, g_vec = prob.exact_sensitivities(u_final)
+        s_deck = s_mat * case.control_factor[None, :] / case.target_factor[:, None]
+        g_deck = g_vec * case.control_factor
+    t3 = time.perf_counter()
+
+    # ---- product and files
+    hist = res.history
+    fac_u, fac_t = case.control_factor, case.target_factor
+    ref_written = ""
+    if submode != "grid":
+        text = reference_deck_text(case, u_final)
+        with atomic_path(ref_path) as tmp:
+            tmp.write_text(text)
+        ref_written = str(ref_path)
+    timing.update(
+        {
+            "setup_s": t1 - t0,
+            "search_s": t2 - t1,
+            "sensitivities_s": res.time_sensitivities_s,
+            "line_search_s": res.time_line_search_s,
+            "bookkeeping_s": res.time_bookkeeping_s,
+            "verification_s": t3 - t2,
+        }
+    )
+    product = TomProduct(
+        title=cfg.title or case.trajectory.title,
+        source=cfg.source_path or "",
+        submode=submode,
+        optimizer=cfg.tom.optimizer,
+        sensitivities=cfg.tom.sensitivities,
+        control_names=list(case.control_names),
+        control_units=list(case.control_units),
+        control_factor=fac_u,
+        u_start=case.u0 / fac_u,
+        u_final=u_final / fac_u,
+        lower=case.lower / fac_u,
+        upper=case.upper / fac_u,
+        target_names=list(tg.names),
+        target_bodies=list(case.target_bodies),
+        target_units=list(case.target_units),
+        target_factor=fac_t,
+        desired=tg.desired / fac_t,
+        tolerance=tg.tolerance / fac_t,
+        achieved_start=start.evaluation.targets / fac_t,
+        achieved=(ev.targets if ev.ok else np.full(tg.n_targets, np.nan)) / fac_t,
+        initial_mass_kg=float(case.base.x0[6]),
+        start_mass_kg=float(start.evaluation.performance),
+        final_mass_kg=float(ev.performance) if ev.ok else float("nan"),
+        stop_reason=reason,
+        converged=converged,
+        search_converged=bool(res.search_converged),
+        targets_met=targets_met,
+        iteration=np.array([r.iteration for r in hist], np.int64),
+        submodes=[r.submode for r in hist],
+        performance_kg=np.array([r.performance for r in hist], float),
+        error_rms=np.array([r.error_rms for r in hist], float),
+        angle_rad=np.array([r.angle_rad for r in hist], float),
+        gamma=np.array([r.gamma for r in hist], float),
+        n_trajectories=np.array([r.n_evaluations for r in hist], np.int64),
+        controls=np.array([r.u / fac_u for r in hist], float).reshape(-1, len(fac_u)),
+        targets=np.array([r.targets / fac_t for r in hist], float).reshape(-1, len(fac_t)),
+        s_matrix=s_deck,
+        g_vector=g_deck,
+        grid=grid,
+        reference_deck=ref_written,
+        timing=timing,
+        provenance=provenance(cfg.source_text, cfg.source_path),
+    )
+    say("writing the results file")
+    write_tom_results(out, product)
+    product.timing["total_s"] = time.perf_counter() - t0
+    return product, out, (ref_path if ref_written else None)

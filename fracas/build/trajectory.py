@@ -28,6 +28,7 @@ from fracas.config.trajectory import TrajectoryDeck
 from fracas.dynamics.model import (
     FRAME_INERTIAL,
     FRAME_VELOCITY,
+    FRAME_VELOCITY_YAW_SWITCH,
     POWER_NUCLEAR,
     POWER_SOLAR,
     ForceModel,
@@ -40,6 +41,9 @@ from fracas.integrate.problem import Problem
 from fracas.timescales import epoch_to_et
 
 __all__ = ["Problem", "build_propagation", "output_times_s", "model_bodies"]
+
+
+_ARC_FRAMES = {"velocity": FRAME_VELOCITY, "inertial": FRAME_INERTIAL, "velocity_yaw_switch": FRAME_VELOCITY_YAW_SWITCH}
 
 
 def _src(deck: TrajectoryDeck) -> str:
@@ -195,7 +199,7 @@ def build_propagation(deck: TrajectoryDeck) -> Problem:
         j2=f.j2,
         srp=f.srp,
         thrust=bool(deck.thrust_arc),
-        velocity_dependent=any(a.frame == "velocity" for a in deck.thrust_arc),
+        velocity_dependent=any(a.frame != "inertial" for a in deck.thrust_arc),
         power=(prop.power_source if prop is not None else POWER_SOLAR),
         change_primary_at_soi=f.change_primary_at_soi,
         conic_bodies=tuple(idx(b) for b in bodies if b in f.conic_bodies),
@@ -246,7 +250,7 @@ def build_propagation(deck: TrajectoryDeck) -> Problem:
             arc_alpha=[math.radians(a.alpha_deg) for a in arcs],
             arc_beta=[math.radians(a.beta_deg) for a in arcs],
             arc_throttle=[a.throttle for a in arcs],
-            arc_frame=[FRAME_VELOCITY if a.frame == "velocity" else FRAME_INERTIAL for a in arcs],
+            arc_frame=[_ARC_FRAMES[a.frame] for a in arcs],
         )
     imps = deck.impulse
     if imps:

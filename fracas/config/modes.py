@@ -1,10 +1,10 @@
 """Which mode a deck asks for (its ``mode`` line) and the validated deck of that mode.
 
 ``mode = "team"`` (TEAM covariance analysis), ``mode = "sweep"`` (a TEAM study run with
-fields varied, :mod:`fracas.config.sweep`) or ``mode = "propagate"`` (a trajectory deck;
-the default, so every trajectory deck stays valid as written).  TOM and TSIM will add
-``"tom"``, ``"tsim"``.  TEAM decks written before ``mode`` existed are
-still recognised by their ``[ertraj]`` table.
+fields varied, :mod:`fracas.config.sweep`), ``mode = "tom"`` (TOM targeting and
+optimization, :mod:`fracas.config.tom`) or ``mode = "propagate"`` (a trajectory deck; the
+default, so every trajectory deck stays valid as written).  TSIM will add ``"tsim"``.  TEAM
+decks written before ``mode`` existed are still recognised by their ``[ertraj]`` table.
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ from fracas.errors import DeckError
 
 __all__ = ["MODES", "PLANNED_MODES", "deck_mode", "parse_any", "load_any"]
 
-MODES = ("propagate", "team", "sweep")
-PLANNED_MODES = ("tom", "tsim")
+MODES = ("propagate", "team", "sweep", "tom")
+PLANNED_MODES = ("tsim",)
 
 
 def deck_mode(text: str, source: str = "<deck>") -> str:
@@ -43,6 +43,10 @@ def parse_any(text: str, source: str = "<deck>"):
         from fracas.config.sweep import parse_sweep_deck
 
         return parse_sweep_deck(text, source)
+    if mode == "tom":
+        from fracas.config.tom import parse_tom_deck
+
+        return parse_tom_deck(text, source)
     if mode == "team":
         from fracas.config.team import parse_team_deck
 

@@ -16,7 +16,7 @@ rad.  No JAX here.  Layout (every section but ``[epoch]``, ``[initial_state]``,
     [spacecraft]      mass_kg, area_m2 = 0, cr = 1
     [propulsion]      power_source = "solar" | "nuclear", power_kw, decay_days (nuclear),
                       efficiency, exhaust_velocity_km_s | isp_s, thrust_scale = 1
-    [[thrust_arc]]    start_days, stop_days, frame = "velocity" | "inertial",
+    [[thrust_arc]]    start_days, stop_days, frame = "velocity" | "inertial" | "velocity_yaw_switch",
                       alpha_deg = 0, beta_deg = 0, throttle = 1
     [[impulse]]       time_days, dv_km_s = [3], frame = "velocity" | "inertial", isp_s = 300
     [forces]          third_bodies = [], j2 = false, srp = false, change_primary_at_soi = false
@@ -356,11 +356,13 @@ class Propulsion(_Section):
 class ThrustArc(_Section):
     """Thrust on for start_days <= t < stop_days (days from the epoch); alpha/beta are the
     in-plane/out-of-plane angles in the velocity frame, or right ascension/declination
-    of an inertial (ICRF) direction."""
+    of an inertial (ICRF) direction; ``velocity_yaw_switch`` is the velocity frame with
+    beta's sign following cos u (the argument of latitude), flipping at the antinodes
+    (Edelbaum's plane-change steering: beta > 0 raises the inclination, < 0 lowers it)."""
 
     start_days: float
     stop_days: float
-    frame: Literal["velocity", "inertial"] = "velocity"
+    frame: Literal["velocity", "inertial", "velocity_yaw_switch"] = "velocity"
     alpha_deg: float = 0.0
     beta_deg: Annotated[float, Field(ge=-90, le=90)] = 0.0
     throttle: Annotated[float, Field(ge=0, le=1)] = 1.0
@@ -1000,6 +1002,7 @@ _KIND_NAMES = {
     "propagate": ("a trajectory deck", "fracas propagate"),
     "team": ("a TEAM deck", "fracas run"),
     "sweep": ("a sweep deck", "fracas sweep"),
+    "tom": ("a TOM deck", "fracas run"),
 }
 
 

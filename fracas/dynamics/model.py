@@ -11,7 +11,9 @@ Thrust arcs (FRACAS EP, DETECT): arc ``k`` thrusts for ``t_on[k] <= t < t_off[k]
 (seconds from the propagation epoch) with in-plane angle ``alpha`` and out-of-plane
 angle ``beta`` (rad) in EP's velocity frame (x along v, z along r x v, y = z x x) when
 ``arc_frame[k] == 0``, or as right ascension / declination of an inertially fixed
-direction (ICRF) when ``arc_frame[k] == 1``; ``throttle`` scales thrust and mass flow.
+direction (ICRF) when ``arc_frame[k] == 1``, or in the velocity frame with beta's sign
+following cos u (flipping at the antinodes, Edelbaum's steering) when ``arc_frame[k] == 2``;
+``throttle`` scales thrust and mass flow.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ POWER_NUCLEAR = "nuclear"
 
 FRAME_VELOCITY = 0  # EP's (v, (r x v) x v ... ) frame
 FRAME_INERTIAL = 1  # right ascension / declination in ICRF
+FRAME_VELOCITY_YAW_SWITCH = 2  # velocity frame, out-of-plane sign = sign(cos u) (Edelbaum steering)
 
 
 @dataclass(frozen=True)
@@ -157,7 +160,7 @@ class Params(NamedTuple):
     arc_alpha: np.ndarray  # (na,) in-plane angle / right ascension
     arc_beta: np.ndarray  # (na,) out-of-plane angle / declination
     arc_throttle: np.ndarray  # (na,) thrust level factor
-    arc_frame: np.ndarray  # (na,) 0 velocity frame, 1 inertial (float flags)
+    arc_frame: np.ndarray  # (na,) 0 velocity frame, 1 inertial, 2 velocity + yaw switch (float codes)
     arc_thrust_scale: np.ndarray  # (na,) per-arc proportionality (1 nominal)
     arc_bias_in_rad: np.ndarray  # (na,)
     arc_bias_out_rad: np.ndarray  # (na,)

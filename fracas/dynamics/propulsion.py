@@ -11,6 +11,13 @@ Pointing: in EP's velocity frame the thrust unit vector is
 with A = [v_hat, (h x v)_hat, h_hat] (columns), h = r x v (FRACAS EP matrix [A]); alpha is
 the in-plane angle from the velocity toward (h x v) and beta the out-of-plane angle toward
 h.  Inertially fixed pointing uses alpha = right ascension, beta = declination (ICRF).
+
+Yaw switching (frame code 2, ``velocity_yaw_switch``; Edelbaum 1961's steering, used by TOM's
+plane-change spirals): the velocity frame with the out-of-plane angle's sign following the
+sign of cos u, u the argument of latitude, so it flips at the antinodes:
+beta_eff = sign(cos u) beta, with sign(cos u) = sign(h_x r_y - h_y r_x) (the node vector
+z x h = (-h_y, h_x, 0) dotted with r).  beta > 0 then raises the inclination on every half
+revolution (di/dt = r cos u f_h / h), beta < 0 lowers it.
 """
 
 from __future__ import annotations
@@ -58,10 +65,19 @@ def angles_to_unit(alpha, beta):
     return jnp.stack([cb * jnp.cos(alpha), cb * jnp.sin(alpha), jnp.sin(beta)])
 
 
-def thrust_direction(r, v, alpha, beta, inertial):
-    """Unit thrust vector in the inertial frame; ``inertial`` (0/1 float) selects RA/Dec pointing."""
-    u_local = angles_to_unit(alpha, beta)
+def thrust_direction(r, v, alpha, beta, frame):
+    """Unit thrust vector in the inertial frame.
+
+    ``frame`` (float code, as ``Params.arc_frame``): 0 velocity frame, 1 inertial RA/Dec
+    pointing, 2 velocity frame with the out-of-plane sign switched at the antinodes (module
+    docstring)."""
+    inertial = (frame > 0.5) & (frame < 1.5)
+    switch = frame > 1.5
+    h = jnp.cross(r, v)
+    sign_cos_u = jnp.where(h[0] * r[1] - h[1] * r[0] >= 0.0, 1.0, -1.0)
+    beta_eff = jnp.where(switch, sign_cos_u * beta, beta)
+    u_local = angles_to_unit(alpha, beta_eff)
     x, y, z = _frame_axes(r, v)
     # the frame applied as a sum of axes, not a matrix product (a batched dot_general under vmap)
     u_vel = x * u_local[0] + y * u_local[1] + z * u_local[2]
-    return jnp.where(inertial > 0.5, u_local, u_vel)
+    return jnp.where(inertial, angles_to_unit(alpha, beta), u_vel)

@@ -53,6 +53,16 @@ TARGET_KINDS: dict[str, TargetKind] = _kinds(
     ("raan", "rad", "osculating longitude of the ascending node about the target body at t_f"),
     ("argp", "rad", "osculating argument of periapsis about the target body at t_f"),
     ("M", "rad", "osculating mean anomaly about the target body at t_f"),
+    ("radius", "km", "distance |r| from the target body at t_f"),
+    ("speed", "km/s", "speed |v| relative to the target body at t_f"),
+    ("radial_velocity", "km/s", "r·v/|r| relative to the target body at t_f (0: an apsis or circular)"),
+    ("e_cos_argp", "1", "e cos(argp) of the osculating conic (smooth through e = 0)"),
+    ("e_sin_argp", "1", "e sin(argp) of the osculating conic (smooth through e = 0)"),
+    ("vinf", "km/s", "hyperbolic excess speed sqrt(v² - 2μ/r) about the target body"),
+    ("vinf_x", "km/s", "x of the incoming-asymptote excess velocity v_inf S"),
+    ("vinf_y", "km/s", "y of the incoming-asymptote excess velocity v_inf S"),
+    ("vinf_z", "km/s", "z of the incoming-asymptote excess velocity v_inf S"),
+    ("final_time", "s", "t_f itself: the time the propagation stopped (arrival at the stop condition)"),
 )
 
 

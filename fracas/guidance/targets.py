@@ -72,7 +72,7 @@ def target_values(names: tuple[str, ...], state_rel, t_f_s, mu, ref_pole=(0.0, 0
     x = jnp.asarray(state_rel, jnp.float64)
     r, v = x[0:3], x[3:6]
     el = cartesian_to_elements(r, v, mu)
-    bp = b_plane(r, v, mu, ref_pole) if any(n in _BPLANE for n in names) else None
+    bp = b_plane(r, v, mu, ref_pole) if any(n in _BPLANE or n.startswith("vinf_") for n in names) else None
     out = []
     for name in names:
         if name in _STATE_INDEX:
@@ -87,6 +87,28 @@ def target_values(names: tuple[str, ...], state_rel, t_f_s, mu, ref_pole=(0.0, 0
             out.append(t_f_s + _time_to_periapsis(el, mu))
         elif name == "closest_approach_radius":
             out.append(el[0] * (1.0 - el[1]))
+        elif name == "radius":
+            out.append(jnp.sqrt(jnp.sum(r * r)))
+        elif name == "speed":
+            out.append(jnp.sqrt(jnp.sum(v * v)))
+        elif name == "radial_velocity":
+            out.append(jnp.sum(r * v) / jnp.sqrt(jnp.sum(r * r)))
+        elif name in ("e_cos_argp", "e_sin_argp"):
+            # from the eccentricity vector in the node frame: smooth through e = 0
+            h = jnp.cross(r, v)
+            w = h / jnp.sqrt(jnp.sum(h * h))
+            e_vec = jnp.cross(v, h) / mu - r / jnp.sqrt(jnp.sum(r * r))
+            sin_i = jnp.sqrt(w[0] ** 2 + w[1] ** 2)
+            eq = sin_i < 1e-15
+            n_hat = jnp.where(eq, jnp.array([1.0, 0.0, 0.0]), jnp.stack([-w[1], w[0], 0.0]) / jnp.where(eq, 1.0, sin_i))
+            m_hat = jnp.cross(w, n_hat)
+            out.append(jnp.sum(e_vec * (n_hat if name == "e_cos_argp" else m_hat)))
+        elif name == "vinf":
+            out.append(jnp.sqrt(jnp.sum(v * v) - 2.0 * mu / jnp.sqrt(jnp.sum(r * r))))
+        elif name in ("vinf_x", "vinf_y", "vinf_z"):
+            out.append(bp.v_inf * bp.s_hat["xyz".index(name[-1])])
+        elif name == "final_time":
+            out.append(jnp.asarray(t_f_s, jnp.float64))
         else:  # pragma: no cover  (check_targets covers TARGET_KINDS)
             raise KeyError(name)
     return jnp.stack(out) if out else jnp.zeros(0)

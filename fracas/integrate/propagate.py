@@ -295,3 +295,56 @@ def finite_difference_sensitivities(
         xm = np.asarray(propagate(model, pm, ephem, epoch_et_s, x0, t_out).x[-1])
         par[:, j] = (xp - xm) / (2 * h)
     return stm, par
+
+
+def final_state_jacobian(
+    model: ForceModel,
+    params: Params,
+    ephem,
+    epoch_et_s,
+    x0,
+    t_end,
+    param_labels: Sequence[str],
+    dx0_du,
+    dp_du,
+) -> tuple[jax.Array, jax.Array]:
+    """(x(t_end) (7,), dx(t_end)/du (7, M)) for controls u that move the initial state by
+    dx0_du (7, M) and the labelled parameters by dp_du (L, M) (TOM's FEGS by AD).
+
+    Forward-mode AD through the integrator, like :func:`propagate_with_sensitivities`, but
+    with only the M control directions as tangents instead of the 7 + L columns of the full
+    STM and parameter matrix (the same derivative of the same discrete map: equal to
+    rounding to Phi dx0_du + Theta dp_du, tests/integrate/test_propagate.py).
+    """
+    static, dyn = split_model(model)
+    return _final_jac(
+        static,
+        dyn,
+        params,
+        ephem,
+        epoch_et_s,
+        jnp.asarray(x0, jnp.float64),
+        jnp.asarray(t_end, jnp.float64),
+        tuple(param_labels),
+        jnp.asarray(dx0_du, jnp.float64),
+        jnp.asarray(dp_du, jnp.float64),
+    )
+
+
+@partial(jax.jit, static_argnums=(0, 7))
+def _final_jac(static, dyn, params, ephem, epoch_et_s, x0, t_end, param_labels, dx0_du, dp_du):
+    model = join_model(static, dyn)
+    labels = tuple(param_labels)
+    p0 = get_values(params, labels, model)
+    t0 = jnp.zeros(())
+    c0, rs = encke.init_carry(model, params, ephem, epoch_et_s, t0, x0)
+    cs = jax.lax.stop_gradient(c0)
+
+    def run(delta):
+        x = x0 + dx0_du @ delta
+        prm = set_values(params, labels, p0 + dp_du @ delta, model) if labels else params
+        x1, _ = _segment(model, prm, ephem, epoch_et_s, cs, x, t_end, rs)
+        return x1
+
+    delta0 = jnp.zeros(dx0_du.shape[1])
+    return run(delta0), jax.jacfwd(run)(delta0)

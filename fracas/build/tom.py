@@ -1,0 +1,416 @@
+"""TOM deck -> :class:`TomCase` (the problem object, the search inputs) and the optimized
+reference written back as a trajectory deck (FRACAS TOM's output to $ERTRAJ / $INSIM).
+
+Units convert here and nowhere else: deck controls and targets are in days, deg, km, km/s,
+1 (``fracas.params.CONTROL_KINDS``; targets: rad -> deg, s -> days); the problem object and
+the search work in the core's canonical units (s, rad, km, km/s).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+
+import numpy as np
+
+from fracas import constants
+from fracas.build.trajectory import _rotation_to_icrf, build_propagation
+from fracas.config.tom import TomDeck, tom_trajectory_deck
+from fracas.config.trajectory import TrajectoryDeck, load_toml
+from fracas.errors import ConfigError
+from fracas.guidance.target_kinds import TARGET_KINDS
+from fracas.integrate.problem import Problem
+from fracas.params import CONTROL_KINDS, STATE_CONTROLS, VINF_CONTROLS, ControlKind, parse_control
+from fracas.tom.problem import ControlMap, TargetSet, TomProblem
+from fracas.tom.search import SearchSettings
+
+__all__ = ["TomCase", "build_tom", "reference_deck_text", "target_display", "control_display"]
+
+_ANGLE_TARGETS = ("i", "raan", "argp", "M")
+
+
+def target_display(name: str) -> tuple[str, float]:
+    """(deck unit, canonical per deck unit) of a target: rad -> deg, s -> days."""
+    unit = TARGET_KINDS[name].unit
+    if unit == "rad":
+        return "deg", math.pi / 180.0
+    if unit == "s":
+        return "days", constants.DAY_S
+    return unit, 1.0
+
+
+def control_display(kind: ControlKind) -> tuple[str, float]:
+    return kind.unit, kind.to_canonical
+
+
+@dataclasses.dataclass
+class TomCase:
+    """Everything a TOM run needs, built from a deck (canonical units unless said).
+
+    problem: the :class:`TomProblem`; u0, lower, upper, scale, floor: the search's inputs;
+    settings: the search settings; control_units / control_factor: deck unit and canonical
+    per deck unit of each control; target_units / target_factor likewise; given_s, given_g:
+    $SMAG in canonical units (or None); trajectory: the trajectory deck; base: its Problem.
+    """
+
+    deck: TomDeck
+    trajectory: TrajectoryDeck
+    base: Problem
+    problem: TomProblem
+    u0: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    scale: np.ndarray
+    floor: np.ndarray
+    settings: SearchSettings
+    control_names: tuple[str, ...]
+    control_units: tuple[str, ...]
+    control_factor: np.ndarray
+    target_names: tuple[str, ...]
+    target_bodies: tuple[str, ...]
+    target_units: tuple[str, ...]
+    target_factor: np.ndarray
+    members: tuple[tuple[tuple[str, float], ...], ...]
+    given_s: np.ndarray | None = None
+    given_g: np.ndarray | None = None
+    grid_increments: np.ndarray | None = None
+
+
+def _err(src: str, field: str, value, expected: str) -> ConfigError:
+    return ConfigError(f"{src}: {field} = {value!r}: {expected}")
+
+
+def _member_label(kind: ControlKind, idx: tuple[int, ...]) -> str:
+    if not idx:
+        return kind.label
+    return f"{kind.label}[{','.join(str(i) for i in idx)}]"
+
+
+def _body_velocity(base: Problem, body: str, centre: str) -> np.ndarray:
+    """Velocity (km/s) of ``body`` relative to ``centre`` at the epoch (the model's ephemeris)."""
+    from fracas.integrate import encke
+
+    model = base.model
+    pos, vel = encke.body_states(model, base.params, base.ephem, base.epoch_et_s)
+    return np.asarray(vel[model.bodies.index(body)] - vel[model.bodies.index(centre)], float)
+
+
+def build_tom(deck: TomDeck) -> TomCase:
+    """Validated TOM deck -> :class:`TomCase`; ConfigError naming the field for what the
+    trajectory cannot support (an arc that does not exist, a body outside the model ...)."""
+    src = deck.source_path or "<deck>"
+    traj = tom_trajectory_deck(deck)
+    base = build_propagation(traj)
+    model = base.model
+    params = base.params
+    n_arcs, n_imp = model.n_arcs, model.n_impulses
+    m = len(deck.control)
+
+    # ---- controls
+    names, units, factor, members_all = [], [], np.zeros(m), []
+    u_traj = np.zeros(m)  # the trajectory's own value of each control (canonical)
+    u0 = np.zeros(m)
+    lower = np.full(m, -np.inf)
+    upper = np.full(m, np.inf)
+    scale = np.zeros(m)
+    floor = np.zeros(m)
+    fd = np.zeros(m)
+    label_index: dict[str, int] = {}
+    labels: list[str] = []
+    entries: list[tuple[int, int, float]] = []  # (label row, control col, coefficient)
+    x0_entries: list[tuple[int, int, float]] = []
+    vinf_index = [-1, -1, -1]
+    final_index = -1
+    parsed = []
+    for j, c in enumerate(deck.control):
+        members = list(c.links.items()) if c.links else [(c.name, 1.0)]
+        where = f"control[{j}]" + (".links" if c.links else ".name")
+        pm = []
+        for name, coef in members:
+            try:
+                kind, idx = parse_control(name, n_arcs, n_imp)
+            except KeyError as exc:
+                raise _err(src, where, name, str(exc).strip("'\"")) from None
+            pm.append((name, kind, idx, coef))
+        parsed.append(pm)
+    durations = {idx[0] for pm in parsed for _, k, idx, _ in pm if k.name == "arc_duration"}
+
+    for j, (c, pm) in enumerate(zip(deck.control, parsed)):
+        kind0 = pm[0][1]
+        f0 = kind0.to_canonical
+        special = [k.name for _, k, _, _ in pm if k.name in VINF_CONTROLS or k.name == "final_time"]
+        if special and len(pm) > 1:
+            raise _err(
+                src, f"control[{j}].links", special[0], "vinf, vinf_ra, vinf_dec and final_time cannot be linked"
+            )
+        values = []
+        for name, kind, idx, coef in pm:
+            if kind.to_canonical != f0:
+                raise _err(src, f"control[{j}].links", name, f"a control in {kind0.unit}, like {pm[0][0]}")
+            cc = coef  # canonical coefficient (same unit as the control)
+            if kind.name in STATE_CONTROLS:
+                row = STATE_CONTROLS.index(kind.name)
+                x0_entries.append((row, j, cc))
+                values.append(base.x0[row] / coef)
+            elif kind.name in VINF_CONTROLS:
+                vinf_index[VINF_CONTROLS.index(kind.name)] = j
+                values.append(np.nan)  # filled below
+            elif kind.name == "final_time":
+                if traj.stop.condition != "time":
+                    raise _err(src, f"control[{j}].name", name, 'only with stop.condition = "time"')
+                final_index = j
+                values.append(base.final_time_s)
+            else:
+                label = _member_label(kind, idx)
+                if label not in label_index:
+                    label_index[label] = len(labels)
+                    labels.append(label)
+                field_val = float(np.asarray(getattr(params, kind.label))[idx] if idx else getattr(params, kind.label))
+                entries.append((label_index[label], j, cc))
+                if kind.name == "arc_duration":
+                    t_on = float(np.asarray(params.arc_t_on)[idx[0]])
+                    values.append((field_val - t_on) / coef)
+                else:
+                    values.append(field_val / coef)
+                if kind.name == "arc_t_on" and idx[0] in durations:
+                    # the arc's duration is a control: moving its start moves its end too
+                    lab = f"arc_t_off[{idx[0]}]"
+                    if lab not in label_index:
+                        label_index[lab] = len(labels)
+                        labels.append(lab)
+                    entries.append((label_index[lab], j, cc))
+        names.append(c.name)
+        units.append(kind0.unit)
+        factor[j] = f0
+        members_all.append(tuple((n, cf) for n, _, _, cf in pm))
+        u_traj[j] = values[0]
+        lo = c.lower if c.lower is not None else (kind0.bounds[0] if len(pm) == 1 else None)
+        hi = c.upper if c.upper is not None else (kind0.bounds[1] if len(pm) == 1 else None)
+        lower[j] = lo * f0 if lo is not None else -np.inf
+        upper[j] = hi * f0 if hi is not None else np.inf
+        scale[j] = c.scale
+        floor[j] = f0
+        fd[j] = c.fd_step * f0 if c.fd_step is not None else np.nan
+
+    # the launch excess velocity
+    v_dep = None
+    if max(vinf_index) >= 0:
+        dep = deck.tom.departure_body or traj.initial_state.centre
+        if dep not in model.bodies:
+            raise _err(src, "tom.departure_body", dep, f"a body of the trajectory's model ({', '.join(model.bodies)})")
+        v_dep = (
+            _body_velocity(base, dep, traj.initial_state.centre) if dep != traj.initial_state.centre else np.zeros(3)
+        )
+        vinf_vec = base.x0[3:6] - v_dep
+        vmag = float(np.linalg.norm(vinf_vec))
+        vals = (vmag, math.atan2(vinf_vec[1], vinf_vec[0]), math.asin(vinf_vec[2] / vmag) if vmag > 0 else 0.0)
+        for k, j in enumerate(vinf_index):
+            if j >= 0:
+                u_traj[j] = vals[k]
+        vinf_fixed = vals
+    else:
+        vinf_fixed = (0.0, 0.0, 0.0)
+
+    for j, c in enumerate(deck.control):
+        u0[j] = c.nominal * factor[j] if c.nominal is not None else u_traj[j]
+        if not np.isfinite(fd[j]):
+            fd[j] = 1e-6 * max(abs(u0[j]) / factor[j], 1.0) * factor[j]
+        if not (lower[j] <= u0[j] <= upper[j]):
+            raise _err(
+                src,
+                f"control[{j}].nominal",
+                u0[j] / factor[j],
+                f"within [{lower[j] / factor[j]:g}, {upper[j] / factor[j]:g}] {units[j]}",
+            )
+
+    n_lab = len(labels)
+    a_mat = np.zeros((n_lab, m))
+    for row, j, cc in entries:
+        a_mat[row, j] += cc
+    b_mat = np.zeros((7, m))
+    for row, j, cc in x0_entries:
+        b_mat[row, j] += cc
+    p_traj = np.array(
+        [
+            float(np.asarray(getattr(params, parse_field(lab)))[parse_index(lab)])
+            if parse_index(lab)
+            else float(getattr(params, parse_field(lab)))
+            for lab in labels
+        ]
+    )
+    # p(u) = p_traj + A (u - u_traj), x0(u) = x0_traj + B (u - u_traj)
+    u_lin = np.where(np.isfinite(u_traj), u_traj, 0.0)
+    cmap = ControlMap(
+        names=tuple(names),
+        param_labels=tuple(labels),
+        param_base=p_traj - a_mat @ u_lin,
+        param_matrix=a_mat,
+        x0_base=base.x0 - b_mat @ u_lin,
+        x0_matrix=b_mat,
+        final_time_s=base.final_time_s,
+        final_time_index=final_index,
+        vinf_index=tuple(vinf_index),
+        vinf_fixed=tuple(float(v) for v in vinf_fixed),
+        v_departure=v_dep,
+    )
+
+    # ---- targets
+    t_names, t_bodies, t_units, t_factor, desired, tol, angle, body_idx = [], [], [], [], [], [], [], []
+    default_body = traj.stop.body or traj.initial_state.centre
+    for i, t in enumerate(deck.target):
+        body = t.body or default_body
+        if body not in model.bodies:
+            raise _err(
+                src,
+                f"target[{i}].body",
+                body,
+                f"a body of the trajectory's model ({', '.join(model.bodies)}); add it to forces.third_bodies "
+                "or make it the stop body",
+            )
+        unit, fac = target_display(t.name)
+        t_names.append(t.name)
+        t_bodies.append(body)
+        body_idx.append(model.bodies.index(body))
+        t_units.append(unit)
+        t_factor.append(fac)
+        desired.append(t.value * fac)
+        tol.append(t.tolerance * fac)
+        angle.append(t.name in _ANGLE_TARGETS)
+    targets = TargetSet(tuple(t_names), tuple(body_idx), np.array(desired), np.array(tol), tuple(angle))
+
+    problem = TomProblem(
+        model,
+        params,
+        base.ephem,
+        base.epoch_et_s,
+        cmap,
+        targets,
+        fd_steps=fd,
+        sensitivity_method=deck.tom.sensitivities,
+    )
+    ts = deck.tom
+    dfmax = ts.max_performance_change_kg if ts.max_performance_change_kg is not None else 0.005 * float(base.x0[6])
+    submode = {"nominal": "target", "grid": "target"}.get(ts.submode, ts.submode)
+    settings = SearchSettings(
+        submode=submode,
+        max_iterations=ts.max_iterations,
+        max_performance_change=dfmax,
+        correction_fraction=ts.correction_fraction,
+        linearity_radius=ts.linearity_radius if ts.linearity_radius is not None else math.inf,
+        max_scale_factor=ts.max_scale_factor,
+        curve_fit_tolerance=ts.curve_fit_tolerance,
+        dependent_angle_rad=math.radians(ts.dependent_angle_deg),
+        convergence_angle_rad=ts.convergence_angle_rad,
+        targeting_threshold=ts.targeting_threshold,
+        optimization_threshold=ts.optimization_threshold,
+        weighting=ts.weighting,
+    )
+    tf = np.array(t_factor)
+    given_s = given_g = None
+    if deck.smag is not None:
+        given_s = np.array(deck.smag.s, float) * tf[:, None] / factor[None, :]
+        given_g = np.array(deck.smag.g, float) / factor
+    grid = np.array(deck.grid.increments) * factor if deck.grid is not None else None
+    return TomCase(
+        deck=deck,
+        trajectory=traj,
+        base=base,
+        problem=problem,
+        u0=u0,
+        lower=lower,
+        upper=upper,
+        scale=scale,
+        floor=floor,
+        settings=settings,
+        control_names=tuple(names),
+        control_units=tuple(units),
+        control_factor=factor,
+        target_names=tuple(t_names),
+        target_bodies=tuple(t_bodies),
+        target_units=tuple(t_units),
+        target_factor=tf,
+        members=tuple(members_all),
+        given_s=given_s,
+        given_g=given_g,
+        grid_increments=grid,
+    )
+
+
+def parse_field(label: str) -> str:
+    return label.split("[")[0]
+
+
+def parse_index(label: str) -> tuple[int, ...]:
+    if "[" not in label:
+        return ()
+    return tuple(int(p) for p in label[label.index("[") + 1 : -1].split(","))
+
+
+# ------------------------------------------------------------------ the reference deck
+def _fmt(x: float) -> float:
+    return float(repr(float(x))) if math.isfinite(x) else x
+
+
+def reference_deck_text(case: TomCase, u) -> str:
+    """The trajectory deck of controls U: the TOM deck's trajectory with every control's
+    final value written in (TOML text, for ``fracas propagate`` and TEAM's [ertraj])."""
+    import tomli_w
+
+    traj = case.trajectory
+    data = copy.deepcopy(load_toml(traj.source_text, traj.source_path or "<deck>")) if traj.source_text else {}
+    for k in ("tom", "control", "target", "smag", "grid", "trajectory"):
+        data.pop(k, None)
+    data["mode"] = "propagate"
+    prob = case.problem
+    cm = prob.controls
+    u = np.asarray(u, float)
+    prm = prob.params_at(u)
+    # initial state (when any state or v∞ control moved it): cartesian in the deck's frame
+    if np.any(cm.x0_matrix) or max(cm.vinf_index) >= 0:
+        x0 = cm.x0_of(u)
+        st = traj.initial_state
+        rot = _rotation_to_icrf(st.frame, st.centre)
+        r_deck, v_deck = rot.T @ x0[:3], rot.T @ x0[3:6]
+        ist = data.setdefault("initial_state", {})
+        for key in ("elements", "spherical", "cartesian"):
+            ist.pop(key, None)
+        ist["cartesian"] = {"r_km": [_fmt(a) for a in r_deck], "v_km_s": [_fmt(a) for a in v_deck]}
+    arcs = data.get("thrust_arc", [])
+    for k, arc in enumerate(arcs):
+        arc["start_days"] = _fmt(float(prm.arc_t_on[k]) / constants.DAY_S)
+        arc["stop_days"] = _fmt(float(prm.arc_t_off[k]) / constants.DAY_S)
+        frame = arc.get("frame", "velocity")
+        arc["alpha_deg"] = _fmt(math.degrees(float(prm.arc_alpha[k])))
+        arc["beta_deg"] = _fmt(math.degrees(float(prm.arc_beta[k])))
+        arc["throttle"] = _fmt(float(prm.arc_throttle[k]))
+        arc["frame"] = frame
+    imps = data.get("impulse", [])
+    for k, imp in enumerate(imps):
+        imp["time_days"] = _fmt(float(prm.impulse_t[k]) / constants.DAY_S)
+        imp["dv_km_s"] = [_fmt(float(a)) for a in np.asarray(prm.impulse_dv)[k]]
+    if "propulsion" in data:
+        pr = data["propulsion"]
+        pr.pop("isp_s", None)
+        pr["exhaust_velocity_km_s"] = _fmt(float(prm.exhaust_velocity_km_s))
+        pr["thrust_scale"] = _fmt(float(prm.thrust_scale))
+    if cm.final_time_index >= 0:
+        stop = data.setdefault("stop", {})
+        stop.pop("final_epoch", None)
+        stop["duration_days"] = _fmt(cm.final_time(u) / constants.DAY_S)
+    if traj.stop.condition == "time":
+        dur = cm.final_time(u) / constants.DAY_S
+        out = data.get("output", {})
+        if "times_days" in out:
+            out["times_days"] = [t for t in out["times_days"] if t <= dur]
+    title = data.get("title", "")
+    data["title"] = (title + " (TOM optimum)").strip()
+    body = tomli_w.dumps({"mode": data.pop("mode"), "title": data.pop("title"), **data})
+    header = (
+        "# Written by fracas TOM: the trajectory deck with the converged controls written in.\n"
+        f"# TOM deck: {case.deck.source_path or '<deck>'}\n"
+    )
+    return header + body
+
+
+__all__ += ["parse_field", "parse_index", "CONTROL_KINDS"]

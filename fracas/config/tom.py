@@ -1,0 +1,280 @@
+"""The TOM deck: targeting and final-mass optimization (FRACAS $DATA, $SMAG; report §3.1).
+
+A TOM deck is a trajectory deck (inline, as in any ``fracas propagate`` deck, or named by
+``[trajectory] deck``) plus the tables below.  Values are in the units an analyst writes:
+times in days, angles in degrees, km, km/s, kg (:data:`fracas.params.CONTROL_KINDS` gives
+each control's unit, :data:`fracas.guidance.target_kinds.TARGET_KINDS` each target's; a
+target in rad is written in deg, one in s in days).  No JAX here::
+
+    mode = "tom"
+    [trajectory]   deck = "trajectory.toml"  (relative to this file; else the trajectory
+                   tables are inline)
+    [tom]          submode = "auto" | "grid" | "target" | "target_optimize" | "optimize" | "nominal"
+                   optimizer = "projected_gradient" | "slsqp" | "trust_constr"
+                   sensitivities = "ad" | "fegs"  (FEGS: forward finite differences)
+                   max_iterations = 100, max_performance_change_kg (ΔF_max; default 0.5 %
+                   of the initial mass), correction_fraction = 1 (p), linearity_radius (R, in
+                   scaled units: tolerances of the most sensitive target; default none),
+                   max_scale_factor = 4 (γ_max), curve_fit_tolerance = 0.1 (η),
+                   dependent_angle_deg = 1 (STEST θ_min), convergence_angle_rad = 1e-3
+                   (TEST θ_conv), targeting_threshold = 10 (T_up), optimization_threshold = 1
+                   (T_low; both on the RMS of ΔT_i/ε_i), weighting = "sensitivity" | "control",
+                   departure_body (for the vinf controls; default the deck's centre),
+                   results = "out/<deck>_tom.h5", reference_deck = "out/<deck>_reference.toml",
+                   plot = "out/<deck>_tom.png", stm_file (optional: an STM file of the optimum)
+    [[control]]    name ("arc_t_off[0]", "vx0", "impulse_dv[0,1]", ...; or any name with
+                   ``links``), nominal (default the trajectory's value), scale = 1 (WEIGHT's
+                   k_j), lower, upper, fd_step (FEGS δU; default 1e-6 max(|U|, 1) in deck
+                   units), links = {"arc_beta[0]" = 1.0, "arc_beta[1]" = -1.0} (a linked
+                   control: each named control moves by coefficient × this one)
+    [[target]]     name, value, tolerance (> 0), body (default the stop body, else the
+                   centre), at = "final" (the stop condition or final time)
+    [smag]         s = [[..], ..] (targets × controls), g = [..]  (given S and G for the
+                   first iteration, in deck units per deck unit)
+    [grid]         increments = [..] (one per control, deck units), steps = 4 (±1..±steps
+                   increments), pairs = true
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import Field, PositiveFloat, PositiveInt, PrivateAttr, ValidationError, model_validator
+
+from fracas.config.trajectory import (
+    BodyName,
+    FieldProblem,
+    SourcedDeck,
+    TrajectoryDeck,
+    _Section,
+    _strip_bom,
+    deck_error,
+    load_toml,
+    read_deck_text,
+    validation_problems,
+)
+from fracas.errors import DeckError
+from fracas.guidance.target_kinds import TARGET_KINDS
+from fracas.params import CONTROL_KINDS
+
+__all__ = ["TomDeck", "TomSettings", "ControlSpec", "TargetSpec", "parse_tom_deck", "load_tom_deck", "SUBMODES"]
+
+SUBMODES = ("auto", "grid", "target", "target_optimize", "optimize", "nominal")
+OPTIMIZERS = ("projected_gradient", "slsqp", "trust_constr")
+_TOM_KEYS = ("mode", "title", "trajectory", "tom", "control", "target", "smag", "grid")
+
+
+class TrajectoryRef(_Section):
+    """$DATA's trajectory part named by file: a trajectory deck (relative to this deck)."""
+
+    deck: str
+
+
+class TomSettings(_Section):
+    """$DATA's iteration inputs (names and recommended defaults: digest §A.2)."""
+
+    submode: Literal["auto", "grid", "target", "target_optimize", "optimize", "nominal"] = "target_optimize"
+    optimizer: Literal["projected_gradient", "slsqp", "trust_constr"] = "projected_gradient"
+    sensitivities: Literal["ad", "fegs"] = "ad"
+    max_iterations: PositiveInt = 100
+    max_performance_change_kg: PositiveFloat | None = None
+    correction_fraction: Annotated[float, Field(gt=0, le=1)] = 1.0
+    linearity_radius: PositiveFloat | None = None  # None: no radius (ΔF_max, p and the line search bound the step)
+    max_scale_factor: Annotated[float, Field(ge=1)] = 4.0
+    curve_fit_tolerance: PositiveFloat = 0.1
+    dependent_angle_deg: Annotated[float, Field(ge=0, lt=90)] = 1.0
+    convergence_angle_rad: PositiveFloat = 1e-3
+    targeting_threshold: PositiveFloat = 10.0
+    optimization_threshold: PositiveFloat = 1.0
+    weighting: Literal["sensitivity", "control"] = "sensitivity"
+    departure_body: BodyName | None = None
+    results: str | None = None
+    reference_deck: str | None = None
+    plot: str | None = None
+    stm_file: str | None = None
+
+    @model_validator(mode="after")
+    def _thresholds(self) -> TomSettings:
+        if self.optimization_threshold >= self.targeting_threshold:
+            raise FieldProblem(
+                "optimization_threshold",
+                self.optimization_threshold,
+                f"must be < targeting_threshold = {self.targeting_threshold:g}",
+            )
+        return self
+
+
+class ControlSpec(_Section):
+    """One control U_j ($DATA control codes): a catalogue name, or a linked combination."""
+
+    name: str
+    nominal: float | None = None
+    scale: PositiveFloat = 1.0
+    lower: float | None = None
+    upper: float | None = None
+    fd_step: PositiveFloat | None = None
+    links: dict[str, float] = {}
+
+    @model_validator(mode="after")
+    def _checks(self) -> ControlSpec:
+        names = list(self.links) if self.links else [self.name]
+        for n in names:
+            base = n.split("[")[0].strip()
+            if base not in CONTROL_KINDS:
+                where = ("links", n) if self.links else "name"
+                raise FieldProblem(where, n, f"a control from the catalogue: {', '.join(CONTROL_KINDS)}")
+        for n, c in self.links.items():
+            if c == 0.0 or not math.isfinite(c):
+                raise FieldProblem(("links", n), c, "a nonzero, finite coefficient")
+        if self.lower is not None and self.upper is not None and self.lower >= self.upper:
+            raise FieldProblem("upper", self.upper, f"must be > lower = {self.lower:g}")
+        if self.nominal is not None:
+            if self.lower is not None and self.nominal < self.lower:
+                raise FieldProblem("nominal", self.nominal, f"must be >= lower = {self.lower:g}")
+            if self.upper is not None and self.nominal > self.upper:
+                raise FieldProblem("nominal", self.nominal, f"must be <= upper = {self.upper:g}")
+        return self
+
+
+class TargetSpec(_Section):
+    """One target T_i with its tolerance ε_i (deck units: km, km/s, deg, days, 1)."""
+
+    name: str
+    value: float
+    tolerance: PositiveFloat
+    body: BodyName | None = None
+    at: Literal["final"] = "final"
+
+    @model_validator(mode="after")
+    def _known(self) -> TargetSpec:
+        if self.name not in TARGET_KINDS:
+            raise FieldProblem("name", self.name, f"a target from the catalogue: {', '.join(TARGET_KINDS)}")
+        return self
+
+
+class Smag(_Section):
+    """$SMAG: S (targets × controls) and G (controls) for the first iteration."""
+
+    s: list[list[float]]
+    g: list[float]
+
+
+class GridSpec(_Section):
+    """GRID: each control alone over ±1..±steps increments, and (pairs) every pair."""
+
+    increments: list[PositiveFloat]
+    steps: PositiveInt = 4
+    pairs: bool = True
+
+
+class TomDeck(SourcedDeck):
+    """A whole TOM deck (frozen).  ``trajectory_deck`` is the inline trajectory, if any."""
+
+    mode: Literal["tom"] = "tom"
+    title: str = ""
+    trajectory: TrajectoryRef | None = None
+    tom: TomSettings = TomSettings()
+    control: list[ControlSpec] = []
+    target: list[TargetSpec] = []
+    smag: Smag | None = None
+    grid: GridSpec | None = None
+    _inline: TrajectoryDeck | None = PrivateAttr(None)
+
+    @model_validator(mode="after")
+    def _cross_checks(self) -> TomDeck:
+        if not self.control:
+            raise FieldProblem("control", [], "at least one [[control]]")
+        seen: dict[str, int] = {}
+        for k, c in enumerate(self.control):
+            if c.name in seen:
+                raise FieldProblem(("control", k, "name"), c.name, f"already control {seen[c.name]}")
+            seen[c.name] = k
+        m, n = len(self.control), len(self.target)
+        if self.smag is not None:
+            if len(self.smag.s) != n or any(len(row) != m for row in self.smag.s):
+                raise FieldProblem(("smag", "s"), f"{len(self.smag.s)} rows", f"{n} rows (targets) of {m} (controls)")
+            if len(self.smag.g) != m:
+                raise FieldProblem(("smag", "g"), f"{len(self.smag.g)} entries", f"{m} entries (one per control)")
+        if self.tom.submode == "grid":
+            if self.grid is None:
+                raise FieldProblem("grid", None, 'a [grid] table (increments) for submode = "grid"')
+        if self.grid is not None and len(self.grid.increments) != m:
+            raise FieldProblem(
+                ("grid", "increments"), f"{len(self.grid.increments)} entries", f"{m} entries (one per control)"
+            )
+        if self.tom.submode in ("target", "target_optimize", "auto") and not self.target:
+            raise FieldProblem("target", [], f'at least one [[target]] for submode = "{self.tom.submode}"')
+        return self
+
+    def resolve(self, rel: str) -> Path:
+        """A path named in the deck, relative to the deck's folder."""
+        p = Path(rel)
+        if p.is_absolute() or self._source_path is None:
+            return p
+        return Path(self._source_path).parent / p
+
+    @property
+    def trajectory_deck(self) -> TrajectoryDeck | None:
+        """The inline trajectory deck (None when [trajectory] names a file)."""
+        return self._inline
+
+
+def parse_tom_deck(text: str, source: str = "<deck>") -> TomDeck:
+    """Validate TOM-deck TOML text; any problem -> one-line DeckError naming the field.
+
+    The TOM tables are validated as :class:`TomDeck`; every other table is the inline
+    trajectory deck, validated as :class:`TrajectoryDeck` (``mode`` dropped), unless
+    ``[trajectory] deck`` names one (then no trajectory table may be inline)."""
+    text = _strip_bom(text)
+    data = load_toml(text, source)
+    tom_data = {k: v for k, v in data.items() if k in _TOM_KEYS}
+    traj_data = {k: v for k, v in data.items() if k not in _TOM_KEYS}
+    problems: list[str] = []
+    deck = None
+    try:
+        deck = TomDeck.model_validate(tom_data)
+    except ValidationError as exc:
+        problems += validation_problems(exc, source, TomDeck, tom_data)
+    inline = None
+    if "trajectory" in tom_data and traj_data:
+        problems.append(
+            f"{source}: {', '.join(sorted(traj_data))}: not expected with [trajectory] deck "
+            "(give the trajectory inline or by file, not both)"
+        )
+    elif "trajectory" not in tom_data:
+        if "title" in data:
+            traj_data["title"] = data["title"]
+        try:
+            inline = TrajectoryDeck.model_validate(traj_data)
+        except ValidationError as exc:
+            problems += validation_problems(exc, source, TrajectoryDeck, traj_data)
+    if problems:
+        raise deck_error(problems)
+    deck._source_path = source
+    deck._source_text = text
+    if inline is not None:
+        inline._source_path = source
+        inline._source_text = text
+        deck._inline = inline
+    return deck
+
+
+def load_tom_deck(path: str | Path) -> TomDeck:
+    """Read and validate a TOM deck; every failure is a one-line DeckError."""
+    return parse_tom_deck(read_deck_text(path), str(path))
+
+
+def tom_trajectory_deck(deck: TomDeck) -> TrajectoryDeck:
+    """The trajectory deck a TOM deck stands on: inline, or the file [trajectory] names."""
+    if deck.trajectory_deck is not None:
+        return deck.trajectory_deck
+    from fracas.config.trajectory import load_deck
+
+    path = deck.resolve(deck.trajectory.deck)
+    if not path.exists():
+        raise DeckError(
+            f"{deck.source_path}: trajectory.deck = {deck.trajectory.deck!r}: no such trajectory deck ({path})"
+        )
+    return load_deck(path)

@@ -1,0 +1,1 @@
+"""TOM: targeting and final-mass optimization (FRACAS TOM)."""

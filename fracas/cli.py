@@ -253,7 +253,8 @@ def run(
     width: int | None,
     debug: bool,
 ) -> None:
-    """Run a DECK in the mode it names (mode = "team": a TEAM study; a trajectory deck: a propagation)."""
+    """Run a DECK in the mode it names (mode = "team": a TEAM study; mode = "tom": targeting and
+    optimization; a trajectory deck: a propagation)."""
     debug = debug or bool((ctx.obj or {}).get("debug"))
     with _errors(debug):
         from fracas.config.modes import deck_mode
@@ -263,6 +264,11 @@ def run(
         mode = deck_mode(read_deck_text(deck), str(deck))
         if mode == "sweep":
             _run_sweep(deck, (), None, None, True, output)
+            return
+        if mode == "tom":
+            if stm_file is not None:
+                raise DeckError(f'{deck}: --stm is for TEAM decks (mode = "team"); this is a TOM deck')
+            _run_tom(deck, output, plot, as_json, quiet)
             return
         if mode == "propagate":
             if stm_file is not None:
@@ -281,6 +287,54 @@ def run(
                 click.echo(f"reference ready ({source}); errcon.analysis = false: no analysis run")
                 return
             _team_report(path, png, as_json, verbosity, stage, product.timing, velocity_unit, width)
+
+
+def _run_tom(deck: Path, output: Path | None, plot: Path | None, as_json: bool, quiet: bool) -> None:
+    """``fracas run`` on a TOM deck: a progress line per iteration, then the summary."""
+    from fracas.config.tom import load_tom_deck
+    from fracas.io.tom_results import read_tom_results
+    from fracas.pipeline import run_tom
+    from fracas.report.tom import PROGRESS_HEADER, plot_tom, progress_line, summary_text
+
+    cfg = load_tom_deck(deck)
+    png = plot or (cfg.resolve(cfg.tom.plot) if cfg.tom.plot else None)
+    talk = not (as_json or quiet)
+    header = [False]
+
+    def on_iteration(rec) -> None:
+        if talk:
+            if not header[0]:
+                click.echo(PROGRESS_HEADER)
+                header[0] = True
+            click.echo(progress_line(rec))
+
+    with _progress(not as_json) as stage:
+        product, path, ref = run_tom(cfg, output, on_stage=stage, plot=png, on_iteration=on_iteration)
+        res = read_tom_results(path)
+        written = plot_tom(res, png) if png is not None else []
+    if as_json:
+        click.echo(
+            json.dumps(
+                {
+                    "file": str(path),
+                    "reference_deck": str(ref) if ref else None,
+                    "converged": bool(product.converged),
+                    "stop_reason": product.stop_reason,
+                    "final_mass_kg": product.final_mass_kg,
+                    "controls": dict(zip(product.control_names, map(float, product.u_final))),
+                    "targets": dict(zip(product.target_names, map(float, product.achieved))),
+                }
+            )
+        )
+        return
+    if quiet:
+        verdict = "converged" if product.converged else "NOT converged"
+        click.echo(f"TOM {verdict}: final mass {product.final_mass_kg:.6f} kg; {product.stop_reason}")
+    else:
+        click.echo(summary_text(res))
+    click.echo(f"results: {path}")
+    for w in written:
+        click.echo(f"plot: {w}")
 
 
 def _verbosity(quiet: bool, verbose: bool) -> str:
@@ -369,6 +423,18 @@ def report(
             check_output_path(plot, "plot")
         if kind == "fracas-team-results":
             _team_report(file, plot, as_json, _verbosity(quiet, verbose), None, None, velocity_unit, width)
+            return
+        if kind == "fracas-tom-results":
+            from fracas.io.tom_results import read_tom_results
+            from fracas.report.tom import plot_tom, summary_text
+
+            res = read_tom_results(file)
+            if as_json:
+                click.echo(json.dumps({"file": str(file), "attrs": {k: str(v) for k, v in res["attrs"].items()}}))
+            else:
+                click.echo(summary_text(res, width=width or 80))
+            for w in plot_tom(res, plot) if plot is not None else []:
+                click.echo(f"plot: {w}")
             return
         from fracas.io.trajectory_file import read_trajectory_file
         from fracas.report.trajectory import plot_trajectory, print_summary

@@ -272,6 +272,10 @@ def check_path(path: str | Path) -> tuple[str | None, list[str]]:
         return kind, list(exc.problems)
     if mode == "team":
         return mode, _team_problems(deck)
+    if mode == "tom":
+        from fracas.config.tom import tom_problems
+
+        return mode, tom_problems(deck)
     if mode == "sweep":
         study = deck.resolve(deck.sweep.study)
         if not study.is_file():

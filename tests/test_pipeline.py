@@ -86,8 +86,8 @@ def test_mode_dispatch():
 
 def test_unknown_or_future_mode_is_refused(tmp_path):
     for mode, expected in (
-        ("tom", 'mode = "tom": not available in this release (expected one of: propagate, team, sweep)'),
-        ("fly", "mode = 'fly': unknown mode (expected one of: propagate, team, sweep)"),
+        ("tsim", 'mode = "tsim": not available in this release (expected one of: propagate, team, sweep, tom)'),
+        ("fly", "mode = 'fly': unknown mode (expected one of: propagate, team, sweep, tom)"),
     ):
         deck = tmp_path / f"{mode}.toml"
         deck.write_text(f'mode = "{mode}"\n', encoding="utf-8")

@@ -173,7 +173,7 @@ def test_unreadable_decks(tmp_path):
     assert validate_path(tmp_path / "none.toml") == [f"{tmp_path / 'none.toml'}: no such file"]
     bad = tmp_path / "bad.toml"
     bad.write_text('mode = "fly"\n', encoding="utf-8")
-    assert validate_path(bad) == [f"{bad}: mode = 'fly': unknown mode (expected one of: propagate, team, sweep)"]
+    assert validate_path(bad) == [f"{bad}: mode = 'fly': unknown mode (expected one of: propagate, team, sweep, tom)"]
 
 
 def test_no_jax_imported():
@@ -197,7 +197,7 @@ def test_validate_command_lists_every_problem(tmp_path):
     decks = sorted(str(p) for p in (ROOT / "namelists").glob("*.toml"))
     r = CliRunner().invoke(main, ["validate", *decks])
     assert r.exit_code == 0, r.output
-    kind = {"_team.toml": "team", "_guidance.toml": "team", "_sweep.toml": "sweep"}
+    kind = {"_team.toml": "team", "_guidance.toml": "team", "_sweep.toml": "sweep", "_tom.toml": "tom"}
     expected = [f"ok: {d} ({next((v for k, v in kind.items() if d.endswith(k)), 'propagate')})" for d in decks]
     assert r.stdout.splitlines() == expected
     bad = tmp_path / "bad.toml"

@@ -88,7 +88,7 @@ class TomSettings(_Section):
     convergence_angle_rad: PositiveFloat = 1e-3
     targeting_threshold: PositiveFloat = 10.0
     optimization_threshold: PositiveFloat = 1.0
-    weighting: Literal["sensitivity", "control"] = "sensitivity"
+    weighting: Literal["sensitivity", "control"] = "control"
     departure_body: BodyName | None = None
     results: str | None = None
     reference_deck: str | None = None
@@ -278,3 +278,48 @@ def tom_trajectory_deck(deck: TomDeck) -> TrajectoryDeck:
             f"{deck.source_path}: trajectory.deck = {deck.trajectory.deck!r}: no such trajectory deck ({path})"
         )
     return load_deck(path)
+
+
+def tom_problems(deck: TomDeck) -> list[str]:
+    """Every problem of a parsed TOM deck the schema alone cannot see, one line each, without
+    JAX: the trajectory deck exists and validates; every control names an arc or impulse the
+    trajectory has and a final_time control comes with stop.condition = "time"; every
+    target body is one whose state the trajectory's model carries."""
+    from fracas.params import parse_control
+
+    src = deck.source_path or "<deck>"
+    try:
+        traj = tom_trajectory_deck(deck)
+    except DeckError as exc:
+        return list(exc.problems) or [str(exc)]
+    out = []
+    n_arcs, n_imp = len(traj.thrust_arc), len(traj.impulse)
+    for j, c in enumerate(deck.control):
+        names = list(c.links) if c.links else [c.name]
+        for name in names:
+            field = f"control[{j}]." + (f"links.{name}" if c.links else "name")
+            try:
+                kind, _ = parse_control(name, n_arcs, n_imp)
+            except KeyError as exc:
+                out.append(f"{src}: {field} = {name!r}: {str(exc).strip(chr(34) + chr(39))}")
+                continue
+            if kind.name == "final_time" and traj.stop.condition != "time":
+                out.append(f'{src}: {field} = "final_time": only with stop.condition = "time"')
+            if kind.name in ("vinf", "vinf_ra", "vinf_dec", "final_time") and c.links:
+                out.append(f"{src}: {field} = {name!r}: cannot be linked")
+    bodies = {traj.initial_state.centre, *traj.forces.third_bodies, *traj.forces.conic_bodies}
+    if traj.stop.body:
+        bodies.add(traj.stop.body)
+    if traj.forces.srp or (traj.propulsion is not None and traj.propulsion.power_source == "solar" and traj.thrust_arc):
+        bodies.add("sun")
+    default = traj.stop.body or traj.initial_state.centre
+    for i, t in enumerate(deck.target):
+        body = t.body or default
+        if body not in bodies and not traj.forces.change_primary_at_soi:
+            out.append(
+                f"{src}: target[{i}].body = {body!r}: not in the trajectory's model ({', '.join(sorted(bodies))}); "
+                "add it to forces.third_bodies or make it the stop body"
+            )
+    if deck.tom.departure_body is not None and deck.tom.departure_body not in bodies:
+        out.append(f"{src}: tom.departure_body = {deck.tom.departure_body!r}: not in the trajectory's model")
+    return out

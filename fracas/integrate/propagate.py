@@ -337,14 +337,15 @@ def _final_jac(static, dyn, params, ephem, epoch_et_s, x0, t_end, param_labels, 
     labels = tuple(param_labels)
     p0 = get_values(params, labels, model)
     t0 = jnp.zeros(())
-    c0, rs = encke.init_carry(model, params, ephem, epoch_et_s, t0, x0)
-    cs = jax.lax.stop_gradient(c0)
 
     def run(delta):
+        # the initial carry inside the differentiated map: an impulse at t = 0 (applied by
+        # init_carry) then depends on its controls like any other
         x = x0 + dx0_du @ delta
         prm = set_values(params, labels, p0 + dp_du @ delta, model) if labels else params
-        x1, _ = _segment(model, prm, ephem, epoch_et_s, cs, x, t_end, rs)
-        return x1
+        c0, rs = encke.init_carry(model, prm, ephem, epoch_et_s, t0, x)
+        c1 = encke.advance(model, prm, ephem, epoch_et_s, c0, t_end, rs)
+        return encke.state_of(c1)
 
     delta0 = jnp.zeros(dx0_du.shape[1])
     return run(delta0), jax.jacfwd(run)(delta0)

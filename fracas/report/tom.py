@@ -3,6 +3,7 @@ convergence and GRID plots, from a TOM results file's contents (:func:`read_tom_
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -36,13 +37,11 @@ def summary_text(res: dict, width: int = 80) -> str:
     title = a.get("title") or Path(a.get("source", "")).name
     lines.append(f"TOM {a.get('submode', '')} -- {title}"[:width])
     verdict = "CONVERGED" if int(a.get("converged", 0)) else "NOT CONVERGED"
-    lines.append(f"{verdict}: {a.get('stop_reason', '')}"[: 3 * width])
     claim = "yes" if int(a.get("search_converged", 0)) else "no"
     met = "yes" if int(a.get("targets_met", 0)) else "no"
-    lines.append(
-        f"optimizer {a.get('optimizer')}, sensitivities {a.get('sensitivities')}; "
-        f"optimizer's own claim: {claim}; targets met on re-propagation: {met}"[:width]
-    )
+    lines.append(f"{verdict} (targets met on re-propagation: {met}; the search's own test: {claim})")
+    lines += textwrap.wrap(f"stop: {a.get('stop_reason', '')}", width)
+    lines.append(f"optimizer {a.get('optimizer')}, sensitivities {a.get('sensitivities')}"[:width])
     lines.append("")
     lines.append(f"{'target':<20} {'desired':>14} {'achieved':>14} {'error':>11} {'tol':>9} {'unit':<5}")
     for i, name in enumerate(res["target_names"]):
@@ -73,10 +72,15 @@ def summary_text(res: dict, width: int = 80) -> str:
     )
     k = len(res["iteration"])
     n_traj = int(res["n_trajectories"][-1]) if k else 0
-    t = {key[7:]: v for key, v in a.items() if key.startswith("timing_")}
-    if t:
-        parts = ", ".join(f"{key} {val:.2f} s" for key, val in t.items())
-        lines.append(f"{k} iterations, {n_traj} trajectories; {parts}"[: 2 * width])
+    t = {key[7:]: float(v) for key, v in a.items() if key.startswith("timing_")}
+    lines.append(f"{k} iterations, {n_traj} trajectories")
+    if "search_s" in t:
+        lines.append(
+            f"search {t['search_s']:.2f} s: sensitivities {t.get('sensitivities_s', 0):.2f} s, line search "
+            f"{t.get('line_search_s', 0):.2f} s, bookkeeping {t.get('bookkeeping_s', 0):.2f} s"[:width]
+        )
+    if "grid_s" in t:
+        lines.append(f"GRID {t['grid_s']:.2f} s ({t.get('grid_trajectories_per_s', 0):.0f} trajectories/s)"[:width])
     if a.get("reference_deck"):
         lines.append(f"reference deck: {a['reference_deck']}")
     return "\n".join(lines)

@@ -45,6 +45,7 @@ Choices made here where the digest leaves one (each is repeated in the function 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -107,6 +108,7 @@ class SearchSettings:
     weighting: str = "sensitivity"
     max_trials: int = 6
     min_performance_gain: float = 0.0
+    optimization_step_limit: float = 10.0  # E_rms an optimization-only (O) trial may reach
 
     def __post_init__(self) -> None:
         if self.submode not in SUBMODES:
@@ -869,10 +871,16 @@ def projected_gradient(
 
     best_u, best_ev, best_key = u.copy(), ev, key(ev, tau)
     reason, converged = "", False
+    # ΔF_max is the most an iteration may ask for (kg); the step asks for dfmax <= ΔF_max,
+    # twice the gain the last optimization step achieved (a line search from a 5 kg request
+    # near an optimum with 0.1 kg left spends its trials shrinking), divided by 10 after an
+    # optimization line search finds no decrease, down to 1e-9 ΔF_max.
+    dfmax = settings.max_performance_change
 
     def iteration(it: int) -> bool:
         """One UPHILL pass; True when the search stops (``reason``/``converged`` set)."""
-        nonlocal u, ev, S, G, tau, best_u, best_ev, best_key, reason, converged
+        nonlocal u, ev, S, G, tau, best_u, best_ev, best_key, reason, converged, s, dfmax
+        s = dataclasses.replace(settings, max_performance_change=dfmax)
         if it > 1:
             ev, S, G = cnt.sensitivities(u, n, m)
             if not ev.ok:
@@ -1021,6 +1029,12 @@ def projected_gradient(
                 trials.append(Trial(gamma, math.inf, -math.inf, math.inf, False))
                 return math.inf
             taut = tau_of(evt)
+            if alpha == 0.0 and n and math.sqrt(float(taut @ taut) / n) > s.optimization_step_limit:
+                # optimization only: a trial that leaves the region E_rms <= optimization_step_limit is
+                # no decrease, whatever FUNCT's linear restoration estimate says (it is blind
+                # to a step that large; seen on the Hohmann test, an O step to E_rms 1e5)
+                trials.append(Trial(gamma, math.inf, evt.performance, float(taut @ taut), False))
+                return math.inf
             c = funct(
                 taut,
                 evt.performance,
@@ -1069,6 +1083,12 @@ def projected_gradient(
                     label, alpha, beta, active, kept, dr, dropped, trials, du, gamma, ev_saved = saved
                     flown[gamma] = ev_saved
         record(label, gamma, dr, trials, dropped)
+        if gamma == 0.0 and beta and dfmax > 1e-9 * settings.max_performance_change:
+            dfmax /= 10.0  # ask for less and try again from the same point
+            return False
+        if gamma > 0.0 and beta:
+            gain = abs(flown[gamma].performance - f_nom)
+            dfmax = min(settings.max_performance_change, max(2.0 * gain, 1e-9 * settings.max_performance_change))
         if gamma == 0.0:
             note = singular_note()
             reason = (note + "; " if note else "") + (

@@ -104,7 +104,14 @@ def _kepler_state(a, e, inc, raan, argp, m_anom, mu):
     r = p / (1 + e * math.cos(nu))
     rp = np.array([r * math.cos(nu), r * math.sin(nu), 0.0])
     vp = math.sqrt(mu / p) * np.array([-math.sin(nu), e + math.cos(nu), 0.0])
-    co, so, ci, si, cw, sw = (math.cos(raan), math.sin(raan), math.cos(inc), math.sin(inc), math.cos(argp), math.sin(argp))
+    co, so, ci, si, cw, sw = (
+        math.cos(raan),
+        math.sin(raan),
+        math.cos(inc),
+        math.sin(inc),
+        math.cos(argp),
+        math.sin(argp),
+    )
     rot = np.array(
         [
             [co * cw - so * sw * ci, -co * sw - so * cw * ci, so * si],

@@ -63,7 +63,9 @@ def test_impulses_and_final_time_against_central_differences():
     the final time as a control (its column is f(x_f) through the targets)."""
 
     def edit(t):
-        return t.replace('[[control]]\nname = "impulse_t[1]"', '[[control]]\nname = "impulse_t[1]"\n[[control]]\nname = "final_time"')
+        return t.replace(
+            '[[control]]\nname = "impulse_t[1]"', '[[control]]\nname = "impulse_t[1]"\n[[control]]\nname = "final_time"'
+        )
 
     case = _case(ROOT / "tests" / "data" / "hohmann_tom.toml", edit)
     assert "final_time" in case.control_names

@@ -1,0 +1,70 @@
+"""The analyst's chain: ``fracas run tom.toml`` writes the optimized reference deck, and a TEAM
+deck whose [ertraj] names it runs end to end (reference: the TOM targets themselves, reached
+again by an independent propagation of the written deck)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from click.testing import CliRunner
+
+from fracas.build.trajectory import build_propagation
+from fracas.cli import main
+from fracas.config.trajectory import load_deck
+from fracas.integrate.propagate import propagate
+from fracas.io.tom_results import read_tom_results
+
+ROOT = Path(__file__).resolve().parents[2]
+
+TEAM = """mode = "team"
+title = "TEAM on the TOM optimum"
+[ertraj]
+deck = "{ref}"
+[filter]
+type = "kalman_schmidt"
+min_elevation_deg = -90.0
+[a_priori]
+position_sigma_km = [1.0, 1.0, 1.0]
+velocity_sigma_km_s = [1e-4, 1e-4, 1e-4]
+[[parameter]]
+label = "mu[earth]"
+sigma = 1e-3
+role = "consider"
+[[tracking]]
+type = "range2"
+stations = ["goldstone"]
+start_days = 0.0
+stop_days = 0.04
+interval_hours = 0.1
+sigma = 5.0
+[[tracking]]
+type = "doppler2"
+stations = ["canberra"]
+start_days = 0.0
+stop_days = 0.04
+interval_hours = 0.1
+sigma = 1.0
+"""
+
+
+def test_tom_reference_deck_feeds_team(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # the reference deck goes to out/ of the working directory
+    ref = tmp_path / "lambert_reference.toml"
+    res = tmp_path / "lambert_tom.h5"
+    r = CliRunner().invoke(main, ["run", str(ROOT / "namelists" / "lambert_tom.toml"), "-o", str(res), "--quiet"])
+    assert r.exit_code == 0, r.output
+    assert "TOM converged" in r.stdout
+    tom = read_tom_results(res)
+    written = Path(tom["attrs"]["reference_deck"])
+    ref.write_text(written.read_text(encoding="utf-8"), encoding="utf-8")
+    # the written deck alone reaches the targets (an independent propagation of the deck)
+    pr = build_propagation(load_deck(ref))
+    tr = propagate(pr.model, pr.params, pr.ephem, pr.epoch_et_s, pr.x0, pr.t_out)
+    assert np.all(np.abs(np.asarray(tr.x_final[:3]) - tom["desired"]) <= tom["tolerance"])
+    team = tmp_path / "team.toml"
+    team.write_text(TEAM.format(ref=ref.name), encoding="utf-8")
+    out = tmp_path / "team.h5"
+    r = CliRunner().invoke(main, ["run", str(team), "-o", str(out), "--quiet"])
+    assert r.exit_code == 0, r.output
+    assert out.exists()

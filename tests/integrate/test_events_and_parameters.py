@@ -173,6 +173,7 @@ def _helio_model(kind="fracas"):
     return m, p, eph, x0
 
 
+@pytest.mark.slow  # heliocentric AD programs: ~35-60 s of compilation per kind on a cold cache
 @pytest.mark.parametrize("kind", KINDS_NO_ENCKE)
 def test_ephemeris_and_element_parameters_match_finite_differences(kind):
     """d x(60 d) / d(Cr, mu_sun, mu_mars, mu_jupiter, Mars a, e, M) and the STM by AD vs central

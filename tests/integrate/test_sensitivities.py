@@ -100,6 +100,7 @@ def test_stm_and_gravity_parameters_match_finite_differences(kind):
     assert err_par.max() < 1e-6, err_par
 
 
+@pytest.mark.slow  # AD through thrust arcs: ~60 s of compilation per kind on a cold cache
 @pytest.mark.parametrize("kind", ["fracas", "cowell"])
 def test_thrust_parameters_match_finite_differences(kind):
     """Every thrust parameter (overall and per-arc proportionality and pointing biases,

@@ -172,7 +172,11 @@ def _png_changed(d: Path, before: dict[str, bytes]) -> Callable[[], bool]:
     return changed
 
 
-@pytest.mark.parametrize("cmd", list(COMMANDS))
+@pytest.mark.parametrize(
+    "cmd",
+    # "stm" and "run" compile a TEAM study afresh in their subprocess (~60 s each, cold): slow subset
+    [pytest.param(c, marks=pytest.mark.slow) if c in ("stm", "run") else c for c in COMMANDS],
+)
 def test_sigkill_never_leaves_a_partial_output(tmp_path, cmd):
     d = tmp_path / "out"
     before = _previous(d)

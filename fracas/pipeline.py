@@ -541,7 +541,7 @@ def run_tom(
     s_deck = g_deck = None
     if ev.ok and submode != "grid":
         say("sensitivities at the final controls")
-        _, s_mat, g_vec = prob.exact_sensitivities(u_final)
+        _, s_mat, g_vec = prob.sensitivities(u_final)  # the deck's method (FEGS runs compile no AD)
         s_deck = s_mat * case.control_factor[None, :] / case.target_factor[:, None]
         g_deck = g_vec * case.control_factor
     t3 = time.perf_counter()
@@ -563,6 +563,9 @@ def run_tom(
             "line_search_s": res.time_line_search_s,
             "bookkeeping_s": res.time_bookkeeping_s,
             "verification_s": t3 - t2,
+            # what the core actually flew (the search's own counts leave FEGS's differences out)
+            "core_propagations": float(prob.n_trajectories),
+            "core_sensitivity_runs": float(prob.n_sensitivity_runs),
         }
     )
     product = TomProduct(
@@ -611,5 +614,26 @@ def run_tom(
     )
     say("writing the results file")
     write_tom_results(out, product)
+    if cfg.tom.stm_file and ref_written:
+        say("building the STM file of the optimum")
+        _tom_stm_file(cfg, ref_path)
     product.timing["total_s"] = time.perf_counter() - t0
     return product, out, (ref_path if ref_written else None)
+
+
+def _tom_stm_file(cfg, ref_path: Path) -> Path:
+    """[tom] stm_file: the optimized reference's STM file (STMGEN), as ``fracas stm build``
+    writes it for a TEAM deck naming the reference deck (every thrust-noise column, a 1 h
+    grid besides the trajectory's own times), for later TEAM studies with ``--stm``."""
+    import json
+
+    from fracas.config.team import parse_team_deck
+
+    ref_path = Path(ref_path).resolve()
+    text = (
+        'mode = "team"\n[errcon]\nbuild_stm = true\nanalysis = false\n'
+        f"[ertraj]\ndeck = {json.dumps(str(ref_path))}\n[stm]\ngrid_hours = 1.0\n"
+    )
+    team = parse_team_deck(text, str(ref_path.with_suffix(".team.toml")))
+    path, _ = build_stm(team, cfg.resolve(cfg.tom.stm_file))
+    return path

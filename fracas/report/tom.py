@@ -73,7 +73,11 @@ def summary_text(res: dict, width: int = 80) -> str:
     k = len(res["iteration"])
     n_traj = int(res["n_trajectories"][-1]) if k else 0
     t = {key[7:]: float(v) for key, v in a.items() if key.startswith("timing_")}
-    lines.append(f"{k} iterations, {n_traj} trajectories")
+    flown = ""
+    if "core_propagations" in t:
+        flown = f" ({int(t['core_propagations'])} propagations and {int(t.get('core_sensitivity_runs', 0))} AD runs"
+        flown += " by the core)"
+    lines.append(f"{k} iterations, {n_traj} trajectories in the search{flown}"[:width])
     if "search_s" in t:
         lines.append(
             f"search {t['search_s']:.2f} s: sensitivities {t.get('sensitivities_s', 0):.2f} s, line search "

@@ -52,9 +52,15 @@ def test_tom_reference_deck_feeds_team(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # the reference deck goes to out/ of the working directory
     ref = tmp_path / "lambert_reference.toml"
     res = tmp_path / "lambert_tom.h5"
-    r = CliRunner().invoke(main, ["run", str(ROOT / "namelists" / "lambert_tom.toml"), "-o", str(res), "--quiet"])
+    deck = tmp_path / "lambert_tom.toml"
+    text = (ROOT / "namelists" / "lambert_tom.toml").read_text(encoding="utf-8")
+    deck.write_text(text.replace("[tom]\n", '[tom]\nstm_file = "lambert_stm.h5"\n'), encoding="utf-8")
+    r = CliRunner().invoke(main, ["run", str(deck), "-o", str(res), "--quiet"])
     assert r.exit_code == 0, r.output
     assert "TOM converged" in r.stdout
+    # the STM file of the optimum, on request, reads back like any other
+    r = CliRunner().invoke(main, ["stm", "info", str(tmp_path / "lambert_stm.h5")])
+    assert r.exit_code == 0, r.output
     tom = read_tom_results(res)
     written = Path(tom["attrs"]["reference_deck"])
     ref.write_text(written.read_text(encoding="utf-8"), encoding="utf-8")

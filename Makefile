@@ -26,6 +26,8 @@ demo: $(STAMP)
 	$(BIN)/fracas run namelists/mercury_approach_guidance.toml --quiet
 	$(BIN)/fracas report out/earth_mars_team.h5 --quiet
 	$(BIN)/fracas sweep namelists/earth_mars_sweep.toml --workers 0
+	$(BIN)/fracas run namelists/near_earth_spiral_tom.toml
+	$(BIN)/fracas run namelists/near_earth_spiral_team.toml --quiet
 
 # the whole suite but the slow reference subset (< 10 min on CI's 2 cores); CI runs both
 test: $(STAMP)

@@ -12,6 +12,7 @@ layer that turns a failed single run into the one-line error users see.
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -366,7 +367,8 @@ def _tom_outputs(cfg, output, plot, reference_deck):
         else (cfg.resolve(ts.reference_deck) if ts.reference_deck else Path("out") / f"{stem}_reference.toml")
     )
     png = Path(plot) if plot is not None else (cfg.resolve(ts.plot) if ts.plot else None)
-    return res, ref, png
+    norm = lambda p: Path(os.path.normpath(p)) if p is not None else None  # noqa: E731
+    return norm(res), norm(ref), norm(png)
 
 
 def _grid_tables(case, say):

@@ -73,11 +73,12 @@ def summary_text(res: dict, width: int = 80) -> str:
     k = len(res["iteration"])
     n_traj = int(res["n_trajectories"][-1]) if k else 0
     t = {key[7:]: float(v) for key, v in a.items() if key.startswith("timing_")}
-    flown = ""
+    lines.append(f"{k} iterations, {n_traj} trajectories in the search"[:width])
     if "core_propagations" in t:
-        flown = f" ({int(t['core_propagations'])} propagations and {int(t.get('core_sensitivity_runs', 0))} AD runs"
-        flown += " by the core)"
-    lines.append(f"{k} iterations, {n_traj} trajectories in the search{flown}"[:width])
+        lines.append(
+            f"the core flew {int(t['core_propagations'])} trajectories and "
+            f"{int(t.get('core_sensitivity_runs', 0))} AD sensitivity runs"[:width]
+        )
     if "search_s" in t:
         lines.append(
             f"search {t['search_s']:.2f} s: sensitivities {t.get('sensitivities_s', 0):.2f} s, line search "

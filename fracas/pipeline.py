@@ -610,6 +610,10 @@ def run_tom(
         s_matrix=s_deck,
         g_vector=g_deck,
         grid=grid,
+        trials=np.array(
+            [[r.iteration, t.gamma, t.cost, t.performance, t.error_index, float(t.ok)] for r in hist for t in r.trials],
+            float,
+        ).reshape(-1, 6),
         reference_deck=ref_written,
         timing=timing,
         provenance=provenance(cfg.source_text, cfg.source_path),

@@ -471,7 +471,8 @@ class TomProduct:
     converged: the verified verdict (every target within tolerance on re-propagation and,
     when optimizing, the search's optimality test); search_converged: the optimizer's own
     claim (recorded, never trusted alone).  s_matrix (N, M), g_vector (M,) at u_final in
-    deck units.  grid: GRID's tables (or None): ``{"single": (M, 2J) E, "single_gammas":
+    deck units.  trials: every line-search trial trajectory (GENMIN/FUNCT) as rows (iteration,
+    γ, F(γ), final mass kg, error index E, ok).  grid: GRID's tables (or None): ``{"single": (M, 2J) E, "single_gammas":
     (2J,), "pairs": {(a, b): (2J, 2J) E}}``.
     """
 
@@ -514,6 +515,7 @@ class TomProduct:
     s_matrix: np.ndarray | None = None
     g_vector: np.ndarray | None = None
     grid: dict | None = None
+    trials: np.ndarray | None = None  # (T, 6): iteration, gamma, cost F(gamma), mass kg, E, ok (1/0)
     reference_deck: str = ""
     timing: dict[str, float] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)

@@ -12,7 +12,8 @@ Layout (every dataset carries ``units`` and ``data_sha256``)::
       targets/names, bodies, units, factor, desired, tolerance, achieved_start, achieved
       mass/initial_kg, start_kg, final_kg
       history/iteration, submode, performance_kg, error_rms, angle_rad, gamma,
-              n_trajectories, controls (K, M), targets (K, N)
+              n_trajectories, controls (K, M), targets (K, N), trials (T, 6: iteration,
+              gamma, F(gamma), final mass kg, E, ok)
       sensitivities/S (N, M), G (M,)          (at the final controls, deck units)
       grid/single (M, G), gammas (G,), pair_<a>_<b> (G, G)   (GRID: G = 2 steps + 1)
 """
@@ -77,6 +78,14 @@ def write_tom_results(path: str | os.PathLike, product: TomProduct) -> Path:
         write(h, "n_trajectories", np.asarray(product.n_trajectories, np.int64), "1")
         write(h, "controls", np.asarray(product.controls, float).reshape(-1, len(product.control_names)), "controls")
         write(h, "targets", np.asarray(product.targets, float).reshape(-1, len(product.target_names)), "targets")
+        if product.trials is not None:
+            write(
+                h,
+                "trials",
+                np.asarray(product.trials, float).reshape(-1, 6),
+                "1, 1, 1, kg, 1, 1",
+                description="line-search trials: iteration, gamma, F(gamma), final mass, error index E, ok",
+            )
         if product.s_matrix is not None:
             s = g.create_group("sensitivities")
             write(s, "S", np.asarray(product.s_matrix, float), "target unit / control unit")
@@ -145,6 +154,8 @@ def read_tom_results(path: str | os.PathLike, *, verify: bool = True) -> dict[st
                 "targets": c.num("tom/history/targets", (k, n)),
                 "grid": None,
             }
+            if "trials" in g["history"]:
+                out["trials"] = c.num("tom/history/trials", (None, 6))
             if "sensitivities" in g:
                 out["S"] = c.num("tom/sensitivities/S", (n, m))
                 out["G"] = c.num("tom/sensitivities/G", (m,))

@@ -129,26 +129,7 @@ def final_states(out):
 
 
 # ----------------------------------------------------------------------------- output
-def emit(s=""):
-    print(s, flush=True)
-
-
-def table(headers, rows, note=None):
-    cells = [list(map(str, headers))] + [[str(c) for c in r] for r in rows]
-    w = [max(len(r[i]) for r in cells) for i in range(len(headers))]
-    for k, r in enumerate(cells):
-        emit("  ".join(c.ljust(w[i]) if i == 0 else c.rjust(w[i]) for i, c in enumerate(r)))
-        if k == 0:
-            emit("  ".join("-" * x for x in w))
-    if note:
-        emit(note)
-
-
-def si(x):
-    for f, s in ((1e6, "M"), (1e3, "k")):
-        if abs(x) >= f:
-            return f"{x / f:.3g}{s}"
-    return f"{x:.3g}"
+from tables import emit, si, table  # noqa: E402
 
 
 # ----------------------------------------------------------------------- sections 1-2

@@ -108,7 +108,8 @@ class SearchSettings:
     weighting: str = "sensitivity"
     max_trials: int = 6
     min_performance_gain: float = 0.0
-    optimization_step_limit: float = 10.0  # E_rms an optimization-only (O) trial may reach
+    optimization_step_limit: float = math.inf  # E_rms an O-mode trial may reach (inf: no limit; the adaptive
+    # performance request made a finite one unnecessary on the examples, and it stalls tight-tolerance problems)
 
     def __post_init__(self) -> None:
         if self.submode not in SUBMODES:
@@ -1048,15 +1049,18 @@ def projected_gradient(
             trials.append(Trial(gamma, c, evt.performance, float(taut @ taut), bool(math.isfinite(c))))
             return c
 
-        gamma, _, _ = genmin(
-            cost,
-            f0,
-            dr.slope,
-            gamma_max=s.max_scale_factor,
-            eta=s.curve_fit_tolerance,
-            max_trials=s.max_trials,
-            first=1.0,
-        )
+        def line_search(f_start, slope):
+            return genmin(
+                cost,
+                f_start,
+                slope,
+                gamma_max=s.max_scale_factor,
+                eta=s.curve_fit_tolerance,
+                max_trials=s.max_trials,
+                first=1.0,
+            )[0]
+
+        gamma = line_search(f0, dr.slope)
         if gamma < _TINY_STEP and alpha and beta and not feasible:
             # The combined step found no (or only a negligible) decrease: typically the curvature of
             # the targets along ΔU₁ swamps F_T.  Record it and retry this iteration as targeting only;
@@ -1069,15 +1073,7 @@ def projected_gradient(
                 dropped = tuple(stest) + tuple(active)
                 trials, du = [], dr.du * d
                 f0 = funct(tau, f_nom, f_nom, dr.restoration, alpha=1.0, beta=0.0, max_performance_change=1.0)
-                gamma, _, _ = genmin(
-                    cost,
-                    f0,
-                    dr.slope,
-                    gamma_max=s.max_scale_factor,
-                    eta=s.curve_fit_tolerance,
-                    max_trials=s.max_trials,
-                    first=1.0,
-                )
+                gamma = line_search(f0, dr.slope)
                 if gamma == 0.0 and saved[9] > 0.0:
                     history.pop()
                     label, alpha, beta, active, kept, dr, dropped, trials, du, gamma, ev_saved = saved

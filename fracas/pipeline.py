@@ -474,6 +474,7 @@ def run_tom(
         given_G=case.given_g,
         labels=case.control_names,
         target_labels=tg.names,
+        value_weighted=np.array([u not in ("deg", "days") for u in case.control_units]),
     )
     grid = None
     t1 = time.perf_counter()

@@ -187,6 +187,11 @@ def build_tom(deck: TomDeck) -> TomCase:
         u_traj[j] = values[0]
         lo = c.lower if c.lower is not None else (kind0.bounds[0] if len(pm) == 1 else None)
         hi = c.upper if c.upper is not None else (kind0.bounds[1] if len(pm) == 1 else None)
+        if len(pm) == 1 and kind0.name in ("arc_t_on", "arc_t_off", "impulse_t"):
+            # an epoch within the propagation span (a forward one: [0, final time]) unless the deck says
+            span = sorted((0.0, traj.duration_days))
+            lo = span[0] if lo is None else lo
+            hi = span[1] if hi is None else hi
         lower[j] = lo * f0 if lo is not None else -np.inf
         upper[j] = hi * f0 if hi is not None else np.inf
         scale[j] = c.scale

@@ -121,7 +121,7 @@ def solve_nlp(
 
     if not ev0.ok:
         return finish(u0, ev0, "trajectory failed at the starting controls", False)
-    d = weights(S0, tol, u0, prob.scale, prob.floor, s.weighting)
+    d = weights(S0, tol, u0, prob.scale, prob.floor, s.weighting, prob.value_weighted)
     dfm = s.max_performance_change
 
     x0 = u0 / d

@@ -163,6 +163,7 @@ class Problem:
     given_G: np.ndarray | None = None
     labels: tuple[str, ...] = ()
     target_labels: tuple[str, ...] = ()
+    value_weighted: np.ndarray | None = None  # (M,) bool, see :func:`weights`
 
 
 @dataclass
@@ -237,8 +238,13 @@ def weights(
     scale: np.ndarray,
     floor: np.ndarray,
     kind: str = "sensitivity",
+    value_weighted: np.ndarray | None = None,
 ) -> np.ndarray:
     """FRACAS WEIGHT: the diagonal d of D = W^(1/2), in control units (so Ũ = U/d is dimensionless).
+
+    ``value_weighted`` (M,) bool: where False, control weighting uses the floor alone (W_jj =
+    k_j² U_floor,j²): for angles and epochs, whose size says nothing about their scale (a right
+    ascension of 177 deg is not 177 times more "room" than one of 1 deg).  Default: all True.
 
     * ``"sensitivity"`` (WEIGHT-1): W_jj = k_j² / max_i(|S_ij|/ε_i)², i.e. d_j = k_j / max_i |S_ij|/ε_i.
       A column with no target sensitivity (all zero, or N = 0) falls back to control weighting.
@@ -250,7 +256,11 @@ def weights(
     S = np.asarray(S, dtype=float)
     u = np.asarray(u, dtype=float)
     scale = np.asarray(scale, dtype=float)
-    control = scale * np.maximum(np.abs(u), np.abs(np.asarray(floor, dtype=float)))
+    floor = np.abs(np.asarray(floor, dtype=float))
+    size = np.maximum(np.abs(u), floor)
+    if value_weighted is not None:
+        size = np.where(np.asarray(value_weighted, bool), size, floor)
+    control = scale * size
     control = np.where(control > 0, control, scale)
     if kind == "control":
         return control
@@ -894,7 +904,7 @@ def projected_gradient(
         E = float(tau @ tau)
         e_rms = math.sqrt(E / n) if n else 0.0
         feasible = bool(np.all(np.abs(tau) <= 1.0))
-        d = weights(S, tol, u, prob.scale, prob.floor, s.weighting)
+        d = weights(S, tol, u, prob.scale, prob.floor, s.weighting, prob.value_weighted)
         St = S * d[None, :] / tol[:, None]
         Gt = -d * G
         label = choose_submode(e_rms, s) if n else "O"

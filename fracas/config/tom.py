@@ -9,7 +9,7 @@ target in rad is written in deg, one in s in days).  No JAX here::
     mode = "tom"
     [trajectory]   deck = "trajectory.toml"  (relative to this file; else the trajectory
                    tables are inline)
-    [tom]          submode = "auto" | "grid" | "target" | "target_optimize" | "optimize" | "nominal"
+    [tom]          submode = "auto" (TEST decides) | "grid" | "target" | "target_optimize" | "optimize" | "nominal"
                    optimizer = "projected_gradient" | "slsqp" | "trust_constr"
                    sensitivities = "ad" | "fegs"  (FEGS: forward finite differences)
                    max_iterations = 100, max_performance_change_kg (ΔF_max; default 0.5 %
@@ -75,7 +75,7 @@ class TrajectoryRef(_Section):
 class TomSettings(_Section):
     """$DATA's iteration inputs (names and recommended defaults: digest §A.2)."""
 
-    submode: Literal["auto", "grid", "target", "target_optimize", "optimize", "nominal"] = "target_optimize"
+    submode: Literal["auto", "grid", "target", "target_optimize", "optimize", "nominal"] = "auto"
     optimizer: Literal["projected_gradient", "slsqp", "trust_constr"] = "projected_gradient"
     sensitivities: Literal["ad", "fegs"] = "ad"
     max_iterations: PositiveInt = 100

@@ -129,6 +129,7 @@ def test_batched_params_match_single_propagations():
         propagate_batch(MODEL, p, None, 0.0, x0s, T_OUT, params_axes={"nope": 0})
 
 
+@pytest.mark.slow  # the batched AD program (~45 s cold); batched plain propagations stay in make test
 def test_batched_sensitivities_match_single():
     x0s = _states(3, seed=3)
     t_out = np.array([0.0, 3000.0])

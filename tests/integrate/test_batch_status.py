@@ -123,6 +123,7 @@ def test_failed_members_do_not_touch_the_others():
     _assert_rows_identical(tr, ref, HEALTHY)
 
 
+@pytest.mark.slow  # the batched AD program (~50 s cold); the plain batch case stays in make test
 def test_failed_members_do_not_touch_the_others_with_sensitivities():
     x0s, clean = _batch_states()
     tr, sens = _run(x0s, sens=True)

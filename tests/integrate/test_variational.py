@@ -166,6 +166,7 @@ def _block_errors(phi, th, phi_ref, th_ref):
 SECOND_ORDER = ("phi_mm", "theta_m_bias_out_rad")
 
 
+@pytest.mark.slow  # a second AD program of the Encke/RKN4 thrust model: ~60 s cold
 def test_variational_equations_reproduce_encke_stm_and_parameter_matrix(prob):
     """RK4 on the variational equations along ``propagate``'s states vs the AD-through-Encke
     STM and parameter matrix of ``propagate_with_sensitivities`` over [0, 1 day].

@@ -33,6 +33,8 @@ from fracas.team.reference import integrate_reference, reference_from_product
 from fracas.team.transitions import noise_cell_step, noise_settings
 from tests.team.test_team_engine import SMALL, dumps, pos_rss, scaled_diff, small_dict, study_of
 
+pytestmark = pytest.mark.slow  # reference runs of the noise models (~4 min cold): the slow subset
+
 EXTRA_EVENTS = [
     {"type": "eigenvector", "times_days": [0.37, 1.91]},
     {"type": "prediction", "times_days": [2.23], "predict_to_days": 4.5},

@@ -38,6 +38,7 @@ from fracas.tom.search import (
     _angle,
     _clean,
     _validated,
+    result_of,
     weights,
 )
 
@@ -105,18 +106,8 @@ def solve_nlp(
     history: list[IterationRecord] = []
 
     def finish(u, ev, reason, ok):
-        total = time.perf_counter() - t_start
-        return SearchResult(
-            u=u.copy(),
-            evaluation=ev,
-            history=history,
-            stop_reason=reason,
-            search_converged=ok,
-            n_evaluations=stats["n_eval"],
-            n_sensitivity_evaluations=stats["n_sens"],
-            time_sensitivities_s=stats["t_sens"],
-            time_line_search_s=stats["t_eval"],
-            time_bookkeeping_s=max(total - stats["t_sens"] - stats["t_eval"], 0.0),
+        return result_of(
+            u, ev, history, reason, ok, stats["n_eval"], stats["n_sens"], stats["t_sens"], stats["t_eval"], t_start
         )
 
     if not ev0.ok:

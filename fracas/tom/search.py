@@ -817,6 +817,24 @@ def _clean(ev: Evaluation, n: int) -> Evaluation:
     return Evaluation(targets, float(ev.performance), bool(ok))
 
 
+def result_of(u, ev, history, reason, converged, n_eval, n_sens, t_sens, t_eval, t_start) -> SearchResult:
+    """The :class:`SearchResult` of a finished search (wall time split: sensitivities, line
+    search, and the rest as bookkeeping, from ``t_start`` = time.perf_counter() at the start)."""
+    total = time.perf_counter() - t_start
+    return SearchResult(
+        u=np.array(u, dtype=float, copy=True),
+        evaluation=ev,
+        history=history,
+        stop_reason=reason,
+        search_converged=converged,
+        n_evaluations=n_eval,
+        n_sensitivity_evaluations=n_sens,
+        time_sensitivities_s=t_sens,
+        time_line_search_s=t_eval,
+        time_bookkeeping_s=max(total - t_sens - t_eval, 0.0),
+    )
+
+
 def projected_gradient(
     problem: Problem,
     settings: SearchSettings = SearchSettings(),
@@ -851,19 +869,7 @@ def projected_gradient(
         return np.asarray(err(ev.targets), dtype=float).reshape(n) / tol
 
     def finish(u, ev, reason, converged):
-        total = time.perf_counter() - cnt.t0
-        return SearchResult(
-            u=u.copy(),
-            evaluation=ev,
-            history=history,
-            stop_reason=reason,
-            search_converged=converged,
-            n_evaluations=cnt.n_eval,
-            n_sensitivity_evaluations=cnt.n_sens,
-            time_sensitivities_s=cnt.t_sens,
-            time_line_search_s=cnt.t_eval,
-            time_bookkeeping_s=max(total - cnt.t_sens - cnt.t_eval, 0.0),
-        )
+        return result_of(u, ev, history, reason, converged, cnt.n_eval, cnt.n_sens, cnt.t_sens, cnt.t_eval, cnt.t0)
 
     u = prob.u0.copy()
     if prob.given_S is not None:

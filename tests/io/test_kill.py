@@ -109,8 +109,9 @@ def _start(cmd: str, d: Path, hooked: bool) -> subprocess.Popen:
     )
 
 
-def _kill_when(p: subprocess.Popen, ready: Callable[[], bool], timeout: float = 60.0) -> bool:
-    """SIGKILL ``p`` as soon as ``ready()``; False if it ended first (or timed out)."""
+def _kill_when(p: subprocess.Popen, ready: Callable[[], bool], timeout: float = 300.0) -> bool:
+    """SIGKILL ``p`` as soon as ``ready()``; False if it ended first (or timed out: 300 s, room for a
+    cold TEAM compile in the subprocess on a loaded 2-core machine, where 60 s was seen to run out)."""
     t_end = time.monotonic() + timeout
     while p.poll() is None and time.monotonic() < t_end:
         if ready():

@@ -396,7 +396,7 @@ def _grid_tables(case, say):
     lanes = np.clip(np.array(lanes), case.lower, case.upper)
     say(f"GRID: {len(lanes)} trajectories in one batch")
     t0 = time.perf_counter()
-    vals, _, ok = prob.evaluate_batch(lanes)
+    vals, _, ok = prob.evaluate_batch(lanes, progress=lambda done, total: say(f"GRID: {done}/{total} trajectories"))
     dt = time.perf_counter() - t0
     err = np.array([prob.targets.error(v) for v in vals]) / prob.targets.tolerance
     e_idx = np.where(ok, np.sum(err**2, axis=1), np.inf)
@@ -521,8 +521,7 @@ def run_tom(
 
     # ---- verification: the plain core at the final controls, afresh
     say("verifying: re-propagating the final controls")
-    prob._cache.clear()
-    final = prob.outcome(res.u)
+    final = prob.fresh_outcome(res.u)
     u_final = np.asarray(res.u, float)
     ev = final.evaluation
     err = tg.error(ev.targets) if ev.ok else np.full(tg.n_targets, np.nan)

@@ -18,14 +18,15 @@ from fracas import constants
 from fracas.build.trajectory import _rotation_to_icrf, build_propagation
 from fracas.config.tom import TomDeck, tom_trajectory_deck
 from fracas.config.trajectory import TrajectoryDeck, load_toml
+from fracas.dynamics.parameters import get_values
 from fracas.errors import ConfigError
 from fracas.guidance.target_kinds import TARGET_KINDS
 from fracas.integrate.problem import Problem
-from fracas.params import CONTROL_KINDS, STATE_CONTROLS, VINF_CONTROLS, ControlKind, parse_control
+from fracas.params import STATE_CONTROLS, VINF_CONTROLS, ControlKind, parse_control
 from fracas.tom.problem import ControlMap, TargetSet, TomProblem
 from fracas.tom.search import SearchSettings
 
-__all__ = ["TomCase", "build_tom", "reference_deck_text", "target_display", "control_display"]
+__all__ = ["TomCase", "build_tom", "reference_deck_text", "target_display"]
 
 _ANGLE_TARGETS = ("i", "raan", "argp", "M")
 
@@ -38,10 +39,6 @@ def target_display(name: str) -> tuple[str, float]:
     if unit == "s":
         return "days", constants.DAY_S
     return unit, 1.0
-
-
-def control_display(kind: ControlKind) -> tuple[str, float]:
-    return kind.unit, kind.to_canonical
 
 
 @dataclasses.dataclass
@@ -236,14 +233,7 @@ def build_tom(deck: TomDeck) -> TomCase:
     b_mat = np.zeros((7, m))
     for row, j, cc in x0_entries:
         b_mat[row, j] += cc
-    p_traj = np.array(
-        [
-            float(np.asarray(getattr(params, parse_field(lab)))[parse_index(lab)])
-            if parse_index(lab)
-            else float(getattr(params, parse_field(lab)))
-            for lab in labels
-        ]
-    )
+    p_traj = np.asarray(get_values(params, labels, model), dtype=float)
     # p(u) = p_traj + A (u - u_traj), x0(u) = x0_traj + B (u - u_traj)
     u_lin = np.where(np.isfinite(u_traj), u_traj, 0.0)
     cmap = ControlMap(
@@ -342,21 +332,7 @@ def build_tom(deck: TomDeck) -> TomCase:
     )
 
 
-def parse_field(label: str) -> str:
-    return label.split("[")[0]
-
-
-def parse_index(label: str) -> tuple[int, ...]:
-    if "[" not in label:
-        return ()
-    return tuple(int(p) for p in label[label.index("[") + 1 : -1].split(","))
-
-
 # ------------------------------------------------------------------ the reference deck
-def _fmt(x: float) -> float:
-    return float(repr(float(x))) if math.isfinite(x) else x
-
-
 def reference_deck_text(case: TomCase, u) -> str:
     """The trajectory deck of controls U: the TOM deck's trajectory with every control's
     final value written in (TOML text, for ``fracas propagate`` and TEAM's [ertraj])."""
@@ -380,29 +356,27 @@ def reference_deck_text(case: TomCase, u) -> str:
         ist = data.setdefault("initial_state", {})
         for key in ("elements", "spherical", "cartesian"):
             ist.pop(key, None)
-        ist["cartesian"] = {"r_km": [_fmt(a) for a in r_deck], "v_km_s": [_fmt(a) for a in v_deck]}
+        ist["cartesian"] = {"r_km": [float(a) for a in r_deck], "v_km_s": [float(a) for a in v_deck]}
     arcs = data.get("thrust_arc", [])
     for k, arc in enumerate(arcs):
-        arc["start_days"] = _fmt(float(prm.arc_t_on[k]) / constants.DAY_S)
-        arc["stop_days"] = _fmt(float(prm.arc_t_off[k]) / constants.DAY_S)
-        frame = arc.get("frame", "velocity")
-        arc["alpha_deg"] = _fmt(math.degrees(float(prm.arc_alpha[k])))
-        arc["beta_deg"] = _fmt(math.degrees(float(prm.arc_beta[k])))
-        arc["throttle"] = _fmt(float(prm.arc_throttle[k]))
-        arc["frame"] = frame
+        arc["start_days"] = float(float(prm.arc_t_on[k]) / constants.DAY_S)
+        arc["stop_days"] = float(float(prm.arc_t_off[k]) / constants.DAY_S)
+        arc["alpha_deg"] = float(math.degrees(float(prm.arc_alpha[k])))
+        arc["beta_deg"] = float(math.degrees(float(prm.arc_beta[k])))
+        arc["throttle"] = float(float(prm.arc_throttle[k]))
     imps = data.get("impulse", [])
     for k, imp in enumerate(imps):
-        imp["time_days"] = _fmt(float(prm.impulse_t[k]) / constants.DAY_S)
-        imp["dv_km_s"] = [_fmt(float(a)) for a in np.asarray(prm.impulse_dv)[k]]
+        imp["time_days"] = float(float(prm.impulse_t[k]) / constants.DAY_S)
+        imp["dv_km_s"] = [float(float(a)) for a in np.asarray(prm.impulse_dv)[k]]
     if "propulsion" in data:
         pr = data["propulsion"]
         pr.pop("isp_s", None)
-        pr["exhaust_velocity_km_s"] = _fmt(float(prm.exhaust_velocity_km_s))
-        pr["thrust_scale"] = _fmt(float(prm.thrust_scale))
+        pr["exhaust_velocity_km_s"] = float(float(prm.exhaust_velocity_km_s))
+        pr["thrust_scale"] = float(float(prm.thrust_scale))
     if cm.final_time_index >= 0:
         stop = data.setdefault("stop", {})
         stop.pop("final_epoch", None)
-        stop["duration_days"] = _fmt(cm.final_time(u) / constants.DAY_S)
+        stop["duration_days"] = float(cm.final_time(u) / constants.DAY_S)
     if traj.stop.condition == "time":
         dur = cm.final_time(u) / constants.DAY_S
         out = data.get("output", {})
@@ -416,6 +390,3 @@ def reference_deck_text(case: TomCase, u) -> str:
         f"# TOM deck: {case.deck.source_path or '<deck>'}\n"
     )
     return header + body
-
-
-__all__ += ["parse_field", "parse_index", "CONTROL_KINDS"]

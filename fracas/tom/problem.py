@@ -309,6 +309,11 @@ class TomProblem:
         self.last_outcome = out
         return out
 
+    def fresh_outcome(self, u) -> Outcome:
+        """:meth:`outcome` propagated afresh (its cached value dropped): TOM's verification."""
+        self._cache.pop(np.asarray(u, float).tobytes(), None)
+        return self.outcome(u)
+
     def evaluate(self, u) -> Evaluation:
         """FUNCT's trajectory: (T, F, ok) at U."""
         return self.outcome(u).evaluation

@@ -314,7 +314,7 @@ def final_state_jacobian(
     Forward-mode AD through the integrator, like :func:`propagate_with_sensitivities`, but
     with only the M control directions as tangents instead of the 7 + L columns of the full
     STM and parameter matrix (the same derivative of the same discrete map: equal to
-    rounding to Phi dx0_du + Theta dp_du, tests/integrate/test_propagate.py).
+    rounding to Phi dx0_du + Theta dp_du, tests/integrate/test_final_jacobian.py).
     """
     static, dyn = split_model(model)
     return _final_jac(

@@ -117,3 +117,28 @@ def test_velocity_frame_thrust_direction():
     hv = np.cross(h, v)
     np.testing.assert_allclose(u1, hv / np.linalg.norm(hv), atol=1e-15)
     np.testing.assert_allclose(u2, h / np.linalg.norm(h), atol=1e-15)
+
+
+def test_yaw_switch_frame_flips_beta_with_cos_u():
+    """Frame code 2 (Edelbaum's steering): on a circular orbit of inclination 30 deg, the thrust
+    direction is the velocity-frame direction with beta when cos u > 0 and with -beta when
+    cos u < 0 (u the argument of latitude, from the orbit geometry built here), so its normal
+    component r x v / |r x v| . d has the sign of cos u for beta > 0 (di/dt > 0 on both halves)."""
+    inc = np.radians(30.0)
+    alpha, beta = 0.1, 0.3
+    for u in np.radians([20.0, 80.0, 100.0, 200.0, 260.0, 300.0]):
+        # circular orbit, raan = 0: r = R1(i) (cos u, sin u, 0), v = R1(i) (-sin u, cos u, 0)
+        rot = np.array([[1, 0, 0], [0, np.cos(inc), -np.sin(inc)], [0, np.sin(inc), np.cos(inc)]])
+        r = rot @ np.array([7000.0 * np.cos(u), 7000.0 * np.sin(u), 0.0])
+        v = rot @ np.array([-7.5 * np.sin(u), 7.5 * np.cos(u), 0.0])
+        d2 = np.asarray(propulsion.thrust_direction(r, v, alpha, beta, 2.0))
+        sign = np.sign(np.cos(u))
+        d0 = np.asarray(propulsion.thrust_direction(r, v, alpha, sign * beta, 0.0))
+        np.testing.assert_allclose(d2, d0, rtol=0, atol=1e-15)
+        h_hat = np.cross(r, v) / np.linalg.norm(np.cross(r, v))
+        assert np.sign(d2 @ h_hat) == sign and abs(d2 @ h_hat - sign * np.sin(beta)) < 1e-14
+    # frame 1 stays inertial RA/Dec pointing
+    d1 = np.asarray(propulsion.thrust_direction(r, v, alpha, beta, 1.0))
+    np.testing.assert_allclose(
+        d1, [np.cos(beta) * np.cos(alpha), np.cos(beta) * np.sin(alpha), np.sin(beta)], atol=1e-15
+    )

@@ -205,3 +205,33 @@ def test_psi_against_repropagated_differences(x_c, t_f, names):
     err = np.abs(full - full_fd).max(axis=1) / np.abs(full_fd).max(axis=1)
     assert err.max() < 1e-6, dict(zip(names, err))
     assert np.allclose(psi[:, 6], 0.0)  # ballistic: no target depends on the mass
+
+
+def test_tom_target_values_against_independent_formulas():
+    """TOM's additions to the catalogue against formulas written here: |r|, |v|, r.v/|r|;
+    e cos(argp), e sin(argp) from cartesian_to_elements' e and argp (away from e = 0, where
+    both are defined); v_inf = sqrt(v^2 - 2 mu/r) and |v_inf vector| = v_inf, the vector along
+    the incoming asymptote: the velocity long before the encounter, checked by
+    propagating the two-body conic 2e7 s back (Kepler, fracas.dynamics.kepler) where the
+    velocity has nearly reached it (1e-3 of v_inf); final_time is t_f.  Tolerances 1e-12
+    relative (same arithmetic), except the asymptote (1e-3, the finite look-back)."""
+    from fracas.dynamics.kepler import kepler
+
+    names = ("radius", "speed", "radial_velocity", "e_cos_argp", "e_sin_argp", "final_time")
+    vals = np.asarray(target_values(names, ELL, 123.0, MU))
+    r, v = ELL[:3], ELL[3:]
+    el = np.asarray(cartesian_to_elements(r, v, MU))
+    ref = [
+        np.linalg.norm(r),
+        np.linalg.norm(v),
+        r @ v / np.linalg.norm(r),
+        el[1] * np.cos(el[4]),
+        el[1] * np.sin(el[4]),
+        123.0,
+    ]
+    np.testing.assert_allclose(vals, ref, rtol=1e-12, atol=1e-15)
+    vinf = np.asarray(target_values(("vinf", "vinf_x", "vinf_y", "vinf_z"), HYP, 0.0, MU))
+    assert abs(vinf[0] / np.sqrt(HYP[3:] @ HYP[3:] - 2 * MU / np.linalg.norm(HYP[:3])) - 1) < 1e-12
+    assert abs(np.linalg.norm(vinf[1:]) / vinf[0] - 1) < 1e-12
+    _, v_back = kepler(HYP[:3], HYP[3:], -2e7, MU)
+    np.testing.assert_allclose(vinf[1:], np.asarray(v_back), atol=1e-3 * vinf[0])

@@ -398,7 +398,7 @@ def _grid_tables(case, say):
     t0 = time.perf_counter()
     vals, _, ok = prob.evaluate_batch(lanes, progress=lambda done, total: say(f"GRID: {done}/{total} trajectories"))
     dt = time.perf_counter() - t0
-    err = np.array([prob.targets.error(v) for v in vals]) / prob.targets.tolerance
+    err = prob.targets.error(vals) / prob.targets.tolerance
     e_idx = np.where(ok, np.sum(err**2, axis=1), np.inf)
     g_n = len(gammas)
     single = e_idx[: m * g_n].reshape(m, g_n)

@@ -28,7 +28,7 @@ target in rad is written in deg, one in s in days).  No JAX here::
                    units), links = {"arc_beta[0]" = 1.0, "arc_beta[1]" = -1.0} (a linked
                    control: each named control moves by coefficient × this one)
     [[target]]     name, value, tolerance (> 0), body (default the stop body, else the
-                   centre), at = "final" (the stop condition or final time)
+                   centre); evaluated at the stop (the stop condition or the final time)
     [smag]         s = [[..], ..] (targets × controls), g = [..]  (given S and G for the
                    first iteration, in deck units per deck unit)
     [grid]         increments = [..] (one per control, deck units), steps = 4 (±1..±steps
@@ -145,7 +145,6 @@ class TargetSpec(_Section):
     value: float
     tolerance: PositiveFloat
     body: BodyName | None = None
-    at: Literal["final"] = "final"
 
     @model_validator(mode="after")
     def _known(self) -> TargetSpec:

@@ -39,6 +39,7 @@ import numpy as np
 
 from fracas import _jax  # noqa: F401
 from fracas.dynamics.model import STOP_TIME, ForceModel, Params
+from fracas.dynamics.parameters import set_values
 from fracas.guidance.targets import target_values
 from fracas.integrate import encke
 from fracas.integrate.batch import propagate_batch
@@ -136,11 +137,11 @@ class TargetSet:
         return len(self.names)
 
     def error(self, values) -> np.ndarray:
-        """ΔT = T − T0, angles wrapped to (−π, π] (digest P-A4)."""
+        """ΔT = T − T0, angles wrapped to (−π, π] (digest P-A4); ``values`` (N,) or (K, N)."""
         d = np.asarray(values, float) - self.desired
         ang = np.asarray(self.angle, bool)
         if ang.any():
-            d[ang] = -np.remainder(-d[ang] + np.pi, 2.0 * np.pi) + np.pi
+            d[..., ang] = -np.remainder(-d[..., ang] + np.pi, 2.0 * np.pi) + np.pi
         return d
 
 
@@ -254,20 +255,11 @@ class TomProblem:
 
     # ------------------------------------------------------------------ one trajectory
     def params_at(self, u) -> Params:
-        """The core's Params at U (numpy replacement of the labelled entries)."""
-        vals = self.controls.params_of(u)
-        upd: dict = {}
-        for label, v in zip(self.controls.param_labels, vals):
-            field, idx = parse_label(label, self.model)
-            cur = upd.get(field)
-            if cur is None:
-                cur = np.array(getattr(self.params, field), dtype=np.float64, copy=True)
-            if idx:
-                cur[idx] = v
-            else:
-                cur = np.asarray(v, np.float64)
-            upd[field] = cur
-        return self.params._replace(**upd)
+        """The core's Params at U (the labelled entries replaced, ``dynamics.parameters.set_values``)."""
+        labels = self.controls.param_labels
+        if not labels:
+            return self.params
+        return set_values(self.params, labels, jnp.asarray(self.controls.params_of(u)), self.model)
 
     def _t_out(self, u):
         return np.array([0.0, self.controls.final_time(u)])

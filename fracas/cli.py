@@ -238,6 +238,13 @@ def _print_options(f):
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON summary instead of the tables.")
 @click.option("--quiet", is_flag=True, help="Print only the one-line summary.")
 @_print_options
+@click.option(
+    "--workers",
+    type=click.IntRange(0, 256),
+    default=None,
+    help="TSIM: Dask LocalCluster worker processes (default, 0 or 1: in this process).",
+)
+@click.option("--scheduler", metavar="ADDRESS", default=None, help="TSIM: run on an existing Dask cluster (tcp://...).")
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
 @click.pass_context
 def run(
@@ -251,10 +258,12 @@ def run(
     verbose: bool,
     velocity_unit: str,
     width: int | None,
+    workers: int | None,
+    scheduler: str | None,
     debug: bool,
 ) -> None:
     """Run a DECK in the mode it names (mode = "team": a TEAM study; mode = "tom": targeting and
-    optimization; a trajectory deck: a propagation)."""
+    optimization; mode = "tsim": a Monte Carlo with guidance; a trajectory deck: a propagation)."""
     debug = debug or bool((ctx.obj or {}).get("debug"))
     with _errors(debug):
         from fracas.config.modes import deck_mode
@@ -270,6 +279,15 @@ def run(
                 raise DeckError(f'{deck}: --stm is for TEAM decks (mode = "team"); this is a TOM deck')
             _run_tom(deck, output, plot, as_json, quiet)
             return
+        if mode == "tsim":
+            if stm_file is not None:
+                raise DeckError(f'{deck}: --stm is for TEAM decks (mode = "team"); this is a TSIM deck')
+            _run_tsim(deck, output, plot, as_json, quiet, workers, scheduler)
+            return
+        if workers is not None or scheduler is not None:
+            raise DeckError(
+                f'{deck}: --workers and --scheduler are for TSIM decks (mode = "tsim"); this is a {mode} deck'
+            )
         if mode == "propagate":
             if stm_file is not None:
                 raise DeckError(f'{deck}: --stm is for TEAM decks (mode = "team"); this is a trajectory deck')
@@ -287,6 +305,62 @@ def run(
                 click.echo(f"reference ready ({source}); errcon.analysis = false: no analysis run")
                 return
             _team_report(path, png, as_json, verbosity, stage, product.timing, velocity_unit, width)
+
+
+def _run_tsim(
+    deck: Path, output: Path | None, plot: Path | None, as_json: bool, quiet: bool, workers, scheduler
+) -> None:
+    """``fracas run`` on a TSIM deck: stages, a progress bar over the missions, the summary."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from fracas.config.tsim import load_tsim_deck
+    from fracas.montecarlo import missions_per_second, run_tsim
+    from fracas.report.tsim import plot_tsim, summary_text
+
+    cfg = load_tsim_deck(deck)
+    png = plot or (cfg.resolve(cfg.output.plot) if cfg.output.plot else None)
+    if png is not None:
+        from fracas.io.atomic import check_output_path
+
+        check_output_path(png, "plot")
+    console = Console(stderr=True)
+    show = console.is_terminal and not as_json
+    cols = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
+    with Progress(*cols, console=console, disable=not show, transient=True) as bar:
+        task = bar.add_task("starting", total=None)
+
+        def stage(text: str) -> None:
+            bar.update(task, description=text)
+            if not show and not as_json and not quiet:
+                click.echo(text, err=True)
+
+        def progress(done: int, total: int) -> None:
+            bar.update(task, description="missions", completed=done, total=total)
+
+        product, path = run_tsim(cfg, output, workers=workers, scheduler=scheduler, on_stage=stage, progress=progress)
+    written = plot_tsim(product, png) if png is not None else []
+    if as_json:
+        click.echo(
+            json.dumps(
+                {
+                    "results": str(path),
+                    "counts": product.counts,
+                    "missions_per_s": missions_per_second(product),
+                    "verdicts": [r["verdict"] for r in product.consistency],
+                    "plots": [str(w) for w in written],
+                }
+            )
+        )
+        return
+    if quiet:
+        bad = sum(r["verdict"] not in ("consistent", "not compared") for r in product.consistency)
+        click.echo(f"{product.counts['missions']} missions, {bad} outputs flagged; results: {path}")
+        return
+    click.echo(summary_text(product))
+    click.echo(f"results: {path}  ({missions_per_second(product):.1f} missions/s)")
+    for w in written:
+        click.echo(f"plot: {w}")
 
 
 def _run_tom(deck: Path, output: Path | None, plot: Path | None, as_json: bool, quiet: bool) -> None:
@@ -423,6 +497,19 @@ def report(
             check_output_path(plot, "plot")
         if kind == "fracas-team-results":
             _team_report(file, plot, as_json, _verbosity(quiet, verbose), None, None, velocity_unit, width)
+            return
+        if kind == "fracas-tsim-results":
+            from fracas.io.tsim_results import read_tsim_results
+            from fracas.report.tsim import plot_tsim
+            from fracas.report.tsim import summary_text as tsim_summary
+
+            res = read_tsim_results(file)
+            if as_json:
+                click.echo(json.dumps({"file": str(file), "counts": res.counts}))
+            else:
+                click.echo(tsim_summary(res, width=width or 80))
+            for w in plot_tsim(res, plot) if plot is not None else []:
+                click.echo(f"plot: {w}")
             return
         if kind == "fracas-tom-results":
             from fracas.io.tom_results import read_tom_results

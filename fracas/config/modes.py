@@ -2,8 +2,9 @@
 
 ``mode = "team"`` (TEAM covariance analysis), ``mode = "sweep"`` (a TEAM study run with
 fields varied, :mod:`fracas.config.sweep`), ``mode = "tom"`` (TOM targeting and
-optimization, :mod:`fracas.config.tom`) or ``mode = "propagate"`` (a trajectory deck; the
-default, so every trajectory deck stays valid as written).  TSIM will add ``"tsim"``.  TEAM
+optimization, :mod:`fracas.config.tom`), ``mode = "tsim"`` (TSIM Monte Carlo,
+:mod:`fracas.config.tsim`) or ``mode = "propagate"`` (a trajectory deck; the
+default, so every trajectory deck stays valid as written).  TEAM
 decks written before ``mode`` existed are still recognised by their ``[ertraj]`` table.
 """
 
@@ -16,8 +17,8 @@ from fracas.errors import DeckError
 
 __all__ = ["MODES", "PLANNED_MODES", "deck_mode", "parse_any", "load_any"]
 
-MODES = ("propagate", "team", "sweep", "tom")
-PLANNED_MODES = ("tsim",)
+MODES = ("propagate", "team", "sweep", "tom", "tsim")
+PLANNED_MODES: tuple[str, ...] = ()
 
 
 def deck_mode(text: str, source: str = "<deck>") -> str:
@@ -47,6 +48,10 @@ def parse_any(text: str, source: str = "<deck>"):
         from fracas.config.tom import parse_tom_deck
 
         return parse_tom_deck(text, source)
+    if mode == "tsim":
+        from fracas.config.tsim import parse_tsim_deck
+
+        return parse_tsim_deck(text, source)
     if mode == "team":
         from fracas.config.team import parse_team_deck
 

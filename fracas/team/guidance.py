@@ -381,6 +381,7 @@ def _low_thrust(study, span, g, k, p_c, p_k, summary=True):
         dv_rms_km_s=sig_dv,
         propellant_sigma_kg=sig_m,
         dv_variance_km2_s2=var_dv,
+        dv_jacobian=j_dv,
     )
     return out, p_reset, [(t_c, x_exec_full[:nx, :nx])]
 

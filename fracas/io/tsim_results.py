@@ -1,0 +1,547 @@
+"""TSIM results file and TSIM checkpoint file (HDF5, atomic).
+
+Serialises a :class:`fracas.products.TsimProduct` and reads it back for reports and for
+a-priori merging (:func:`tsim_statistics`); no numerics.  The checkpoint file holds the
+per-mission arrays of the completed blocks of a run so that a killed run can resume.
+
+Results layout (every dataset carries ``units`` and ``data_sha256``)::
+
+    /                         file_kind = "fracas-tsim-results", schema_version, provenance
+    /tsim                     attrs: title, source, epoch_et_s (s past J2000, TDB), n_state,
+                              kind = "fracas-tsim-results", version (= schema_version)
+      labels (n,)             the augmented state (r, v, m, then parameters)
+      counts                  JSON text: missions, ok, near, hopeless, failed, a_priori
+      settings, timing,       JSON text: the run's settings (seed, first_mission, missions,
+      provenance_extra          scale, sampling, grid step, block, workers), timings (s), and
+                                the provenance items /provenance cannot hold as attributes
+      consistency             JSON text: a list of rows, one per compared output, each with
+                              output, names, units, count, ratio (per axis, sigma_TSIM /
+                              sigma_TEAM), se, chi2, dof, p_value, mean_chi2, mean_p_value,
+                              coverage ([k, observed, expected, se] per k), verdict
+                              ("consistent" | "nonlinear" | "biased" | "not compared"), message
+      missions/<field>        attr fields (the field names, in order); the per-mission
+                              table, mission axis first (N missions, J
+                              maneuvers, n = len(labels), M_max controls, m final targets):
+        mission (N,)                 int, mission index
+        status (N,)                  int, 0 ok, 1 near success, 2 hopeless maneuver,
+                                     3 integration failed
+        failed_maneuver (N,)         int, index of the maneuver that ended it (-1: none)
+        iterations (N, J)            int, guidance iterations per maneuver
+        initial_deviation (N, n)     labels' units (km, km/s, kg, parameters)
+        state_deviation (N, J, 7)    true state deviation at each maneuver (km, km/s, kg)
+        knowledge_error (N, J, n)    navigation knowledge error at each maneuver (labels' units)
+        correction (N, J, M_max)     commanded correction (each maneuver's control units)
+        execution_error (N, J, M_max) execution error (each maneuver's control units)
+        dv_km_s (N, J)               |dV| of each maneuver (km/s)
+        dv_total_km_s (N,)           total |dV| (km/s)
+        target_error (N, m)          final target error (final target units)
+        maneuver_target_error (N, J, m_max)  each maneuver's target error (its target units)
+        final_mass_kg (N,)           kg
+                              (any further field is stored the same way, units "1")
+      maneuvers/<j>_<name>    one group per maneuver j (0, 1, ...):
+        name, type, law       text ("impulsive" | "primary" | "vernier"; "linear" | "nonlinear")
+        time_s, target_time_s (s); control_labels, control_units, target_names, target_units
+        team_correction_cov (M, M)   TEAM's covariance of the commanded correction
+        team_dv_mean_km_s, team_dv_99_km_s   TEAM's exact mean and 99 % |dV| (km/s)
+        team_target_cov_after (m, m) TEAM's target dispersion after the event
+        failures, near        int: missions it ended (hopeless), near successes
+      statistics/<name>       attrs name (exact), order, count (int); mean (p,), covariance (p, p)
+      percentiles/<name>      attrs name (exact), order; q (k,) (percent), value (k,)
+      final/target_names, target_units, time_s (s), team_target_cov (m, m)
+
+Checkpoint layout::
+
+    /                         file_kind = "fracas-tsim-checkpoint", schema_version, plan_key
+      block_<index>/<field>   the completed block's arrays (integer or float64)
+
+(a "/" in a name becomes "|" in a group's key; the exact name is the group's ``name`` attr)
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from fracas.errors import ResultsFileError
+from fracas.io.hdf5 import (
+    Checked,
+    atomic_h5,
+    attr_int,
+    attr_strs,
+    attr_text,
+    read_provenance,
+    set_attr,
+    write,
+    write_provenance,
+    write_strings,
+)
+from fracas.products import TsimManeuver, TsimProduct
+
+__all__ = [
+    "write_tsim_results",
+    "read_tsim_results",
+    "tsim_statistics",
+    "write_tsim_checkpoint",
+    "read_tsim_checkpoint",
+    "TSIM_SCHEMA",
+    "CHECKPOINT_SCHEMA",
+]
+
+TSIM_SCHEMA = 1
+CHECKPOINT_SCHEMA = 1
+_KIND = "fracas-tsim-results"
+_CKPT_KIND = "fracas-tsim-checkpoint"
+VERDICTS = ("consistent", "nonlinear", "biased", "not compared")
+
+#: per-mission field -> (units, integer, description)
+_FIELDS: dict[str, tuple[str, bool, str]] = {
+    "mission": ("1", True, "mission index"),
+    "status": ("1", True, "0 ok, 1 near success, 2 hopeless maneuver, 3 integration failed"),
+    "failed_maneuver": ("1", True, "index of the maneuver that ended the mission (-1: none)"),
+    "iterations": ("1", True, "guidance iterations per maneuver"),
+    "initial_deviation": ("labels", False, "initial augmented-state deviation (units of /tsim/labels)"),
+    "state_deviation": ("km, km/s, kg", False, "true state deviation (r, v, m) at each maneuver"),
+    "knowledge_error": ("labels", False, "knowledge error at each maneuver (units of /tsim/labels)"),
+    "correction": ("control units", False, "commanded correction per maneuver (its control units)"),
+    "execution_error": ("control units", False, "execution error per maneuver (its control units)"),
+    "dv_km_s": ("km/s", False, "|dV| of each maneuver"),
+    "dv_total_km_s": ("km/s", False, "total |dV|"),
+    "target_error": ("final target units", False, "final target error"),
+    "maneuver_target_error": ("target units", False, "each maneuver's target error (its target units)"),
+    "final_mass_kg": ("kg", False, "final mass"),
+}
+
+
+def _key(name: str) -> str:
+    return str(name).replace("/", "|") or "_"
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, (np.bool_, bool)):
+        return bool(x)
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.floating):
+        return float(x)
+    if isinstance(x, Path):
+        return str(x)
+    return x
+
+
+def _dumps(x: Any) -> str:
+    return json.dumps(_jsonable(x), default=str)
+
+
+def _simple(val: Any) -> bool:
+    return isinstance(val, (str, bool, int, float, np.integer, np.floating)) and not isinstance(val, bytes)
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def write_tsim_results(path: str | os.PathLike, product: TsimProduct) -> Path:
+    """Write ``product`` to ``path`` atomically (a crash leaves any old file intact)."""
+    p = Path(path)
+    prov = dict(product.provenance)
+    std = {
+        k: v
+        for k, v in prov.items()
+        if (k == "deck_text" and isinstance(v, str))
+        or (k == "libraries" and isinstance(v, dict) and all(isinstance(x, str) for x in v.values()))
+        or (k not in ("deck_text", "libraries") and _simple(v))
+    }
+    extra = {k: v for k, v in prov.items() if k not in std}
+    with atomic_h5(p) as f:
+        f.attrs["file_kind"] = _KIND
+        f.attrs["schema_version"] = TSIM_SCHEMA
+        write_provenance(f, std)
+        g = f.create_group("tsim")
+        g.attrs["title"] = str(product.title)
+        g.attrs["source"] = str(product.source)
+        g.attrs["epoch_et_s"] = float(product.epoch_et_s)
+        g.attrs["n_state"] = int(product.n_state)
+        g.attrs["kind"] = _KIND
+        g.attrs["version"] = TSIM_SCHEMA
+        write_strings(g, "labels", product.labels)
+        write(g, "counts", _dumps({k: int(v) for k, v in product.counts.items()}), "none")
+        write(g, "settings", _dumps(product.settings), "none")
+        write(g, "timing", _dumps(product.timing), "none", description="seconds")
+        write(g, "provenance_extra", _dumps(extra), "none")
+        write(g, "consistency", _dumps(list(product.consistency)), "none", description="JSON list of rows")
+        t = g.create_group("missions")
+        set_attr(t, "fields", [str(k) for k in product.table])
+        for name, arr in product.table.items():
+            units, _, desc = _FIELDS.get(name, ("1", False, ""))
+            a = np.asarray(arr)
+            if a.dtype.kind not in "iu":
+                a = a.astype(np.float64)
+            extra_attrs = {"description": desc} if desc else {}
+            write(t, name, a, units, **extra_attrs)
+        mg = g.create_group("maneuvers")
+        for j, m in enumerate(product.maneuvers):
+            h = mg.create_group(f"{j}_{_key(m.name)}")
+            h.attrs["index"] = j
+            write(h, "name", str(m.name), "none")
+            write(h, "type", str(m.type), "none")
+            write(h, "law", str(m.law), "none")
+            write(h, "time_s", np.float64(m.time_s), "s")
+            write(h, "target_time_s", np.float64(m.target_time_s), "s")
+            write_strings(h, "control_labels", m.control_labels)
+            write_strings(h, "control_units", m.control_units)
+            write_strings(h, "target_names", m.target_names)
+            write_strings(h, "target_units", m.target_units)
+            mc = len(m.control_labels)
+            write(h, "team_correction_cov", np.asarray(m.team_correction_cov, float).reshape(mc, mc), "control units^2")
+            write(h, "team_dv_mean_km_s", np.float64(m.team_dv_mean_km_s), "km/s")
+            write(h, "team_dv_99_km_s", np.float64(m.team_dv_99_km_s), "km/s")
+            mt = len(m.target_names)
+            write(
+                h, "team_target_cov_after", np.asarray(m.team_target_cov_after, float).reshape(mt, mt), "target units^2"
+            )
+            write(h, "failures", np.int64(m.failures), "1", description="missions it ended (hopeless)")
+            write(h, "near", np.int64(m.near), "1", description="designs accepted as near successes")
+        sg = g.create_group("statistics")
+        for i, (name, (count, mean, cov)) in enumerate(product.statistics.items()):
+            h = sg.create_group(_key(name))
+            h.attrs["name"] = str(name)
+            h.attrs["order"] = i
+            h.attrs["count"] = int(count)
+            mean = np.atleast_1d(np.asarray(mean, float))
+            write(h, "mean", mean, "output units")
+            write(h, "covariance", np.asarray(cov, float).reshape(mean.size, mean.size), "output units^2")
+        pg = g.create_group("percentiles")
+        for i, (name, table) in enumerate(product.percentiles.items()):
+            h = pg.create_group(_key(name))
+            h.attrs["name"] = str(name)
+            h.attrs["order"] = i
+            write(h, "q", np.asarray([float(q) for q in table], float), "percent")
+            write(h, "value", np.asarray([float(v) for v in table.values()], float), "output units")
+        fg = g.create_group("final")
+        write_strings(fg, "target_names", product.final_target_names)
+        write_strings(fg, "target_units", product.final_target_units)
+        write(fg, "time_s", np.float64(product.final_target_time_s), "s")
+        m = len(product.final_target_names)
+        write(fg, "team_target_cov", np.asarray(product.team_target_cov, float).reshape(m, m), "target units^2")
+    return p
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def _open_checked(p: Path, f: h5py.File, kind: str, schema: int, what: str, verify: bool) -> Checked:
+    got = attr_text(f, "file_kind")
+    if got != kind:
+        raise ResultsFileError(
+            f"{p}: not a fracas {what} (file_kind = {f.attrs.get('file_kind')!r}, expected {kind!r})"
+        )
+    version = attr_int(f, "schema_version")
+    if version is None or version < 1 or version > schema:
+        raise ResultsFileError(f"{p}: schema_version = {f.attrs.get('schema_version')!r}, expected 1..{schema}")
+    return Checked(f, p, ResultsFileError, verify=verify)
+
+
+def _check_path(p: Path, what: str) -> None:
+    if not p.exists():
+        raise ResultsFileError(f"{p}: no such {what}")
+    if p.is_dir():
+        raise ResultsFileError(f"{p}: is a directory, expected a {what} (HDF5)")
+
+
+def _group(c: Checked, name: str) -> h5py.Group:
+    if name not in c.f or not isinstance(c.f[name], h5py.Group):
+        raise c.fail(name, "missing, expected a group (incomplete file?)")
+    return c.f[name]
+
+
+def _json(c: Checked, name: str, kind: type) -> Any:
+    text = c.text(name)
+    try:
+        val = json.loads(text)
+    except ValueError as exc:
+        raise c.fail(name, f"not valid JSON ({exc}), expected JSON text") from None
+    if not isinstance(val, kind):
+        raise c.fail(name, f"JSON {type(val).__name__}, expected a JSON {'object' if kind is dict else 'list'}")
+    return val
+
+
+def _ordered(c: Checked, group: str) -> list[tuple[str, str]]:
+    """(exact name, dataset path prefix) of the subgroups of ``group`` in their written order."""
+    g = _group(c, group)
+    rows = []
+    for key in g:
+        h = g[key]
+        where = f"{group}/{key}"
+        if not isinstance(h, h5py.Group):
+            raise c.fail(where, "is a dataset, expected a group")
+        name = attr_text(h, "name")
+        if name is None:
+            raise c.fail(where, "no text attribute 'name', expected the exact name")
+        order = attr_int(h, "order", c.fail(where, "attribute 'order' is not an integer, expected one"))
+        rows.append((order if order is not None else 0, name, where))
+    rows.sort(key=lambda r: r[0])
+    return [(name, where) for _, name, where in rows]
+
+
+def _count(c: Checked, where: str) -> int:
+    h = c.f[where]
+    val = attr_int(h, "count", c.fail(where, "attribute 'count' is not an integer, expected the sample count"))
+    if val is None or val < 0:
+        raise c.fail(where, f"attribute 'count' = {h.attrs.get('count')!r}, expected a count >= 0")
+    return val
+
+
+def _statistics(c: Checked) -> dict[str, tuple[int, np.ndarray, np.ndarray]]:
+    out = {}
+    for name, where in _ordered(c, "tsim/statistics"):
+        count = _count(c, where)
+        mean = c.num(f"{where}/mean", (None,))
+        cov = c.num(f"{where}/covariance", (mean.shape[0], mean.shape[0]))
+        out[name] = (count, mean, cov)
+    return out
+
+
+def _counts(c: Checked) -> dict[str, int]:
+    raw = _json(c, "tsim/counts", dict)
+    for k, v in raw.items():
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise c.fail("tsim/counts", f"{k} = {v!r}, expected an integer count")
+    return raw
+
+
+def _consistency(c: Checked) -> list[dict[str, Any]]:
+    rows = _json(c, "tsim/consistency", list)
+    for i, row in enumerate(rows):
+        if not isinstance(row, dict):
+            raise c.fail("tsim/consistency", f"row {i} is a JSON {type(row).__name__}, expected an object")
+        for key in ("output", "verdict", "message"):
+            if not isinstance(row.get(key), str):
+                raise c.fail("tsim/consistency", f"row {i}: {key} = {row.get(key)!r}, expected a string")
+        if row["verdict"] not in VERDICTS:
+            raise c.fail("tsim/consistency", f"row {i}: verdict {row['verdict']!r}, expected one of {VERDICTS}")
+    return rows
+
+
+def _maneuvers(c: Checked) -> list[TsimManeuver]:
+    g = _group(c, "tsim/maneuvers")
+    keyed = []
+    for key in g:
+        head = key.split("_", 1)[0]
+        if not head.isdigit():
+            raise c.fail(
+                f"tsim/maneuvers/{key}", "group name does not start with '<index>_', expected '<index>_<name>'"
+            )
+        keyed.append((int(head), key))
+    keyed.sort()
+    if [j for j, _ in keyed] != list(range(len(keyed))):
+        raise c.fail("tsim/maneuvers", f"indices {[j for j, _ in keyed]}, expected 0..{len(keyed) - 1}")
+    out = []
+    for _, key in keyed:
+        w = f"tsim/maneuvers/{key}"
+        labels = c.strs(f"{w}/control_labels")
+        mc = len(labels)
+        names = c.strs(f"{w}/target_names")
+        mt = len(names)
+        out.append(
+            TsimManeuver(
+                name=c.text(f"{w}/name"),
+                type=c.text(f"{w}/type"),
+                law=c.text(f"{w}/law"),
+                time_s=c.scalar(f"{w}/time_s"),
+                control_labels=labels,
+                control_units=c.strs(f"{w}/control_units", mc),
+                target_names=names,
+                target_units=c.strs(f"{w}/target_units", mt),
+                target_time_s=c.scalar(f"{w}/target_time_s"),
+                team_correction_cov=c.num(f"{w}/team_correction_cov", (mc, mc)),
+                team_dv_mean_km_s=c.scalar(f"{w}/team_dv_mean_km_s", finite=False),
+                team_dv_99_km_s=c.scalar(f"{w}/team_dv_99_km_s", finite=False),
+                team_target_cov_after=c.num(f"{w}/team_target_cov_after", (mt, mt)),
+                failures=c.scalar(f"{w}/failures", integer=True),
+                near=c.scalar(f"{w}/near", integer=True),
+            )
+        )
+    return out
+
+
+def _table(c: Checked, j: int, n: int, m: int) -> dict[str, np.ndarray]:
+    g = _group(c, "tsim/missions")
+    if "fields" not in g.attrs:
+        raise c.fail("tsim/missions", "no attribute 'fields', expected the list of the table's fields")
+    fields = attr_strs(g, "fields") if g.attrs["fields"].size else []
+    for req in ["mission", "status"] + [k for k in fields if k not in ("mission", "status")]:
+        if req not in g:
+            raise c.fail(f"tsim/missions/{req}", "missing, expected a dataset (incomplete file?)")
+    nm = c.num("tsim/missions/mission", (None,), integer=True).shape[0]
+    known = {
+        "mission": (nm,),
+        "status": (nm,),
+        "failed_maneuver": (nm,),
+        "iterations": (nm, j),
+        "initial_deviation": (nm, n),
+        "state_deviation": (nm, j, 7),
+        "knowledge_error": (nm, j, n),
+        "correction": (nm, j, None),
+        "execution_error": (nm, j, None),
+        "dv_km_s": (nm, j),
+        "dv_total_km_s": (nm,),
+        "target_error": (nm, m),
+        "maneuver_target_error": (nm, j, None),
+        "final_mass_kg": (nm,),
+    }
+    out = {}
+    for key in fields + sorted(k for k in g if k not in fields):
+        where = f"tsim/missions/{key}"
+        ds = c.dataset(where)
+        if key in _FIELDS:
+            integer = _FIELDS[key][1]
+            shape = known[key]
+        else:
+            integer = ds.dtype.kind in "iu"
+            shape = (nm,) + (None,) * max(ds.ndim - 1, 0)
+            if ds.ndim == 0:
+                raise c.fail(where, "a scalar, expected a mission axis first")
+        out[key] = c.num(where, shape, integer=integer)
+    return out
+
+
+def read_tsim_results(path: str | os.PathLike, *, verify: bool = True) -> TsimProduct:
+    """The :class:`TsimProduct` stored in a TSIM results file; a one-line ResultsFileError
+    naming the file and the dataset for a missing or damaged file."""
+    p = Path(path)
+    _check_path(p, "TSIM results file")
+    try:
+        with h5py.File(p, "r") as f:
+            c = _open_checked(p, f, _KIND, TSIM_SCHEMA, "TSIM results file", verify)
+            g = _group(c, "tsim")
+            attrs = {}
+            for key in ("title", "source"):
+                val = attr_text(g, key)
+                if val is None:
+                    raise c.fail("tsim", f"no text attribute {key!r}, expected one")
+                attrs[key] = val
+            try:
+                epoch = float(g.attrs["epoch_et_s"])
+            except (KeyError, TypeError, ValueError):
+                raise c.fail("tsim", "attribute 'epoch_et_s' missing or not a number, expected seconds") from None
+            n_state = attr_int(g, "n_state", c.fail("tsim", "attribute 'n_state' is not an integer, expected one"))
+            if n_state is None:
+                raise c.fail("tsim", "no attribute 'n_state', expected an integer")
+            labels = c.strs("tsim/labels")
+            names = c.strs("tsim/final/target_names")
+            m = len(names)
+            maneuvers = _maneuvers(c)
+            table = _table(c, len(maneuvers), len(labels), m)
+            percentiles = {}
+            for name, where in _ordered(c, "tsim/percentiles"):
+                q = c.num(f"{where}/q", (None,))
+                v = c.num(f"{where}/value", (q.shape[0],))
+                percentiles[name] = {float(a): float(b) for a, b in zip(q, v)}
+            prov = read_provenance(f)
+            prov.update(_json(c, "tsim/provenance_extra", dict))
+            return TsimProduct(
+                title=attrs["title"],
+                source=attrs["source"],
+                epoch_et_s=epoch,
+                labels=labels,
+                n_state=n_state,
+                maneuvers=maneuvers,
+                final_target_names=names,
+                final_target_units=c.strs("tsim/final/target_units", m),
+                final_target_time_s=c.scalar("tsim/final/time_s"),
+                team_target_cov=c.num("tsim/final/team_target_cov", (m, m)),
+                table=table,
+                statistics=_statistics(c),
+                percentiles=percentiles,
+                consistency=_consistency(c),
+                counts=_counts(c),
+                settings=_json(c, "tsim/settings", dict),
+                timing=_json(c, "tsim/timing", dict),
+                provenance=prov,
+            )
+    except OSError as exc:
+        raise ResultsFileError(f"{p}: cannot read as HDF5 ({exc}), expected a TSIM results file") from None
+
+
+def tsim_statistics(path: str | os.PathLike, *, verify: bool = True) -> tuple[int, dict]:
+    """Only the statistics of an earlier TSIM results file (for a-priori merging):
+    (the number of successful missions they cover -- ok + near + a_priori of its counts --,
+    name -> (count, mean, covariance))."""
+    p = Path(path)
+    _check_path(p, "TSIM results file")
+    try:
+        with h5py.File(p, "r") as f:
+            c = _open_checked(p, f, _KIND, TSIM_SCHEMA, "TSIM results file", verify)
+            counts = _counts(c)
+            ok = sum(int(counts.get(k, 0)) for k in ("ok", "near", "a_priori"))
+            return ok, _statistics(c)
+    except OSError as exc:
+        raise ResultsFileError(f"{p}: cannot read as HDF5 ({exc}), expected a TSIM results file") from None
+
+
+# --------------------------------------------------------------------------- checkpoint
+
+
+def write_tsim_checkpoint(path: str | os.PathLike, plan_key: str, blocks: dict[int, dict[str, np.ndarray]]) -> Path:
+    """Atomically rewrite the checkpoint at ``path``: one group per completed block index
+    holding that block's arrays (integer or float64), attribute ``plan_key``."""
+    p = Path(path)
+    with atomic_h5(p) as f:
+        f.attrs["file_kind"] = _CKPT_KIND
+        f.attrs["schema_version"] = CHECKPOINT_SCHEMA
+        f.attrs["plan_key"] = str(plan_key)
+        for index in sorted(blocks):
+            g = f.create_group(f"block_{int(index)}")
+            for name, arr in blocks[index].items():
+                a = np.asarray(arr)
+                if a.dtype.kind not in "iu":
+                    a = a.astype(np.float64)
+                write(g, name, a, _FIELDS.get(name, ("1",))[0])
+    return p
+
+
+def read_tsim_checkpoint(
+    path: str | os.PathLike, plan_key: str, *, verify: bool = True
+) -> dict[int, dict[str, np.ndarray]]:
+    """The completed blocks of a checkpoint ({} when ``path`` does not exist); a one-line
+    ResultsFileError for a damaged file or one written by a different run (``plan_key``)."""
+    p = Path(path)
+    if not p.exists():
+        return {}
+    if p.is_dir():
+        raise ResultsFileError(f"{p}: is a directory, expected a TSIM checkpoint file (HDF5)")
+    try:
+        with h5py.File(p, "r") as f:
+            c = _open_checked(p, f, _CKPT_KIND, CHECKPOINT_SCHEMA, "TSIM checkpoint file", verify)
+            key = attr_text(f, "plan_key")
+            if key is None:
+                raise ResultsFileError(f"{p}: no text attribute 'plan_key', expected the run's plan key")
+            if key != str(plan_key):
+                raise ResultsFileError(
+                    f"{p}: checkpoint belongs to a different run (plan_key {key[:16]}..., expected "
+                    f"{str(plan_key)[:16]}...); delete it to start afresh"
+                )
+            out: dict[int, dict[str, np.ndarray]] = {}
+            for gname in f:
+                head, _, idx = gname.partition("_")
+                if head != "block" or not idx.isdigit() or not isinstance(f[gname], h5py.Group):
+                    raise c.fail(gname, "unexpected entry, expected a group 'block_<index>'")
+                arrays = {}
+                for name in f[gname]:
+                    where = f"{gname}/{name}"
+                    ds = c.dataset(where)
+                    arrays[name] = c.num(where, None, integer=ds.dtype.kind in "iu")
+                out[int(idx)] = arrays
+            return dict(sorted(out.items()))
+    except OSError as exc:
+        raise ResultsFileError(f"{p}: cannot read as HDF5 ({exc}), expected a TSIM checkpoint file") from None

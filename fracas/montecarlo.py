@@ -1,0 +1,266 @@
+"""``fracas run`` on a TSIM deck: the Monte Carlo driver (FRACAS TSIM, digest C.3; docs/tsim.md).
+
+deck -> TEAM run of the deck it stands on (guidance model ``tsim``: P̃ = P_c + P_k, the
+estimate TSIM's independent knowledge sampling makes) -> :class:`fracas.tsim.plan.TsimPlan`
+-> blocks of missions (:func:`fracas.tsim.engine.simulate_block`) in this process, on a
+Dask ``LocalCluster`` (``workers``) or on a running scheduler (``scheduler``) -> statistics,
+consistency -> results file.
+
+* Work is cut into blocks of 32 missions (fixed: mission i always flies in the same lane of
+  the same compiled program), and blocks into tasks of ``batch_missions``.  Every task's
+  blocks are written to a checkpoint file (``<results>.partial.h5``, atomically, after each
+  task); a run killed mid-way and started again with the same deck resumes from it and ends
+  with the same bits.  The checkpoint is removed once the results file is written.
+* Each Dask worker is one process with one XLA host device (``fracas._jax.worker_setup``),
+  so N workers share N cores without oversubscribing them; the plan is sent to every worker
+  once (``scatter``), each compiles the flight programs once.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fracas import pipeline
+from fracas.config.tsim import TsimDeck, load_tsim_deck, tsim_problems, tsim_team_deck
+from fracas.errors import DeckError
+from fracas.io.atomic import check_output_path
+
+__all__ = ["run_tsim", "checkpoint_path", "plan_key", "fly_blocks", "assemble"]
+
+Progress = Callable[[int, int], None]
+
+
+def checkpoint_path(results: Path) -> Path:
+    return results.with_name(results.name + ".partial.h5")
+
+
+def plan_key(cfg: TsimDeck, team_text: str) -> str:
+    """What a checkpoint must match to be resumed: both decks' texts and the fracas version."""
+    from fracas import __version__
+
+    h = hashlib.sha256()
+    for part in (cfg.source_text or "", team_text or "", __version__):
+        h.update(part.encode())
+        h.update(b"\0")
+    return h.hexdigest()[:32]
+
+
+def fly_blocks(plan, blocks: list[int]) -> dict[int, dict[str, np.ndarray]]:
+    """Fly the given blocks of ``plan`` (one task)."""
+    from fracas.tsim.engine import simulate_block
+
+    return {b: simulate_block(plan, b) for b in blocks}
+
+
+def assemble(plan, done: dict[int, dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """The per-mission table in mission order, trimmed to the run's missions."""
+    keys = sorted(done)
+    table = {k: np.concatenate([done[b][k] for b in keys], axis=0) for k in done[keys[0]]}
+    return {k: v[: plan.missions] for k, v in table.items()}
+
+
+def _team_for(cfg: TsimDeck, say):
+    from fracas.build.team import build_case
+    from fracas.sweep import vary
+
+    team_deck = tsim_team_deck(cfg)
+    team_deck = vary(team_deck, "errcon.guidance_model", "tsim")
+    say("running TEAM (guidance model tsim) for the knowledge and guidance matrices")
+    prod, _, _ = pipeline.run_team(team_deck, write_results=False, on_stage=None)
+    if prod is None or not prod.guidance:
+        raise DeckError(f"{cfg.source_path}: insim.team_deck: the TEAM run made no guidance events")
+    return team_deck, build_case(team_deck), prod
+
+
+def _run_local(plan, todo: list[list[int]], record) -> None:
+    for task in todo:
+        record(fly_blocks(plan, task))
+
+
+def _run_dask(plan, todo: list[list[int]], record, workers: int | None, scheduler: str | None) -> int:
+    import os
+
+    from distributed import Client, LocalCluster, as_completed
+
+    from fracas.sweep import _plugin
+
+    cluster = None
+    if scheduler is None:
+        n = workers if workers is not None else (os.cpu_count() or 1)
+        cluster = LocalCluster(
+            n_workers=max(1, min(n, len(todo))),
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=None,
+        )
+    client = Client(cluster if cluster is not None else scheduler)
+    try:
+        client.register_plugin(_plugin())
+        n_workers = len(client.scheduler_info().get("workers", {})) or 1
+        remote = client.scatter(plan, broadcast=True)
+        futures = [client.submit(fly_blocks, remote, task, pure=False) for task in todo]
+        for fut in as_completed(futures):
+            record(fut.result())
+        return n_workers
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def run_tsim(
+    deck,
+    output: str | Path | None = None,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    on_stage: Callable[[str], None] | None = None,
+    progress: Progress | None = None,
+    stop_after_tasks: int | None = None,
+    batch_missions: int | None = None,
+):
+    """Run a TSIM deck (path or TsimDeck); returns (TsimProduct, results path).
+
+    ``workers``: None or 1 runs in this process; N ≥ 2 starts a Dask LocalCluster of N
+    single-threaded worker processes; ``scheduler``: the address of a running Dask
+    scheduler (overrides workers).  ``progress(done, total)`` after every task (missions).
+    ``stop_after_tasks`` (tests: a run killed mid-way) stops after that many tasks, leaving
+    the checkpoint.  ``batch_missions`` overrides the deck's.
+    """
+    from fracas.build.tsim import build_plan
+    from fracas.io.hdf5 import provenance
+    from fracas.io.tsim_results import (
+        read_tsim_checkpoint,
+        tsim_statistics,
+        write_tsim_checkpoint,
+        write_tsim_results,
+    )
+    from fracas.products import TsimManeuver, TsimProduct
+    from fracas.tsim import summary
+    from fracas.tsim.plan import STATUS_HOPELESS, STATUS_NEAR
+
+    say = on_stage or (lambda s: None)
+    t0 = time.perf_counter()
+    cfg = deck if isinstance(deck, TsimDeck) else load_tsim_deck(deck)
+    problems = tsim_problems(cfg)
+    if problems:
+        raise DeckError("; ".join(problems)) if len(problems) > 1 else DeckError(problems[0])
+    out = Path(output) if output is not None else (
+        cfg.resolve(cfg.output.results) if cfg.output.results else pipeline.default_output(cfg.source_path)
+    )  # fmt: skip
+    if output is None and not cfg.output.results:
+        out = out.with_name(out.stem + "_tsim.h5")
+    check_output_path(out, "results file")
+    ckpt = checkpoint_path(out)
+    check_output_path(ckpt, "checkpoint file")
+    earlier = []
+    for f in cfg.insim.a_priori_statistics:
+        earlier.append(tsim_statistics(cfg.resolve(f)))
+    team_deck, case, team = _team_for(cfg, say)
+    t1 = time.perf_counter()
+    say("building the Monte Carlo plan (reference through the noise grid)")
+    plan = build_plan(cfg, case, team)
+    key = plan_key(cfg, team_deck.source_text or "")
+    done = read_tsim_checkpoint(ckpt, key)
+    per_task = max(1, -(-(batch_missions or cfg.insim.batch_missions) // plan.block))
+    remaining = [b for b in range(plan.n_blocks) if b not in done]
+    todo = [remaining[i : i + per_task] for i in range(0, len(remaining), per_task)]
+    if stop_after_tasks is not None:
+        todo = todo[:stop_after_tasks]
+    if done:
+        say(f"resuming: {len(done)} of {plan.n_blocks} blocks already in {ckpt}")
+    say(f"flying {plan.missions} missions in {plan.n_blocks} blocks of {plan.block}")
+    total = plan.missions
+    t2 = time.perf_counter()
+
+    def record(blocks: dict[int, dict[str, np.ndarray]]) -> None:
+        done.update(blocks)
+        write_tsim_checkpoint(ckpt, key, done)
+        if progress is not None:
+            progress(min(len(done) * plan.block, total), total)
+
+    if progress is not None:
+        progress(min(len(done) * plan.block, total), total)
+    n_workers = 1
+    if todo:
+        if scheduler is None and (workers is None or workers <= 1):
+            _run_local(plan, todo, record)
+        else:
+            n_workers = _run_dask(plan, todo, record, workers, scheduler)
+    t3 = time.perf_counter()
+    if len(done) < plan.n_blocks:
+        return None, ckpt
+    table = assemble(plan, done)
+    stats = summary.merge_a_priori(summary.statistics_of(plan, table), [s for _, s in earlier])
+    counts = summary.counts_of(plan, table)
+    counts["a_priori"] = int(sum(c for c, _ in earlier))
+    mans = []
+    for j, m in enumerate(plan.maneuvers):
+        fm = table["failed_maneuver"]
+        mans.append(
+            TsimManeuver(
+                name=m.name, type=m.type, law=m.law, time_s=m.time_s, control_labels=list(m.control_labels),
+                control_units=list(m.control_units), target_names=list(m.target.names),
+                target_units=list(m.target.units), target_time_s=m.target.t_s,
+                team_correction_cov=np.asarray(m.team["correction_cov"]),
+                team_dv_mean_km_s=float(m.team["dv_mean_km_s"]), team_dv_99_km_s=float(m.team["dv_99_km_s"]),
+                team_target_cov_after=np.asarray(m.team["target_cov_after"]),
+                failures=int(np.sum((fm == j) & (table["status"] == STATUS_HOPELESS))),
+                near=int(np.sum((table["iterations"][:, j] > 0) & (table["status"] == STATUS_NEAR))),
+            )
+        )  # fmt: skip
+    product = TsimProduct(
+        title=cfg.title or team.title,
+        source=str(cfg.source_path),
+        epoch_et_s=float(plan.epoch_et_s),
+        labels=list(team.labels),
+        n_state=int(plan.nx),
+        maneuvers=mans,
+        final_target_names=list(plan.final.names),
+        final_target_units=list(plan.final.units),
+        final_target_time_s=float(plan.final.t_s),
+        team_target_cov=np.asarray(plan.final_team["target_cov"]),
+        table=table,
+        statistics={k: (int(v.count), np.asarray(v.mean), _cov(v)) for k, v in stats.items()},
+        percentiles=summary.percentiles_of(plan, table),
+        consistency=summary.consistency(plan, table),
+        counts=counts,
+        settings={
+            "seed": plan.seed,
+            "first_mission": plan.first_mission,
+            "missions": plan.missions,
+            "scale": float(cfg.insim.scale),
+            "sampling": plan.info.get("sampling"),
+            "noise_step_s": plan.info.get("grid_step_s"),
+            "block": plan.block,
+            "workers": n_workers,
+            "team_deck": str(cfg.insim.team_deck),
+            "guidance_model": "tsim",
+            "laws": {m.name: m.law for m in plan.maneuvers},
+        },  # fmt: skip
+        timing={"team_s": t1 - t0, "plan_s": t2 - t1, "missions_s": t3 - t2},
+        provenance=provenance(cfg.source_text, cfg.source_path),
+    )
+    say("writing the results file")
+    write_tsim_results(out, product)
+    ckpt.unlink(missing_ok=True)
+    product.timing["total_s"] = time.perf_counter() - t0
+    return product, out
+
+
+def _cov(m) -> np.ndarray:
+    from fracas.tsim.statistics import covariance
+
+    return np.asarray(covariance(m))
+
+
+def missions_per_second(product: Any) -> float:
+    t = product.timing.get("missions_s", float("nan"))
+    return product.counts["missions"] / t if t > 0 else float("nan")

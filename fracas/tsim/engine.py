@@ -1,0 +1,406 @@
+"""One block of TSIM missions flown through every maneuver (FRACAS TSIM, CSAMP, NOISE, GUIDS,
+SETUP; digest ``tom-tsim-guidance.md`` C.3-C.6).
+
+For each mission (one lane of a vmapped block of :attr:`TsimPlan.block` missions):
+
+1. **Sample the real world** (CSAMP, RNUM): δX₀ = L₀ z over the augmented state (injection
+   state, mass and every parameter, :attr:`TsimPlan.init_factor`); the trajectory's
+   parameters (:attr:`TsimPlan.dyn_labels`) take their sampled values in the real world's
+   ``Params``; the Gauss-Markov thrust errors are drawn on the hold grid (NOISE-1, exact,
+   started stationary) and held constant over each cell (P-C3), the integrator restarting
+   at every node so a realization does not depend on the step size.
+2. **Fly to each maneuver** with the real world (SETUP(real)): phase by phase, in chunks of
+   :data:`CHUNK` grid cells (one compiled program for every phase and chunk).
+3. **Estimate by sampling** (P-C1, independent): δX̂ = (X_actual − X_ref) + n, n = L_k z
+   with P_k TEAM's true knowledge covariance at the maneuver (or the deck's).
+4. **Design** (GUIDS; SETUP(nominal): the nominal model, no noise, at the estimated
+   parameters the law estimates):
+   * linear: ΔV = −Γ δX̂ (impulsive) or δU = −Γ_U δX̂ − K^{+W}K δU_c (low thrust; δU_c is
+     what earlier events already commanded on the same arc, so a vernier replaces the
+     command it updates rather than stacking on it, as TEAM's exact reset does);
+   * nonlinear (impulsive): start from the linear ΔV; fly the estimated state to the target
+     time; ΔV ← ΔV − K^{+W} ΔT, with K about the reference, recomputed by central
+     differences about the current design when the weighted miss grows; converged when
+     every |ΔT_i| ≤ ε_i; after ``max_iterations`` a design within ``near_success_factor``
+     × ε is accepted (status 1, near success), otherwise the mission is **hopeless**
+     (status 2): it ends there and is counted, never dropped.
+5. **Execute with errors** on the actual trajectory: Gates (proportionality σ_p along ΔV, two
+   pointing angles across it, resolution) for impulses, with the propellant at the impulsive
+   engine's Isp; a fractional error per control for low thrust.
+6. After the last maneuver fly to the final target time; record the target errors
+   T(X_actual) − T_ref, ΔV per maneuver, the final mass.
+
+Nothing raises in the jitted parts: a lane whose integration fails (status 3) is frozen on
+the reference (NaN-free, P-C5) with its status set, so one failed mission never stops its
+block.  States are relative to the model's primary; a mission that changes primary on the
+way is a failure (status 3).
+
+Bit-identity: mission i always flies in lane i mod block of block i // block with the same
+compiled shapes, so its numbers do not depend on the batch size, the worker count or where a
+run was resumed.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from fracas import _jax  # noqa: F401  (float64 before any array exists)
+from fracas.constants import G0_KM_S2
+from fracas.dynamics.model import Params
+from fracas.dynamics.parameters import get_values, set_values
+from fracas.guidance.targets import target_values
+from fracas.integrate.propagate import join_model, propagate, split_model
+from fracas.tsim import sampling as smp
+from fracas.tsim.plan import STATUS_HOPELESS, STATUS_INTEGRATION, STATUS_NEAR, STATUS_OK, TsimPlan
+
+__all__ = ["CHUNK", "BlockResult", "simulate_block", "block_fields"]
+
+CHUNK = 32  # noise-grid cells per compiled flight call
+
+
+def _lane_params(static, params: Params, dyn_labels, dyn_values, ctrl_labels, ctrl_values) -> Params:
+    p = set_values(params, dyn_labels, dyn_values, static) if dyn_labels else params
+    return set_values(p, ctrl_labels, ctrl_values, static) if ctrl_labels else p
+
+
+@functools.lru_cache(maxsize=16)
+def _programs(static, dyn_labels: tuple, ctrl_labels: tuple, final_names: tuple, man_names: tuple):
+    """The compiled (jitted, vmapped) pieces for one model structure and label set."""
+
+    def fly_chunk_one(dyn, params, ephem, epoch, x, t0s, t1s, eta, alive):
+        model = join_model(static, dyn)
+
+        def seg(carry, s):
+            x_c, ok = carry
+            t0, t1, e = s
+            p = params._replace(
+                thrust_scale=params.thrust_scale + e[0],
+                bias_in_rad=params.bias_in_rad + e[1],
+                bias_out_rad=params.bias_out_rad + e[2],
+            )
+            tr = propagate(model, p, ephem, epoch, x_c, jnp.stack([t0, t1]))
+            empty = t1 <= t0
+            good = empty | ((tr.status == 0) & (tr.primary_final == model.primary) & jnp.all(jnp.isfinite(tr.x_final)))
+            x_n = jnp.where(empty | ~good | ~ok, x_c, tr.x_final)
+            return (x_n, ok & good), None
+
+        (x_f, ok), _ = jax.lax.scan(seg, (x, alive), (t0s, t1s, eta))
+        return x_f, ok
+
+    def fly_to_one(dyn, params, ephem, epoch, x, t0, t1):
+        model = join_model(static, dyn)
+        tr = propagate(model, params, ephem, epoch, x, jnp.stack([t0, t1]))
+        good = (tr.status == 0) & (tr.primary_final == model.primary) & jnp.all(jnp.isfinite(tr.x_final))
+        return jnp.where(good, tr.x_final, x), good
+
+    pax = None  # params are batched: every leaf has the lane axis
+
+    fly_chunk = jax.jit(jax.vmap(fly_chunk_one, in_axes=(None, 0, None, None, 0, None, None, 0, 0)))
+    fly_to = jax.jit(jax.vmap(fly_to_one, in_axes=(None, 0, None, None, 0, None, None)))
+    del pax
+
+    def lane_params(params, dyn_values, ctrl_values):
+        return _lane_params(static, params, dyn_labels, dyn_values, ctrl_labels, ctrl_values)
+
+    lane_params_b = jax.jit(jax.vmap(lane_params, in_axes=(None, 0, 0)))
+
+    def targets_of(names):
+        def one(x, t, offset, mu):
+            return target_values(names, x[:6] - offset, t, mu)
+
+        return jax.jit(jax.vmap(one, in_axes=(0, None, None, None)))
+
+    tgt = {names: targets_of(names) for names in set((final_names,) + man_names)}
+
+    def draws(seed, missions, init_factor, sigma, tau, dt, kfacs):
+        def one(i):
+            key = smp.mission_key(seed, i)
+            dx0 = smp.sample_normal(smp.stream_key(key, smp.STREAM_INITIAL), init_factor)
+            eta = smp.gauss_markov(smp.stream_key(key, smp.STREAM_NOISE), sigma, tau, dt)
+            kn = [smp.sample_normal(smp.stream_key(key, smp.STREAM_KNOWLEDGE, j), f) for j, f in enumerate(kfacs)]
+            ek = [smp.stream_key(key, smp.STREAM_EXECUTION, j) for j in range(len(kfacs))]
+            return dx0, eta, kn, ek
+
+        return jax.vmap(one)(missions)
+
+    draws_b = jax.jit(draws)
+
+    def gates(keys, dv, sp, sb, sr):
+        return jax.vmap(lambda k, d: smp.gates_error(k, d, sp, sb, sb, sr))(keys, dv)
+
+    def proportional(keys, du, frac):
+        return jax.vmap(lambda k, d: smp.proportional_error(k, d, frac))(keys, du)
+
+    return {
+        "fly_chunk": fly_chunk,
+        "fly_to": fly_to,
+        "lane_params": lane_params_b,
+        "targets": tgt,
+        "draws": draws_b,
+        "gates": jax.jit(gates),
+        "proportional": jax.jit(proportional),
+    }
+
+
+def block_fields(plan: TsimPlan) -> dict[str, tuple]:
+    """Name -> (shape after the mission axis, dtype) of every per-mission output."""
+    J = len(plan.maneuvers)
+    m_max = max([m.n_controls for m in plan.maneuvers] + [3])
+    return {
+        "mission": ((), np.int64),
+        "status": ((), np.int32),
+        "failed_maneuver": ((), np.int32),
+        "iterations": ((J,), np.int32),
+        "initial_deviation": ((plan.n,), np.float64),
+        "state_deviation": ((J, 7), np.float64),
+        "knowledge_error": ((J, plan.n), np.float64),
+        "correction": ((J, m_max), np.float64),
+        "execution_error": ((J, m_max), np.float64),
+        "dv_km_s": ((J,), np.float64),
+        "dv_total_km_s": ((), np.float64),
+        "target_error": ((len(plan.final.names),), np.float64),
+        "maneuver_target_error": ((J, max([len(m.target.names) for m in plan.maneuvers] + [1])), np.float64),
+        "final_mass_kg": ((), np.float64),
+    }
+
+
+BlockResult = dict  # name -> (block, ...) array, :func:`block_fields`
+
+
+def _grid_chunks(grid: np.ndarray, t_a: float, t_b: float):
+    """Chunks (t0 (C,), t1 (C,), cell index (C,)) of the grid cells from t_a to t_b."""
+    i0 = int(np.searchsorted(grid, t_a - 1e-6))
+    i1 = int(np.searchsorted(grid, t_b - 1e-6))
+    cells = np.arange(i0, i1)
+    out = []
+    for s in range(0, max(len(cells), 1), CHUNK):
+        c = cells[s : s + CHUNK]
+        t0 = np.full(CHUNK, t_b)
+        t1 = np.full(CHUNK, t_b)
+        idx = np.zeros(CHUNK, dtype=np.int64)
+        t0[: len(c)] = grid[c]
+        t1[: len(c)] = grid[c + 1]
+        idx[: len(c)] = c
+        out.append((t0, t1, idx))
+    return out
+
+
+def simulate_block(plan: TsimPlan, block_index: int) -> BlockResult:
+    """Fly the missions ``first_mission + block_index·block + (0..block-1)`` (module docstring).
+
+    Returns every per-mission output (:func:`block_fields`) for the whole block, lanes past
+    the run's last mission included (the caller drops them)."""
+    B = plan.block
+    model = plan.model
+    static, dyn = split_model(model)
+    man = plan.maneuvers
+    ctrl_labels = plan.control_labels
+    prog = _programs(static, plan.dyn_labels, ctrl_labels, plan.final.names, tuple(m.target.names for m in man))
+    missions = plan.first_mission + block_index * B + np.arange(B, dtype=np.int64)
+    dt = np.diff(plan.grid_s)
+    kfacs = tuple(jnp.asarray(m.knowledge_factor) for m in man)
+    dx0, eta, kn, ek = prog["draws"](
+        plan.seed,
+        jnp.asarray(missions),
+        jnp.asarray(plan.init_factor),
+        jnp.asarray(plan.noise_sigma),
+        jnp.asarray(plan.noise_tau_s),
+        jnp.asarray(dt),
+        kfacs,
+    )
+    dx0 = np.array(dx0)
+    eta = np.array(eta)
+    nx = plan.nx
+    J = len(man)
+    fields = block_fields(plan)
+    out = {k: np.zeros((B,) + shp, dtype=dt_) for k, (shp, dt_) in fields.items()}
+    out["mission"][:] = missions
+    out["failed_maneuver"][:] = -1
+    out["initial_deviation"][:] = dx0
+
+    nominal_dyn = np.asarray(get_values(plan.params, plan.dyn_labels, model)) if plan.dyn_labels else np.zeros(0)
+    nominal_ctrl = np.asarray(get_values(plan.params, ctrl_labels, model)) if ctrl_labels else np.zeros(0)
+    dyn_dev = dx0[:, plan.dyn_index] if plan.dyn_labels else np.zeros((B, 0))
+    ctrl_actual = np.zeros((B, len(ctrl_labels)))
+    ctrl_cmd = np.zeros((B, len(ctrl_labels)))
+
+    x = np.tile(plan.x0, (B, 1))
+    x[:, :nx] += dx0[:, :nx]
+    alive = np.ones(B, dtype=bool)
+    status = np.zeros(B, dtype=np.int32)
+    ephem, epoch = plan.ephem, jnp.asarray(plan.epoch_et_s)
+    p_nom = plan.params
+
+    def real_params():
+        return prog["lane_params"](p_nom, jnp.asarray(nominal_dyn + dyn_dev), jnp.asarray(nominal_ctrl + ctrl_actual))
+
+    def fly(x, t_a, t_b, alive):
+        params_b = real_params()
+        xj = jnp.asarray(x)
+        ok = jnp.asarray(alive)
+        for t0, t1, idx in _grid_chunks(plan.grid_s, t_a, t_b):
+            xj, ok = prog["fly_chunk"](
+                dyn, params_b, ephem, epoch, xj, jnp.asarray(t0), jnp.asarray(t1), jnp.asarray(eta[:, idx, :]), ok
+            )
+        return np.array(xj), np.asarray(ok)
+
+    def fail(mask, code, j):
+        new = mask & alive
+        status[new] = code
+        out["failed_maneuver"][new] = j
+
+    t_prev = 0.0
+    for j, m in enumerate(man):
+        x, ok = fly(x, t_prev, m.time_s, alive)
+        fail(~ok, STATUS_INTEGRATION, j)
+        alive &= ok
+        x[~alive] = plan.x_ref[j]  # frozen on the reference: NaN-free dummies
+        dev = x - plan.x_ref[j]
+        out["state_deviation"][:, j] = dev
+        aug = np.concatenate([dev[:, :nx], dx0[:, nx:]], axis=1)
+        know = np.array(kn[j])
+        out["knowledge_error"][:, j] = know
+        est = aug + know
+        M = m.n_controls
+        if m.impulsive:
+            dv = -est @ m.gamma.T
+            iters = np.zeros(B, dtype=np.int32)
+            if m.law == "nonlinear":
+                dv, code, iters = _nonlinear_impulsive(plan, prog, dyn, m, x, know, est, dv, nominal_dyn, alive)
+                fail(code == STATUS_HOPELESS, STATUS_HOPELESS, j)
+                near = (code == STATUS_NEAR) & alive & (status == STATUS_OK)
+                status[near] = STATUS_NEAR
+                alive &= code != STATUS_HOPELESS
+            dv[~alive] = 0.0
+            err = np.array(prog["gates"](ek[j], jnp.asarray(dv), m.sigma_p, m.sigma_pointing_rad, m.sigma_res_km_s))
+            err[~alive] = 0.0
+            applied = dv + err
+            x[:, 3:6] += applied
+            x[:, 6] *= np.exp(-np.linalg.norm(applied, axis=1) / (G0_KM_S2 * plan.isp_s))
+            out["correction"][:, j, :3] = dv
+            out["execution_error"][:, j, :3] = err
+            out["dv_km_s"][:, j] = np.linalg.norm(dv, axis=1)
+            out["iterations"][:, j] = iters
+        else:
+            idx = [ctrl_labels.index(c) for c in m.control_labels]
+            du = -est @ m.gamma.T - ctrl_cmd[:, idx] @ m.kk.T
+            du[~alive] = 0.0
+            err = np.array(prog["proportional"](ek[j], jnp.asarray(du), m.sigma_p))
+            err[~alive] = 0.0
+            ctrl_cmd[:, idx] += du
+            ctrl_actual[:, idx] += du + err
+            out["correction"][:, j, :M] = du
+            out["execution_error"][:, j, :M] = err
+            out["dv_km_s"][:, j] = np.abs(du @ m.dv_jacobian)
+        t_prev = m.time_s
+    x, ok = fly(x, t_prev, plan.final.t_s, alive)
+    fail(~ok, STATUS_INTEGRATION, J)
+    alive &= ok
+    x[~alive] = plan.x_ref[J]
+    tf = plan.final
+    t_val = np.asarray(prog["targets"][tf.names](jnp.asarray(x), tf.t_s, jnp.asarray(tf.offset), tf.mu))
+    out["target_error"][:] = t_val - tf.reference
+    for j, m in enumerate(man):  # each maneuver's own target set, when it is the final one
+        if m.target.names == tf.names and abs(m.target.t_s - tf.t_s) < 1e-6:
+            out["maneuver_target_error"][:, j, : len(tf.names)] = out["target_error"]
+    out["final_mass_kg"][:] = x[:, 6]
+    out["dv_total_km_s"][:] = out["dv_km_s"].sum(axis=1)
+    out["status"][:] = status
+    dead = ~alive
+    for k in ("target_error", "final_mass_kg"):
+        out[k][dead] = np.nan if k != "final_mass_kg" else np.nan
+    return out
+
+
+def _nonlinear_impulsive(plan, prog, dyn, m, x, know, est, dv0, nominal_dyn, alive):
+    """GUIDS's nonlinear design for the lanes of a block (module docstring, item 4)."""
+    B = x.shape[0]
+    nx = plan.nx
+    tgt = m.target
+    x_est = x.copy()
+    x_est[:, :nx] += know[:, :nx]
+    dyn_est = nominal_dyn + np.where(plan.est_dyn, est[:, plan.dyn_index], 0.0) if plan.dyn_labels else np.zeros((B, 0))
+    ctrl0 = np.zeros((B, len(plan.control_labels)))
+    ctrl0 += np.asarray(get_values(plan.params, plan.control_labels, plan.model)) if plan.control_labels else 0.0
+    params_est = prog["lane_params"](plan.params, jnp.asarray(dyn_est), jnp.asarray(ctrl0))
+    fn_t = prog["targets"][tgt.names]
+    ephem, epoch = plan.ephem, jnp.asarray(plan.epoch_et_s)
+
+    def miss(dv):
+        xs = x_est.copy()
+        xs[:, 3:6] += dv
+        xf, good = prog["fly_to"](dyn, params_est, ephem, epoch, jnp.asarray(xs), m.time_s, tgt.t_s)
+        val = np.asarray(fn_t(xf, tgt.t_s, jnp.asarray(tgt.offset), tgt.mu))
+        return val - tgt.reference, np.asarray(good)
+
+    kp = np.tile(m.k_pinv, (B, 1, 1))
+    dv = dv0.copy()
+    done = ~alive.copy()
+    code = np.full(B, STATUS_HOPELESS, dtype=np.int32)
+    code[~alive] = STATUS_OK
+    iters = np.zeros(B, dtype=np.int32)
+    prev = np.full(B, np.inf)
+    norm = np.full(B, np.inf)
+    for it in range(m.max_iterations + 1):
+        dT, good = miss(dv)
+        norm = np.where(good, np.max(np.abs(dT) / tgt.tolerance, axis=1), np.inf)
+        conv = (norm <= 1.0) & ~done
+        code[conv] = STATUS_OK
+        done |= conv
+        iters[~done] = it + 1
+        if done.all() or it == m.max_iterations:
+            break
+        grow = (norm > prev) & ~done & good
+        if grow.any():  # recompute K about the current design (central differences)
+            h = 1e-6
+            cols = []
+            for i in range(3):
+                e = np.zeros(3)
+                e[i] = h
+                tp, _ = miss(dv + e)
+                tm, _ = miss(dv - e)
+                cols.append((tp - tm) / (2 * h))
+            k_new = np.stack(cols, axis=-1)  # (B, m, 3)
+            kp_new = np.linalg.pinv(k_new)
+            kp[grow] = kp_new[grow]
+        step = np.einsum("bij,bj->bi", kp, np.where(good[:, None], dT, 0.0))
+        dv = np.where(done[:, None], dv, dv - step)
+        prev = norm
+    near = ~done & (norm <= plan.near_success_factor)
+    code[near] = STATUS_NEAR
+    return dv, code, iters
+
+
+def reference_states(plan: TsimPlan, times_s) -> np.ndarray:
+    """The reference (7,) at each of ``times_s`` (sorted, s), flown by the engine with every
+    deviation and the noise zero through the plan's hold grid: the states the missions'
+    deviations are measured from (the null run deviates by exactly zero)."""
+    B = plan.block
+    static, dyn = split_model(plan.model)
+    ctrl_labels = plan.control_labels
+    prog = _programs(
+        static, plan.dyn_labels, ctrl_labels, plan.final.names, tuple(m.target.names for m in plan.maneuvers)
+    )
+    nominal_dyn = np.asarray(get_values(plan.params, plan.dyn_labels, plan.model)) if plan.dyn_labels else np.zeros(0)
+    nominal_ctrl = np.asarray(get_values(plan.params, ctrl_labels, plan.model)) if ctrl_labels else np.zeros(0)
+    params_b = prog["lane_params"](
+        plan.params, jnp.asarray(np.tile(nominal_dyn, (B, 1))), jnp.asarray(np.tile(nominal_ctrl, (B, 1)))
+    )
+    x = jnp.asarray(np.tile(plan.x0, (B, 1)))
+    ok = jnp.ones(B, dtype=bool)
+    zero = jnp.zeros((B, CHUNK, 3))
+    out, t_prev = [], 0.0
+    for t in times_s:
+        for t0, t1, _ in _grid_chunks(plan.grid_s, t_prev, t):
+            x, ok = prog["fly_chunk"](
+                dyn, params_b, plan.ephem, jnp.asarray(plan.epoch_et_s), x, jnp.asarray(t0), jnp.asarray(t1), zero, ok
+            )
+        if not bool(np.asarray(ok)[0]):
+            raise RuntimeError(f"the reference trajectory could not be flown to {t / 86400.0:.6g} d")
+        out.append(np.asarray(x)[0].copy())
+        t_prev = t
+    return np.stack(out)

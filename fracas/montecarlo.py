@@ -65,17 +65,43 @@ def assemble(plan, done: dict[int, dict[str, np.ndarray]]) -> dict[str, np.ndarr
     return {k: v[: plan.missions] for k, v in table.items()}
 
 
+_TEAM_RUNS: dict[str, tuple] = {}  # this process's TEAM runs, by the texts that made them
+
+
+def _team_key(team_deck) -> str:
+    from fracas.config.trajectory import read_deck_text
+
+    h = hashlib.sha256((team_deck.source_text or "").encode())
+    traj = team_deck.resolve(team_deck.ertraj.deck) if team_deck.ertraj.deck else None
+    if traj is not None and traj.exists():
+        h.update(read_deck_text(traj).encode())
+    if team_deck.errcon.stm_file:
+        stm = team_deck.resolve(team_deck.errcon.stm_file)
+        if stm.exists():
+            st = stm.stat()
+            h.update(f"{stm.resolve()}:{st.st_size}:{st.st_mtime_ns}".encode())
+    return h.hexdigest()
+
+
 def _team_for(cfg: TsimDeck, say):
+    """The TEAM run TSIM stands on (guidance model ``tsim``), once per process for the same
+    TEAM deck, trajectory deck and STM file (a second TSIM run on them, e.g. the other half
+    of a split run, reuses it)."""
     from fracas.build.team import build_case
-    from fracas.sweep import vary
+    from fracas.sweep import vary_many
 
     team_deck = tsim_team_deck(cfg)
-    team_deck = vary(team_deck, "errcon.guidance_model", "tsim")
+    changes = {**cfg.insim.team_changes, "errcon.guidance_model": "tsim"}
+    team_deck = vary_many(team_deck, changes)
+    key = _team_key(team_deck) + repr(sorted(changes.items()))
+    if key in _TEAM_RUNS:
+        return _TEAM_RUNS[key]
     say("running TEAM (guidance model tsim) for the knowledge and guidance matrices")
     prod, _, _ = pipeline.run_team(team_deck, write_results=False, on_stage=None)
     if prod is None or not prod.guidance:
         raise DeckError(f"{cfg.source_path}: insim.team_deck: the TEAM run made no guidance events")
-    return team_deck, build_case(team_deck), prod
+    _TEAM_RUNS[key] = (team_deck, build_case(team_deck), prod)
+    return _TEAM_RUNS[key]
 
 
 def _run_local(plan, todo: list[list[int]], record) -> None:
@@ -125,6 +151,7 @@ def run_tsim(
     progress: Progress | None = None,
     stop_after_tasks: int | None = None,
     batch_missions: int | None = None,
+    force_dask: bool = False,
 ):
     """Run a TSIM deck (path or TsimDeck); returns (TsimProduct, results path).
 
@@ -132,7 +159,8 @@ def run_tsim(
     single-threaded worker processes; ``scheduler``: the address of a running Dask
     scheduler (overrides workers).  ``progress(done, total)`` after every task (missions).
     ``stop_after_tasks`` (tests: a run killed mid-way) stops after that many tasks, leaving
-    the checkpoint.  ``batch_missions`` overrides the deck's.
+    the checkpoint.  ``batch_missions`` overrides the deck's.  ``force_dask``: a LocalCluster
+    even for one worker (the scaling benchmark's 1-worker row).
     """
     from fracas.build.tsim import build_plan
     from fracas.io.hdf5 import provenance
@@ -190,7 +218,7 @@ def run_tsim(
         progress(min(len(done) * plan.block, total), total)
     n_workers = 1
     if todo:
-        if scheduler is None and (workers is None or workers <= 1):
+        if scheduler is None and not force_dask and (workers is None or workers <= 1):
             _run_local(plan, todo, record)
         else:
             n_workers = _run_dask(plan, todo, record, workers, scheduler)

@@ -213,6 +213,7 @@ def build_plan(cfg, case, team, sampling_override: str | None = None) -> TsimPla
         near_success_factor=float(ins.near_success_factor),
         first_mission=int(ins.first_mission),
         missions=int(ins.missions),
+        impulse_propellant=ins.impulse_propellant,
         info={"grid_step_s": step, "sampling": method, "scale": k},
     )
     return plan

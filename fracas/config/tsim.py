@@ -19,7 +19,14 @@ as written by an analyst: km, km/s, kg, days.  No JAX here::
                    sampling = "eigen" (CSAMP) | "cholesky"; noise_step_days (the
                    Gauss-Markov hold step, default min τ / 10, P-C3);
                    a_priori_statistics (earlier TSIM results files whose statistics this
-                   run's are merged with, STAT-1); near_success_factor = 10 (GUIDS c_close)
+                   run's are merged with, STAT-1); near_success_factor = 10 (GUIDS c_close);
+                   impulse_propellant = "spent" (an impulsive correction's propellant,
+                   at the impulsive engine's Isp, leaves the spacecraft: the later thrust
+                   arcs accelerate a lighter vehicle) | "booked" (TEAM's model, where a
+                   correction changes the velocity only: the propellant is subtracted from
+                   the final mass but not flown); team_changes = {"field" = value, ...}
+                   (TEAM-deck fields changed for this run, as a sweep varies them, e.g.
+                   {"thrust_noise.proportionality.sigma" = 0.0})
     [insim.injection]   optional: the injection dispersions instead of the TEAM deck's
                    [control]: frame = "inertial" | "rtn" (radial, along-track, normal at
                    injection), position_sigma_km (3), velocity_sigma_km_s (3), mass_sigma_kg
@@ -35,7 +42,7 @@ as written by an analyst: km, km/s, kg, days.  No JAX here::
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, PositiveFloat, PositiveInt, ValidationError, model_validator
 
@@ -80,6 +87,8 @@ class InSim(_Section):
     sampling: Literal["eigen", "cholesky"] = "eigen"
     noise_step_days: PositiveFloat | None = None
     near_success_factor: Annotated[float, Field(ge=1)] = 10.0
+    impulse_propellant: Literal["spent", "booked"] = "spent"
+    team_changes: dict[str, Any] = {}
     a_priori_statistics: list[str] = []
     injection: Injection | None = None
 

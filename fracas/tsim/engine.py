@@ -18,15 +18,18 @@ For each mission (one lane of a vmapped block of :attr:`TsimPlan.block` missions
    * linear: ΔV = −Γ δX̂ (impulsive) or δU = −Γ_U δX̂ − K^{+W}K δU_c (low thrust; δU_c is
      what earlier events already commanded on the same arc, so a vernier replaces the
      command it updates rather than stacking on it, as TEAM's exact reset does);
-   * nonlinear (impulsive): start from the linear ΔV; fly the estimated state to the target
-     time; ΔV ← ΔV − K^{+W} ΔT, with K about the reference, recomputed by central
-     differences about the current design when the weighted miss grows; converged when
-     every |ΔT_i| ≤ ε_i; after ``max_iterations`` a design within ``near_success_factor``
+   * nonlinear (impulsive): start from the linear ΔV; fly the estimated state with the
+     correction to the target time (its propellant is not in the design: see docs/tsim.md);
+     ΔV ← ΔV − λ K⁺ ΔT, K about the reference for the first step and by central differences
+     about the current design after it, λ halved (up to 3 times) while the weighted miss max|ΔT_i/ε_i| grows; converged
+     when every |ΔT_i| ≤ ε_i; after ``max_iterations`` a design within ``near_success_factor``
      × ε is accepted (status 1, near success), otherwise the mission is **hopeless**
      (status 2): it ends there and is counted, never dropped.
 5. **Execute with errors** on the actual trajectory: Gates (proportionality σ_p along ΔV, two
    pointing angles across it, resolution) for impulses, with the propellant at the impulsive
-   engine's Isp; a fractional error per control for low thrust.
+   engine's Isp spent (or only booked against the final mass, ``impulse_propellant``: TEAM's
+   model, where a correction changes the velocity only); a fractional error per control for
+   low thrust.
 6. After the last maneuver fly to the final target time; record the target errors
    T(X_actual) − T_ref, ΔV per maneuver, the final mass.
 
@@ -253,6 +256,7 @@ def simulate_block(plan: TsimPlan, block_index: int) -> BlockResult:
         status[new] = code
         out["failed_maneuver"][new] = j
 
+    booked = np.zeros(B)  # impulsive propellant not flown (impulse_propellant = "booked")
     t_prev = 0.0
     for j, m in enumerate(man):
         x, ok = fly(x, t_prev, m.time_s, alive)
@@ -280,7 +284,11 @@ def simulate_block(plan: TsimPlan, block_index: int) -> BlockResult:
             err[~alive] = 0.0
             applied = dv + err
             x[:, 3:6] += applied
-            x[:, 6] *= np.exp(-np.linalg.norm(applied, axis=1) / (G0_KM_S2 * plan.isp_s))
+            spent = x[:, 6] * (1.0 - np.exp(-np.linalg.norm(applied, axis=1) / (G0_KM_S2 * plan.isp_s)))
+            if plan.impulse_propellant == "spent":
+                x[:, 6] -= spent
+            else:
+                booked += spent
             out["correction"][:, j, :3] = dv
             out["execution_error"][:, j, :3] = err
             out["dv_km_s"][:, j] = np.linalg.norm(dv, axis=1)
@@ -307,7 +315,7 @@ def simulate_block(plan: TsimPlan, block_index: int) -> BlockResult:
     for j, m in enumerate(man):  # each maneuver's own target set, when it is the final one
         if m.target.names == tf.names and abs(m.target.t_s - tf.t_s) < 1e-6:
             out["maneuver_target_error"][:, j, : len(tf.names)] = out["target_error"]
-    out["final_mass_kg"][:] = x[:, 6]
+    out["final_mass_kg"][:] = x[:, 6] - booked
     out["dv_total_km_s"][:] = out["dv_km_s"].sum(axis=1)
     out["status"][:] = status
     dead = ~alive
@@ -335,41 +343,53 @@ def _nonlinear_impulsive(plan, prog, dyn, m, x, know, est, dv0, nominal_dyn, ali
         xs[:, 3:6] += dv
         xf, good = prog["fly_to"](dyn, params_est, ephem, epoch, jnp.asarray(xs), m.time_s, tgt.t_s)
         val = np.asarray(fn_t(xf, tgt.t_s, jnp.asarray(tgt.offset), tgt.mu))
-        return val - tgt.reference, np.asarray(good)
+        return val - tgt.reference, np.array(good)
 
-    kp = np.tile(m.k_pinv, (B, 1, 1))
+    def measure(dT, good):
+        return np.where(good, np.max(np.abs(dT) / tgt.tolerance, axis=1), np.inf)
+
+    def jacobian(dv):  # K about the current design, central differences (SCOMP by FD)
+        h = 1e-4  # km/s: the flights' step-size noise (up to ~10 km over 150 d) / h stays below 1 % of K
+        cols = []
+        for i in range(3):
+            e = np.zeros(3)
+            e[i] = h
+            cols.append((miss(dv + e)[0] - miss(dv - e)[0]) / (2 * h))
+        return np.stack(cols, axis=-1)  # (B, m, 3)
+
     dv = dv0.copy()
     done = ~alive.copy()
     code = np.full(B, STATUS_HOPELESS, dtype=np.int32)
     code[~alive] = STATUS_OK
     iters = np.zeros(B, dtype=np.int32)
-    prev = np.full(B, np.inf)
-    norm = np.full(B, np.inf)
-    for it in range(m.max_iterations + 1):
-        dT, good = miss(dv)
-        norm = np.where(good, np.max(np.abs(dT) / tgt.tolerance, axis=1), np.inf)
+    dT, good = miss(dv)
+    norm = measure(dT, good)
+    kp = np.tile(m.k_pinv, (B, 1, 1))  # first step: K about the reference
+    for it in range(m.max_iterations):
         conv = (norm <= 1.0) & ~done
         code[conv] = STATUS_OK
         done |= conv
-        iters[~done] = it + 1
-        if done.all() or it == m.max_iterations:
+        if done.all():
             break
-        grow = (norm > prev) & ~done & good
-        if grow.any():  # recompute K about the current design (central differences)
-            h = 1e-6
-            cols = []
-            for i in range(3):
-                e = np.zeros(3)
-                e[i] = h
-                tp, _ = miss(dv + e)
-                tm, _ = miss(dv - e)
-                cols.append((tp - tm) / (2 * h))
-            k_new = np.stack(cols, axis=-1)  # (B, m, 3)
-            kp_new = np.linalg.pinv(k_new)
-            kp[grow] = kp_new[grow]
+        iters[~done] = it + 1
+        if it > 0:
+            kp = np.linalg.pinv(jacobian(dv))
         step = np.einsum("bij,bj->bi", kp, np.where(good[:, None], dT, 0.0))
-        dv = np.where(done[:, None], dv, dv - step)
-        prev = norm
+        todo = ~done & good
+        lam = 1.0
+        for _ in range(4):  # backtracking: halve the step while the weighted miss grows
+            trial = np.where(todo[:, None], dv - lam * step, dv)
+            dT_t, good_t = miss(trial)
+            norm_t = measure(dT_t, good_t)
+            take = todo & (norm_t < norm)
+            dv[take], dT[take], norm[take], good[take] = trial[take], dT_t[take], norm_t[take], good_t[take]
+            todo &= ~take
+            if not todo.any():
+                break
+            lam *= 0.5
+    conv = (norm <= 1.0) & ~done
+    code[conv] = STATUS_OK
+    done |= conv
     near = ~done & (norm <= plan.near_success_factor)
     code[near] = STATUS_NEAR
     return dv, code, iters

@@ -127,6 +127,7 @@ class TsimPlan:
     first_mission: int
     missions: int
     block: int = 32
+    impulse_propellant: str = "spent"
     info: dict = field(default_factory=dict)
 
     @property

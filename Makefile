@@ -28,6 +28,7 @@ demo: $(STAMP)
 	$(BIN)/fracas sweep namelists/earth_mars_sweep.toml --workers 0
 	$(BIN)/fracas run namelists/near_earth_spiral_tom.toml
 	$(BIN)/fracas run namelists/near_earth_spiral_team.toml --quiet
+	$(BIN)/fracas run namelists/earth_mars_tsim.toml
 
 # the whole suite but the slow reference subset (< 10 min on CI's 2 cores); CI runs both
 test: $(STAMP)

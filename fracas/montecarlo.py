@@ -7,10 +7,12 @@ Dask ``LocalCluster`` (``workers``) or on a running scheduler (``scheduler``) ->
 consistency -> results file.
 
 * Work is cut into blocks of 32 missions (fixed: mission i always flies in the same lane of
-  the same compiled program), and blocks into tasks of ``batch_missions``.  Every task's
-  blocks are written to a checkpoint file (``<results>.partial.h5``, atomically, after each
-  task); a run killed mid-way and started again with the same deck resumes from it and ends
-  with the same bits.  The checkpoint is removed once the results file is written.
+  the same compiled program), and blocks into tasks of ``batch_missions``.  Every finished
+  task's blocks are written, atomically, to their own file in the checkpoint folder
+  (``<results>.partial/task_<first block>.h5``: the cost stays linear in the missions, where
+  rewriting one growing file made it quadratic); a run killed mid-way and started again
+  with the same deck resumes from them and ends with the same bits.  The folder is removed
+  once the results file is written.
 * Each Dask worker is one process with one XLA host device (``fracas._jax.worker_setup``),
   so N workers share N cores without oversubscribing them; the plan is sent to every worker
   once (``scatter``), each compiles the flight programs once.
@@ -37,7 +39,39 @@ Progress = Callable[[int, int], None]
 
 
 def checkpoint_path(results: Path) -> Path:
-    return results.with_name(results.name + ".partial.h5")
+    """The checkpoint folder of a results file: one small file per completed task."""
+    return results.with_name(results.name + ".partial")
+
+
+def _read_checkpoints(folder: Path, key: str) -> dict[int, dict[str, np.ndarray]]:
+    from fracas.errors import ResultsFileError
+    from fracas.io.tsim_results import read_tsim_checkpoint
+
+    if not folder.exists():
+        return {}
+    if not folder.is_dir():
+        raise ResultsFileError(f"{folder}: expected the TSIM checkpoint folder of this run (a file is in the way)")
+    done: dict[int, dict[str, np.ndarray]] = {}
+    for f in sorted(folder.glob("task_*.h5")):
+        done.update(read_tsim_checkpoint(f, key))
+    return done
+
+
+def _write_checkpoint(folder: Path, key: str, blocks: dict[int, dict[str, np.ndarray]]) -> None:
+    from fracas.io.tsim_results import write_tsim_checkpoint
+
+    folder.mkdir(parents=True, exist_ok=True)
+    write_tsim_checkpoint(folder / f"task_{min(blocks):08d}.h5", key, blocks)  # atomic, this task only
+
+
+def _remove_checkpoints(folder: Path) -> None:
+    if folder.is_dir():
+        for f in folder.glob("task_*.h5"):
+            f.unlink(missing_ok=True)
+        try:
+            folder.rmdir()
+        except OSError:
+            pass  # something else is in it: leave it
 
 
 def plan_key(cfg: TsimDeck, team_text: str) -> str:
@@ -104,29 +138,34 @@ def _team_for(cfg: TsimDeck, say):
     return _TEAM_RUNS[key]
 
 
+# One core per worker process: XLA's CPU thread pool and the BLAS libraries would otherwise
+# each take every core, and N workers on N cores would oversubscribe them.
+_WORKER_ENV = {
+    "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+}
+
+
 def _run_local(plan, todo: list[list[int]], record) -> None:
     for task in todo:
         record(fly_blocks(plan, task))
 
 
 def _run_dask(plan, todo: list[list[int]], record, workers: int | None, scheduler: str | None) -> int:
-    import os
 
     from distributed import Client, LocalCluster, as_completed
 
+    from fracas.errors import FracasError
     from fracas.sweep import _plugin
 
     cluster = None
-    if scheduler is None:
-        n = workers if workers is not None else (os.cpu_count() or 1)
-        cluster = LocalCluster(
-            n_workers=max(1, min(n, len(todo))),
-            threads_per_worker=1,
-            processes=True,
-            host="127.0.0.1",
-            dashboard_address=None,
-        )
-    client = Client(cluster if cluster is not None else scheduler)
+    try:
+        cluster, client = _start(LocalCluster, Client, todo, workers, scheduler)
+    except Exception as exc:  # noqa: BLE001  (an address that does not answer, a worker that cannot start)
+        where = f"the Dask scheduler at {scheduler}" if scheduler else "a Dask LocalCluster"
+        raise FracasError(f"could not start {where}: {type(exc).__name__}: {exc}") from None
     try:
         client.register_plugin(_plugin())
         n_workers = len(client.scheduler_info().get("workers", {})) or 1
@@ -139,6 +178,29 @@ def _run_dask(plan, todo: list[list[int]], record, workers: int | None, schedule
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _start(LocalCluster, Client, todo, workers, scheduler):
+    import os
+
+    cluster = None
+    if scheduler is None:
+        n = workers if workers is not None else (os.cpu_count() or 1)
+        cluster = LocalCluster(
+            n_workers=max(1, min(n, len(todo))),
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=None,
+            env=_WORKER_ENV,
+        )
+    try:
+        client = Client(cluster if cluster is not None else scheduler, timeout="10s")
+    except Exception:
+        if cluster is not None:
+            cluster.close()
+        raise
+    return cluster, client
 
 
 def run_tsim(
@@ -164,12 +226,7 @@ def run_tsim(
     """
     from fracas.build.tsim import build_plan
     from fracas.io.hdf5 import provenance
-    from fracas.io.tsim_results import (
-        read_tsim_checkpoint,
-        tsim_statistics,
-        write_tsim_checkpoint,
-        write_tsim_results,
-    )
+    from fracas.io.tsim_results import tsim_statistics, write_tsim_results
     from fracas.products import TsimManeuver, TsimProduct
     from fracas.tsim import summary
     from fracas.tsim.plan import STATUS_HOPELESS, STATUS_NEAR
@@ -187,7 +244,7 @@ def run_tsim(
         out = out.with_name(out.stem + "_tsim.h5")
     check_output_path(out, "results file")
     ckpt = checkpoint_path(out)
-    check_output_path(ckpt, "checkpoint file")
+    check_output_path(ckpt / "task_00000000.h5", "checkpoint file")
     earlier = []
     for f in cfg.insim.a_priori_statistics:
         earlier.append(tsim_statistics(cfg.resolve(f)))
@@ -196,7 +253,7 @@ def run_tsim(
     say("building the Monte Carlo plan (reference through the noise grid)")
     plan = build_plan(cfg, case, team)
     key = plan_key(cfg, team_deck.source_text or "")
-    done = read_tsim_checkpoint(ckpt, key)
+    done = _read_checkpoints(ckpt, key)
     per_task = max(1, -(-(batch_missions or cfg.insim.batch_missions) // plan.block))
     remaining = [b for b in range(plan.n_blocks) if b not in done]
     todo = [remaining[i : i + per_task] for i in range(0, len(remaining), per_task)]
@@ -210,7 +267,7 @@ def run_tsim(
 
     def record(blocks: dict[int, dict[str, np.ndarray]]) -> None:
         done.update(blocks)
-        write_tsim_checkpoint(ckpt, key, done)
+        _write_checkpoint(ckpt, key, blocks)
         if progress is not None:
             progress(min(len(done) * plan.block, total), total)
 
@@ -278,7 +335,7 @@ def run_tsim(
     )
     say("writing the results file")
     write_tsim_results(out, product)
-    ckpt.unlink(missing_ok=True)
+    _remove_checkpoints(ckpt)
     product.timing["total_s"] = time.perf_counter() - t0
     return product, out
 

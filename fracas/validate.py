@@ -276,6 +276,13 @@ def check_path(path: str | Path) -> tuple[str | None, list[str]]:
         from fracas.config.tom import tom_problems
 
         return mode, tom_problems(deck)
+    if mode == "tsim":
+        from fracas.config.tsim import tsim_problems
+
+        probs = tsim_problems(deck)
+        if probs:
+            return mode, probs
+        return mode, check_path(deck.resolve(deck.insim.team_deck))[1]
     if mode == "sweep":
         study = deck.resolve(deck.sweep.study)
         if not study.is_file():

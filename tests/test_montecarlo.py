@@ -24,6 +24,11 @@ from fracas.io.tsim_results import read_tsim_results
 from fracas.montecarlo import checkpoint_path, run_tsim
 
 DATA = Path(__file__).resolve().parent / "data"
+# the TEAM study of tests/tsim/test_engine.py (one TEAM run per test process serves both)
+NO_NOISE = (
+    'impulse_propellant = "booked"\n[insim.team_changes]\n"thrust_noise.proportionality.sigma" = 0.0\n'
+    '"thrust_noise.in_plane_deg.sigma" = 0.0\n"thrust_noise.out_of_plane_deg.sigma" = 0.0\n'
+)
 
 
 def _deck(tmp: Path, name="run.toml", **insim) -> Path:
@@ -35,7 +40,7 @@ def _deck(tmp: Path, name="run.toml", **insim) -> Path:
     body.update({k: (f'"{v}"' if isinstance(v, str) else str(v).lower() if isinstance(v, bool) else str(v))
                  for k, v in insim.items()})  # fmt: skip
     path = tmp / name
-    path.write_text('mode = "tsim"\n[insim]\n' + "".join(f"{k} = {v}\n" for k, v in body.items()))
+    path.write_text('mode = "tsim"\n[insim]\n' + "".join(f"{k} = {v}\n" for k, v in body.items()) + NO_NOISE)
     return path
 
 
@@ -60,7 +65,8 @@ def test_batch_size_and_resume_give_the_same_bits(tmp_path):
     _same(a, b)
     out = tmp_path / "c.h5"
     none, ckpt = run_tsim(deck, out, stop_after_tasks=1)
-    assert none is None and ckpt == checkpoint_path(out) and ckpt.exists() and not out.exists()
+    assert none is None and ckpt == checkpoint_path(out) and len(list(ckpt.glob("task_*.h5"))) == 1
+    assert not out.exists()
     c, path = run_tsim(deck, out)
     assert path == out and not ckpt.exists()
     _same(a, c)
@@ -74,7 +80,7 @@ def test_two_half_runs_merged_equal_one_whole_run(tmp_path):
     whole, _ = run_tsim(_deck(tmp_path, "whole.toml", missions=192), tmp_path / "whole.h5")
     run_tsim(_deck(tmp_path, "h1.toml", missions=96), tmp_path / "h1.h5")
     h2_deck = _deck(tmp_path, "h2.toml", missions=96, first_mission=96)
-    h2_deck.write_text(h2_deck.read_text() + 'a_priori_statistics = ["h1.h5"]\n')
+    h2_deck.write_text(h2_deck.read_text().replace("[insim]\n", '[insim]\na_priori_statistics = ["h1.h5"]\n', 1))
     h2, _ = run_tsim(h2_deck, tmp_path / "h2.h5")
     np.testing.assert_array_equal(h2.table["target_error"], whole.table["target_error"][96:])
     assert h2.counts["a_priori"] == 96
@@ -130,7 +136,7 @@ def test_cli_runs_a_tsim_deck_and_reports_it(tmp_path):
 def test_deck_errors_name_the_field(tmp_path, extra, expected):
     """A wrong [[maneuver]] is one line naming the file and the field, exit 2, nothing written."""
     deck = _deck(tmp_path)
-    deck.write_text(deck.read_text() + extra)
+    deck.write_text(deck.read_text() + extra)  # [[maneuver]] after [insim.team_changes]: a new table
     res = CliRunner().invoke(main, ["run", str(deck), "-o", str(tmp_path / "x.h5")])
     assert res.exit_code == 2, res.output
     assert expected in res.output and str(deck) in res.output
@@ -148,3 +154,15 @@ def test_missing_team_deck_and_bad_values():
         parse_tsim_deck('mode = "tsim"\n[insim]\nteam_deck = "a.toml"\nscale = -1\n', "d.toml")
     with pytest.raises(DeckError, match="missionz"):
         parse_tsim_deck('mode = "tsim"\n[insim]\nteam_deck = "a.toml"\nmissionz = 3\n', "d.toml")
+
+
+@pytest.mark.slow
+def test_unreachable_scheduler_is_one_line(tmp_path):
+    """--scheduler at an address nobody answers: one line naming it, exit 1, nothing written
+    (after the client's 10 s timeout)."""
+    deck = _deck(tmp_path, missions=32)
+    res = CliRunner().invoke(main, ["run", str(deck), "-o", str(tmp_path / "x.h5"), "--scheduler", "tcp://127.0.0.1:9"])
+    assert res.exit_code != 0, res.output
+    assert "could not start the Dask scheduler at tcp://127.0.0.1:9" in res.output
+    assert "Traceback" not in res.output
+    assert not (tmp_path / "x.h5").exists()

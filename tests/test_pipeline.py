@@ -84,10 +84,10 @@ def test_mode_dispatch():
     assert deck_mode(SMALL.read_text(encoding="utf-8")) == "team"
 
 
-def test_unknown_or_future_mode_is_refused(tmp_path):
+def test_unknown_mode_or_incomplete_tsim_deck_is_refused(tmp_path):
     for mode, expected in (
-        ("tsim", 'mode = "tsim": not available in this release (expected one of: propagate, team, sweep, tom)'),
-        ("fly", "mode = 'fly': unknown mode (expected one of: propagate, team, sweep, tom)"),
+        ("tsim", "insim: required"),
+        ("fly", "mode = 'fly': unknown mode (expected one of: propagate, team, sweep, tom, tsim)"),
     ):
         deck = tmp_path / f"{mode}.toml"
         deck.write_text(f'mode = "{mode}"\n', encoding="utf-8")

@@ -173,7 +173,9 @@ def test_unreadable_decks(tmp_path):
     assert validate_path(tmp_path / "none.toml") == [f"{tmp_path / 'none.toml'}: no such file"]
     bad = tmp_path / "bad.toml"
     bad.write_text('mode = "fly"\n', encoding="utf-8")
-    assert validate_path(bad) == [f"{bad}: mode = 'fly': unknown mode (expected one of: propagate, team, sweep, tom)"]
+    assert validate_path(bad) == [
+        f"{bad}: mode = 'fly': unknown mode (expected one of: propagate, team, sweep, tom, tsim)"
+    ]
 
 
 def test_no_jax_imported():

@@ -113,12 +113,13 @@ def test_reference_matches_the_plain_core_propagation(base):
 
 def test_perfect_knowledge_guidance_nulls_the_target(base):
     """Linear guidance theory: injection state errors only (the study's law estimates the state,
-    not the parameters), perfect knowledge, no noise and no execution errors: the 3-control law leaves only the second-order miss.  Bound 0.1 km:
+    not the parameters), perfect knowledge, no noise and no execution errors: the 3-control
+    law leaves only the second-order miss.  Bound 0.1 km:
     the second-order term of 300 km / 2 m/s dispersions over 6 days at 1 AU is ~(1e3 km)²/r ~
     0.01 km; a first-order error in Γ or in the reference would leave ~100 km (the σ)."""
     *_, plan = base
     plan = _quiet(plan, noise=False, knowledge=False, execution=False)
-    state_only = np.r_[np.ones(plan.nx), np.zeros(plan.n - plan.nx)][:, None]  # the law estimates the state only
+    state_only = np.r_[np.ones(plan.nx), np.zeros(plan.n - plan.nx)][:, None]  # the law estimates the state
     tab, _ = _fly(dataclasses.replace(plan, init_factor=plan.init_factor * state_only), 256)
     assert np.all(tab["status"] == STATUS_OK)
     before = np.sqrt(np.diag(plan.maneuvers[0].team["target_cov_before"]))
@@ -178,8 +179,7 @@ def test_injection_in_rtn_is_honoured(base):
     radial unit vector of the injection state, by hand."""
     _, case, team, _ = base
     cfg = _cfg(
-        "[insim.injection]\nframe = \"rtn\"\nposition_sigma_km = [1.0, 0.0, 0.0]\n"
-        "velocity_sigma_km_s = [0.0, 0.0, 0.0]\n"
+        '[insim.injection]\nframe = "rtn"\nposition_sigma_km = [1.0, 0.0, 0.0]\nvelocity_sigma_km_s = [0.0, 0.0, 0.0]\n'
     )
     plan = build_plan(cfg, case, team)
     p0 = plan.init_factor @ plan.init_factor.T
@@ -223,7 +223,9 @@ def test_nonlinear_design_converges_where_linear_leaves_a_miss(base):
             f'[[maneuver]]\nname = "tcm1"\nlaw = "{law}"\n[[maneuver]]\nname = "lt2"\nenabled = false\n', scale=20.0
         )
         plan = _quiet(build_plan(c, case, team), noise=False, knowledge=False, execution=False)
-        plan = dataclasses.replace(plan, init_factor=plan.init_factor * np.r_[np.ones(7), np.zeros(plan.n - 7)][:, None])
+        plan = dataclasses.replace(
+            plan, init_factor=plan.init_factor * np.r_[np.ones(7), np.zeros(plan.n - 7)][:, None]
+        )
         tab, plan = _fly(plan, 32)
         miss = np.max(np.abs(tab["target_error"]))
         if law == "linear":

@@ -36,6 +36,9 @@ Results layout (every dataset carries ``units`` and ``data_sha256``)::
         dv_total_km_s (N,)           total |dV| (km/s)
         target_error (N, m)          final target error (final target units)
         maneuver_target_error (N, J, m_max)  each maneuver's target error (its target units)
+        linear_design_miss (N, J, m_max)  impulsive: the linear design's miss on the estimated
+                             trajectory (its target units)
+        design_miss (N, J, m_max)  impulsive: the flown design's miss there
         final_mass_kg (N,)           kg
                               (any further field is stored the same way, units "1")
       maneuvers/<j>_<name>    one group per maneuver j (0, 1, ...):
@@ -113,6 +116,8 @@ _FIELDS: dict[str, tuple[str, bool, str]] = {
     "dv_total_km_s": ("km/s", False, "total |dV|"),
     "target_error": ("final target units", False, "final target error"),
     "maneuver_target_error": ("target units", False, "each maneuver's target error (its target units)"),
+    "linear_design_miss": ("target units", False, "impulsive: the linear design's miss on the estimated trajectory"),
+    "design_miss": ("target units", False, "impulsive: the flown design's miss on the estimated trajectory"),
     "final_mass_kg": ("kg", False, "final mass"),
 }
 
@@ -397,6 +402,8 @@ def _table(c: Checked, j: int, n: int, m: int) -> dict[str, np.ndarray]:
         "dv_total_km_s": (nm,),
         "target_error": (nm, m),
         "maneuver_target_error": (nm, j, None),
+        "linear_design_miss": (nm, j, None),
+        "design_miss": (nm, j, None),
         "final_mass_kg": (nm,),
     }
     out = {}

@@ -31,7 +31,10 @@ For each mission (one lane of a vmapped block of :attr:`TsimPlan.block` missions
    model, where a correction changes the velocity only); a fractional error per control for
    low thrust.
 6. After the last maneuver fly to the final target time; record the target errors
-   T(X_actual) − T_ref, ΔV per maneuver, the final mass.
+   T(X_actual) − T_ref, ΔV per maneuver, the final mass, and for each impulsive maneuver its
+   design's miss on the estimated trajectory (``design_miss``; ``linear_design_miss`` the
+   linear law's, which a nonlinear design starts from): what the linear law leaves undone
+   where the problem is nonlinear, free of the knowledge and execution errors.
 
 Nothing raises in the jitted parts: a lane whose integration fails (status 3) is frozen on
 the reference (NaN-free, P-C5) with its status set, so one failed mission never stops its
@@ -153,6 +156,7 @@ def block_fields(plan: TsimPlan) -> dict[str, tuple]:
     """Name -> (shape after the mission axis, dtype) of every per-mission output."""
     J = len(plan.maneuvers)
     m_max = max([m.n_controls for m in plan.maneuvers] + [3])
+    m_tgt = max([len(m.target.names) for m in plan.maneuvers] + [1])
     return {
         "mission": ((), np.int64),
         "status": ((), np.int32),
@@ -166,7 +170,9 @@ def block_fields(plan: TsimPlan) -> dict[str, tuple]:
         "dv_km_s": ((J,), np.float64),
         "dv_total_km_s": ((), np.float64),
         "target_error": ((len(plan.final.names),), np.float64),
-        "maneuver_target_error": ((J, max([len(m.target.names) for m in plan.maneuvers] + [1])), np.float64),
+        "maneuver_target_error": ((J, m_tgt), np.float64),
+        "linear_design_miss": ((J, m_tgt), np.float64),
+        "design_miss": ((J, m_tgt), np.float64),
         "final_mass_kg": ((), np.float64),
     }
 
@@ -272,9 +278,15 @@ def simulate_block(plan: TsimPlan, block_index: int) -> BlockResult:
         M = m.n_controls
         if m.impulsive:
             dv = -est @ m.gamma.T
-            iters = np.zeros(B, dtype=np.int32)
-            if m.law == "nonlinear":
-                dv, code, iters = _nonlinear_impulsive(plan, prog, dyn, m, x, know, est, dv, nominal_dyn, alive)
+            ctrl_now = nominal_ctrl + ctrl_cmd  # what the navigator believes the arcs will fly
+            nonlin = m.law == "nonlinear"
+            dv, code, iters, miss_lin, miss = _impulsive_design(
+                plan, prog, dyn, m, x, know, est, dv, nominal_dyn, ctrl_now, alive, nonlin
+            )
+            mt = len(m.target.names)
+            out["linear_design_miss"][:, j, :mt] = miss_lin
+            out["design_miss"][:, j, :mt] = miss
+            if nonlin:
                 fail(code == STATUS_HOPELESS, STATUS_HOPELESS, j)
                 near = (code == STATUS_NEAR) & alive & (status == STATUS_OK)
                 status[near] = STATUS_NEAR
@@ -324,17 +336,19 @@ def simulate_block(plan: TsimPlan, block_index: int) -> BlockResult:
     return out
 
 
-def _nonlinear_impulsive(plan, prog, dyn, m, x, know, est, dv0, nominal_dyn, alive):
-    """GUIDS's nonlinear design for the lanes of a block (module docstring, item 4)."""
+def _impulsive_design(plan, prog, dyn, m, x, know, est, dv0, nominal_dyn, ctrl_now, alive, iterate):
+    """GUIDS for the impulsive lanes of a block (module docstring, item 4): the design's miss
+    on the estimated trajectory (the estimated state with the correction flown to the target
+    time by the nominal model at the estimated parameters), and with ``iterate`` the
+    nonlinear design.  Returns (ΔV, status code, iterations, the linear design's miss, the
+    final design's miss), misses (B, m) in target units."""
     B = x.shape[0]
     nx = plan.nx
     tgt = m.target
     x_est = x.copy()
     x_est[:, :nx] += know[:, :nx]
     dyn_est = nominal_dyn + np.where(plan.est_dyn, est[:, plan.dyn_index], 0.0) if plan.dyn_labels else np.zeros((B, 0))
-    ctrl0 = np.zeros((B, len(plan.control_labels)))
-    ctrl0 += np.asarray(get_values(plan.params, plan.control_labels, plan.model)) if plan.control_labels else 0.0
-    params_est = prog["lane_params"](plan.params, jnp.asarray(dyn_est), jnp.asarray(ctrl0))
+    params_est = prog["lane_params"](plan.params, jnp.asarray(dyn_est), jnp.asarray(ctrl_now))
     fn_t = prog["targets"][tgt.names]
     ephem, epoch = plan.ephem, jnp.asarray(plan.epoch_et_s)
 
@@ -363,6 +377,9 @@ def _nonlinear_impulsive(plan, prog, dyn, m, x, know, est, dv0, nominal_dyn, ali
     code[~alive] = STATUS_OK
     iters = np.zeros(B, dtype=np.int32)
     dT, good = miss(dv)
+    miss_linear = np.where(alive[:, None], dT, 0.0)
+    if not iterate:
+        return dv, np.full(B, STATUS_OK, dtype=np.int32), iters, miss_linear, miss_linear
     norm = measure(dT, good)
     kp = np.tile(m.k_pinv, (B, 1, 1))  # first step: K about the reference
     for it in range(m.max_iterations):
@@ -392,7 +409,7 @@ def _nonlinear_impulsive(plan, prog, dyn, m, x, know, est, dv0, nominal_dyn, ali
     done |= conv
     near = ~done & (norm <= plan.near_success_factor)
     code[near] = STATUS_NEAR
-    return dv, code, iters
+    return dv, code, iters, miss_linear, np.where(alive[:, None], dT, 0.0)
 
 
 def reference_states(plan: TsimPlan, times_s) -> np.ndarray:

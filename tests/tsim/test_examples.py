@@ -49,3 +49,26 @@ def test_full_errors_example_is_flagged(tmp_path):
     assert verdict["mean |dv| [lt1]"]["verdict"] == "nonlinear"
     assert "nonlinear" in verdict["mean |dv| [lt1]"]["message"]
     assert verdict["correction tcm1"]["verdict"] == "consistent", verdict["correction tcm1"]["message"]
+
+
+def test_nonlinear_example_nonlinear_guidance_does_better(tmp_path):
+    """earth_mars_tsim_nonlinear.toml (the main job's full errors) with 256 missions, the
+    clean-up by the linear law and by nonlinear guidance: both runs are flagged; on the
+    estimated trajectory (free of the knowledge and execution errors both laws share) the
+    linear law misses its 1 km targets by more than 100 km RMS, the nonlinear design meets
+    them for every mission (measured: 3090 km against 0.18 km RMS)."""
+    cfg = _deck("earth_mars_tsim_nonlinear.toml", 256)
+    lin_text = cfg.source_text.replace('law = "nonlinear"', 'law = "linear"', 1)
+    lin = parse_tsim_deck(lin_text, cfg.source_path)
+    p_lin, _ = run_tsim(lin, tmp_path / "lin.h5")
+    p_nl, _ = run_tsim(cfg, tmp_path / "nl.h5")
+    for prod in (p_lin, p_nl):
+        assert any(r["verdict"] != "consistent" for r in prod.consistency)
+    j = [m.name for m in p_nl.maneuvers].index("tcm1")
+    ok = p_nl.table["status"] <= 1
+    assert np.all(p_nl.table["status"] == 0)
+    rms_lin = np.sqrt(np.mean(p_lin.table["design_miss"][:, j, :3] ** 2, axis=0))
+    assert np.max(rms_lin) > 100.0
+    assert np.max(np.abs(p_nl.table["design_miss"][ok, j, :3])) <= 1.0
+    row = {r["output"]: r for r in p_nl.consistency}["design miss [tcm1]"]
+    assert "the nonlinear design by" in row["message"]

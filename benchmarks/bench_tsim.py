@@ -173,7 +173,7 @@ def main():
                 t0 = time.perf_counter()
                 prod, _ = run_tsim(
                     _with_missions(cfg, ARGS.dask_missions), Path(tmp) / "r.h5", workers=w, force_dask=True,
-                    batch_missions=128, progress=lambda d, n: stamps.append((time.perf_counter(), d)),
+                    batch_missions=512, progress=lambda d, n: stamps.append((time.perf_counter(), d)),
                 )  # fmt: skip
                 wall = time.perf_counter() - t0
             ms = prod.timing["missions_s"]

@@ -200,7 +200,13 @@ def test_validate_command_lists_every_problem(tmp_path):
     r = CliRunner().invoke(main, ["validate", *decks])
     assert r.exit_code == 0, r.output
     kind = {"_team.toml": "team", "_guidance.toml": "team", "_sweep.toml": "sweep", "_tom.toml": "tom"}
-    expected = [f"ok: {d} ({next((v for k, v in kind.items() if d.endswith(k)), 'propagate')})" for d in decks]
+
+    def mode(d: str) -> str:
+        if "_tsim" in Path(d).name:
+            return "tsim"
+        return next((v for k, v in kind.items() if d.endswith(k)), "propagate")
+
+    expected = [f"ok: {d} ({mode(d)})" for d in decks]
     assert r.stdout.splitlines() == expected
     bad = tmp_path / "bad.toml"
     text = (ROOT / "tests/data/team_small.toml").read_text(encoding="utf-8")

@@ -154,15 +154,14 @@ def _run_local(plan, todo: list[list[int]], record) -> None:
 
 
 def _run_dask(plan, todo: list[list[int]], record, workers: int | None, scheduler: str | None) -> int:
-
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import as_completed
 
     from fracas.errors import FracasError
-    from fracas.sweep import _plugin
+    from fracas.sweep import _plugin, start_cluster
 
     cluster = None
     try:
-        cluster, client = _start(LocalCluster, Client, todo, workers, scheduler)
+        cluster, client = start_cluster(workers, len(todo), scheduler, env=_WORKER_ENV, timeout="10s")
     except Exception as exc:  # noqa: BLE001  (an address that does not answer, a worker that cannot start)
         where = f"the Dask scheduler at {scheduler}" if scheduler else "a Dask LocalCluster"
         raise FracasError(f"could not start {where}: {type(exc).__name__}: {exc}") from None
@@ -178,29 +177,6 @@ def _run_dask(plan, todo: list[list[int]], record, workers: int | None, schedule
         client.close()
         if cluster is not None:
             cluster.close()
-
-
-def _start(LocalCluster, Client, todo, workers, scheduler):
-    import os
-
-    cluster = None
-    if scheduler is None:
-        n = workers if workers is not None else (os.cpu_count() or 1)
-        cluster = LocalCluster(
-            n_workers=max(1, min(n, len(todo))),
-            threads_per_worker=1,
-            processes=True,
-            host="127.0.0.1",
-            dashboard_address=None,
-            env=_WORKER_ENV,
-        )
-    try:
-        client = Client(cluster if cluster is not None else scheduler, timeout="10s")
-    except Exception:
-        if cluster is not None:
-            cluster.close()
-        raise
-    return cluster, client
 
 
 def run_tsim(

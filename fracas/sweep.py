@@ -686,22 +686,39 @@ class _Context:
         return rows
 
 
-def _run_dask(todo, ctx: _Context, record, workers, scheduler) -> None:
+def start_cluster(workers: int | None, n_tasks: int, scheduler: str | None, env: dict | None = None, timeout=None):
+    """(LocalCluster or None, Client): a LocalCluster of single-threaded worker processes
+    (``workers``, default one per core, at most ``n_tasks``; ``env`` set in each worker
+    process), or a client of the running scheduler at ``scheduler``."""
     import os
 
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import Client, LocalCluster
 
     cluster = None
     if scheduler is None:
         n = workers if workers is not None else (os.cpu_count() or 1)
+        extra = {"env": env} if env else {}
         cluster = LocalCluster(
-            n_workers=max(1, min(n, len(todo))),
+            n_workers=max(1, min(n, n_tasks)),
             threads_per_worker=1,
             processes=True,
             host="127.0.0.1",
             dashboard_address=None,
+            **extra,
         )
-    client = Client(cluster if cluster is not None else scheduler)
+    try:
+        client = Client(cluster if cluster is not None else scheduler, **({"timeout": timeout} if timeout else {}))
+    except Exception:
+        if cluster is not None:
+            cluster.close()
+        raise
+    return cluster, client
+
+
+def _run_dask(todo, ctx: _Context, record, workers, scheduler) -> None:
+    from distributed import as_completed
+
+    cluster, client = start_cluster(workers, len(todo), scheduler)
     try:
         client.register_plugin(_plugin())
         n_workers = len(client.scheduler_info().get("workers", {})) or 1

@@ -299,13 +299,6 @@ class SweepDeck(SourcedDeck):
     sweep: SweepSection
     output: SweepOutput = SweepOutput()
 
-    def resolve(self, rel: str) -> Path:
-        """A path named in the deck, relative to the deck's folder."""
-        p = Path(rel)
-        if p.is_absolute() or self._source_path is None:
-            return p
-        return Path(self._source_path).parent / p
-
     def studies(self) -> list[tuple[Scalar, ...]]:
         """The varied values of every study, in order (grid: the last field varies fastest)."""
         import itertools

@@ -533,13 +533,6 @@ class TeamDeck(SourcedDeck):
     output: OutputSection = OutputSection()
     limits: Limits = Limits()
 
-    def resolve(self, rel: str) -> Path:
-        """A path named in the deck, relative to the deck's folder."""
-        p = Path(rel)
-        if p.is_absolute() or self._source_path is None:
-            return p
-        return Path(self._source_path).parent / p
-
     @model_validator(mode="after")
     def _cross_checks(self) -> TeamDeck:
         if self.errcon.analysis and self.a_priori is None:

@@ -207,13 +207,6 @@ class TomDeck(SourcedDeck):
             raise FieldProblem("target", [], f'at least one [[target]] for submode = "{self.tom.submode}"')
         return self
 
-    def resolve(self, rel: str) -> Path:
-        """A path named in the deck, relative to the deck's folder."""
-        p = Path(rel)
-        if p.is_absolute() or self._source_path is None:
-            return p
-        return Path(self._source_path).parent / p
-
     @property
     def trajectory_deck(self) -> TrajectoryDeck | None:
         """The inline trajectory deck (None when [trajectory] names a file)."""

@@ -545,6 +545,13 @@ class SourcedDeck(_Section):
     def source_path(self) -> str | None:
         return self._source_path
 
+    def resolve(self, rel: str) -> Path:
+        """A path named in the deck, relative to the deck's folder."""
+        p = Path(rel)
+        if p.is_absolute() or self._source_path is None:
+            return p
+        return Path(self._source_path).parent / p
+
     @property
     def source_text(self) -> str | None:
         return self._source_text

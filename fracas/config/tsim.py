@@ -142,13 +142,6 @@ class TsimDeck(SourcedDeck):
             seen[m.name] = k
         return self
 
-    def resolve(self, rel: str) -> Path:
-        """A path named in the deck, relative to the deck's folder."""
-        p = Path(rel)
-        if p.is_absolute() or self._source_path is None:
-            return p
-        return Path(self._source_path).parent / p
-
     @property
     def batch_blocks(self) -> int:
         """Blocks of :data:`BLOCK_MISSIONS` per task (the batch size rounded up)."""

@@ -228,6 +228,7 @@ def run_tsim(
     t1 = time.perf_counter()
     say("building the Monte Carlo plan (reference through the noise grid)")
     plan = build_plan(cfg, case, team)
+    _check_table_size(cfg, plan)
     key = plan_key(cfg, team_deck.source_text or "")
     done = _read_checkpoints(ckpt, key)
     per_task = max(1, -(-(batch_missions or cfg.insim.batch_missions) // plan.block))
@@ -314,6 +315,31 @@ def run_tsim(
     _remove_checkpoints(ckpt)
     product.timing["total_s"] = time.perf_counter() - t0
     return product, out
+
+
+def table_bytes(plan) -> int:
+    """Bytes of the per-mission table the run holds (and writes)."""
+    from fracas.tsim.engine import block_fields
+
+    per = sum(int(np.prod(shape, dtype=np.int64)) * np.dtype(dt).itemsize for shape, dt in block_fields(plan).values())
+    return int(per) * plan.n_blocks * plan.block
+
+
+def _check_table_size(cfg: TsimDeck, plan) -> None:
+    """One line naming insim.missions when the table would take over a quarter of the memory."""
+    import os
+
+    try:
+        mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):  # not on this platform: no check
+        return
+    need = table_bytes(plan)
+    if need > mem / 4:
+        raise DeckError(
+            f"{cfg.source_path}: insim.missions = {plan.missions}: the per-mission table would take "
+            f"{need / 2**30:.1f} GiB of this machine's {mem / 2**30:.1f} GiB (expected at most a quarter); "
+            "split the run (first_mission, a_priori_statistics)"
+        )
 
 
 def _cov(m) -> np.ndarray:

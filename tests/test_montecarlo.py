@@ -166,3 +166,16 @@ def test_unreachable_scheduler_is_one_line(tmp_path):
     assert "could not start the Dask scheduler at tcp://127.0.0.1:9" in res.output
     assert "Traceback" not in res.output
     assert not (tmp_path / "x.h5").exists()
+
+
+def test_a_table_too_big_for_memory_is_refused_in_one_line(tmp_path, monkeypatch):
+    """A run whose per-mission table would not fit in a quarter of the memory: one line naming
+    insim.missions, the size and the way out (split runs), before any mission flies."""
+    import os
+
+    real = os.sysconf
+    monkeypatch.setattr(os, "sysconf", lambda k: 256 if k == "SC_PHYS_PAGES" else real(k))  # ~1 MB
+    deck = _deck(tmp_path, missions=100_000)
+    with pytest.raises(DeckError, match=r"insim.missions = 100000: the per-mission table would take .* GiB"):
+        run_tsim(deck, tmp_path / "big.h5")
+    assert not (tmp_path / "big.h5").exists()

@@ -40,7 +40,7 @@ def _args():
     return ap.parse_args()
 
 
-ARGS = _args() if __name__ == "__main__" else None
+ARGS = _args()
 os.environ.setdefault("FRACAS_HOST_DEVICES", "1")
 
 import numpy as np  # noqa: E402
@@ -49,13 +49,12 @@ from tables import emit, table  # noqa: E402
 DECK = ROOT / "namelists" / "earth_mars_tsim_noise.toml"
 
 
-def loop_mission(plan, i, prog_single):
+def loop_mission(plan, i, propagate_one):
     """One mission by a plain Python loop of single propagations (the baseline)."""
     import jax.numpy as jnp
 
     from fracas.constants import G0_KM_S2
     from fracas.dynamics.parameters import get_values, set_values
-    from fracas.tsim import engine
     from fracas.tsim import sampling as smp
 
     key = smp.mission_key(plan.seed, plan.first_mission + i)
@@ -88,7 +87,9 @@ def loop_mission(plan, i, prog_single):
                 bias_in_rad=p.bias_in_rad + eta[c, 1],
                 bias_out_rad=p.bias_out_rad + eta[c, 2],
             )
-            tr = prog_single(model, pc, plan.ephem, plan.epoch_et_s, x, np.array([plan.grid_s[c], plan.grid_s[c + 1]]))
+            tr = propagate_one(
+                model, pc, plan.ephem, plan.epoch_et_s, x, np.array([plan.grid_s[c], plan.grid_s[c + 1]])
+            )
             x = np.array(tr.x_final)
         return x
 
@@ -115,7 +116,6 @@ def loop_mission(plan, i, prog_single):
             ctrl_cmd[idx] += du
             ctrl_act[idx] += du + err
         t_prev = m.time_s
-    del engine
     return fly(x, t_prev, plan.final.t_s)
 
 
@@ -148,10 +148,9 @@ def main():
     eng_rate = (plan.n_blocks - 1) * plan.block / t_rest
 
     # plain loop (warm: one mission first to compile the single propagate)
-    prog = propagate
-    loop_mission(plan, 0, prog)
+    loop_mission(plan, 0, propagate)  # compile the single propagation first
     t0 = time.perf_counter()
-    xs = [loop_mission(plan, i, prog) for i in range(ARGS.loop_missions)]
+    xs = [loop_mission(plan, i, propagate) for i in range(ARGS.loop_missions)]
     t_loop = time.perf_counter() - t0
     loop_rate = ARGS.loop_missions / t_loop
     # agreement: the loop's final states against the engine's (target error + reference)

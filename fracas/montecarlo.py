@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from fracas import pipeline
+from fracas.config.trajectory import deck_error
 from fracas.config.tsim import TsimDeck, load_tsim_deck, tsim_problems, tsim_team_deck
 from fracas.errors import DeckError
 from fracas.io.atomic import check_output_path
@@ -212,7 +213,7 @@ def run_tsim(
     cfg = deck if isinstance(deck, TsimDeck) else load_tsim_deck(deck)
     problems = tsim_problems(cfg)
     if problems:
-        raise DeckError("; ".join(problems)) if len(problems) > 1 else DeckError(problems[0])
+        raise deck_error(problems)
     out = Path(output) if output is not None else (
         cfg.resolve(cfg.output.results) if cfg.output.results else pipeline.default_output(cfg.source_path)
     )  # fmt: skip
@@ -275,7 +276,7 @@ def run_tsim(
                 team_dv_mean_km_s=float(m.team["dv_mean_km_s"]), team_dv_99_km_s=float(m.team["dv_99_km_s"]),
                 team_target_cov_after=np.asarray(m.team["target_cov_after"]),
                 failures=int(np.sum((fm == j) & (table["status"] == STATUS_HOPELESS))),
-                near=int(np.sum((table["iterations"][:, j] > 0) & (table["status"] == STATUS_NEAR))),
+                near=int(np.sum(table["maneuver_status"][:, j] == STATUS_NEAR)),
             )
         )  # fmt: skip
     product = TsimProduct(

@@ -571,7 +571,7 @@ class TsimProduct:
     order (:func:`fracas.tsim.engine.block_fields`: mission, status, failed_maneuver,
     iterations (J), initial_deviation (n), state_deviation (J, 7), knowledge_error (J, n),
     correction (J, M_max), execution_error (J, M_max), dv_km_s (J), dv_total_km_s,
-    target_error (m), maneuver_target_error (J, m), final_mass_kg).  labels (n): the
+    target_error (m), maneuver_status (J), linear_design_miss / design_miss (J, m), final_mass_kg).  labels (n): the
     augmented state (r, v, m, then parameters); n_state.  final_target_names / units /
     final_target_time_s and team_target_cov (m, m): TEAM's predicted final target
     dispersion (the last maneuver's "after").  statistics: name -> (count, mean, covariance)

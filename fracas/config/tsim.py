@@ -208,8 +208,6 @@ def tsim_problems(deck: TsimDeck) -> list[str]:
                 f'{src}: maneuver[{k}].law = "nonlinear": built for impulsive events only '
                 f'({m.name} is {g.type}; expected "linear")'
             )
-        if g.type == "none" and m.enabled:
-            pass
     for j, f in enumerate(deck.insim.a_priori_statistics):
         if not deck.resolve(f).exists():
             out.append(f"{src}: insim.a_priori_statistics[{j}] = {f!r}: no such TSIM results file")

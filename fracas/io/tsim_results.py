@@ -35,7 +35,7 @@ Results layout (every dataset carries ``units`` and ``data_sha256``)::
         dv_km_s (N, J)               |dV| of each maneuver (km/s)
         dv_total_km_s (N,)           total |dV| (km/s)
         target_error (N, m)          final target error (final target units)
-        maneuver_target_error (N, J, m_max)  each maneuver's target error (its target units)
+        maneuver_status (N, J)       per maneuver: 0 ok, 1 near success, 2 hopeless
         linear_design_miss (N, J, m_max)  impulsive: the linear design's miss on the estimated
                              trajectory (its target units)
         design_miss (N, J, m_max)  impulsive: the flown design's miss there
@@ -115,7 +115,7 @@ _FIELDS: dict[str, tuple[str, bool, str]] = {
     "dv_km_s": ("km/s", False, "|dV| of each maneuver"),
     "dv_total_km_s": ("km/s", False, "total |dV|"),
     "target_error": ("final target units", False, "final target error"),
-    "maneuver_target_error": ("target units", False, "each maneuver's target error (its target units)"),
+    "maneuver_status": ("1", True, "per maneuver: 0 ok, 1 near success, 2 hopeless"),
     "linear_design_miss": ("target units", False, "impulsive: the linear design's miss on the estimated trajectory"),
     "design_miss": ("target units", False, "impulsive: the flown design's miss on the estimated trajectory"),
     "final_mass_kg": ("kg", False, "final mass"),
@@ -401,7 +401,7 @@ def _table(c: Checked, j: int, n: int, m: int) -> dict[str, np.ndarray]:
         "dv_km_s": (nm, j),
         "dv_total_km_s": (nm,),
         "target_error": (nm, m),
-        "maneuver_target_error": (nm, j, None),
+        "maneuver_status": (nm, j),
         "linear_design_miss": (nm, j, None),
         "design_miss": (nm, j, None),
         "final_mass_kg": (nm,),

@@ -103,11 +103,9 @@ def _programs(static, dyn_labels: tuple, ctrl_labels: tuple, final_names: tuple,
         good = (tr.status == 0) & (tr.primary_final == model.primary) & jnp.all(jnp.isfinite(tr.x_final))
         return jnp.where(good, tr.x_final, x), good
 
-    pax = None  # params are batched: every leaf has the lane axis
-
+    # params are batched: every leaf has the lane axis
     fly_chunk = jax.jit(jax.vmap(fly_chunk_one, in_axes=(None, 0, None, None, 0, None, None, 0, 0)))
     fly_to = jax.jit(jax.vmap(fly_to_one, in_axes=(None, 0, None, None, 0, None, None)))
-    del pax
 
     def lane_params(params, dyn_values, ctrl_values):
         return _lane_params(static, params, dyn_labels, dyn_values, ctrl_labels, ctrl_values)
@@ -152,6 +150,20 @@ def _programs(static, dyn_labels: tuple, ctrl_labels: tuple, final_names: tuple,
     }
 
 
+def _setup(plan: TsimPlan):
+    """(traced integrator constants, the compiled programs, nominal values of the trajectory's
+    parameters and of the arc controls) of a plan."""
+    static, dyn = split_model(plan.model)
+    prog = _programs(
+        static, plan.dyn_labels, plan.control_labels, plan.final.names, tuple(m.target.names for m in plan.maneuvers)
+    )
+
+    def values(labels):
+        return np.asarray(get_values(plan.params, labels, plan.model)) if labels else np.zeros(0)
+
+    return dyn, prog, values(plan.dyn_labels), values(plan.control_labels)
+
+
 def block_fields(plan: TsimPlan) -> dict[str, tuple]:
     """Name -> (shape after the mission axis, dtype) of every per-mission output."""
     J = len(plan.maneuvers)
@@ -170,7 +182,7 @@ def block_fields(plan: TsimPlan) -> dict[str, tuple]:
         "dv_km_s": ((J,), np.float64),
         "dv_total_km_s": ((), np.float64),
         "target_error": ((len(plan.final.names),), np.float64),
-        "maneuver_target_error": ((J, m_tgt), np.float64),
+        "maneuver_status": ((J,), np.int32),
         "linear_design_miss": ((J, m_tgt), np.float64),
         "design_miss": ((J, m_tgt), np.float64),
         "final_mass_kg": ((), np.float64),
@@ -204,11 +216,9 @@ def simulate_block(plan: TsimPlan, block_index: int) -> BlockResult:
     Returns every per-mission output (:func:`block_fields`) for the whole block, lanes past
     the run's last mission included (the caller drops them)."""
     B = plan.block
-    model = plan.model
-    static, dyn = split_model(model)
     man = plan.maneuvers
     ctrl_labels = plan.control_labels
-    prog = _programs(static, plan.dyn_labels, ctrl_labels, plan.final.names, tuple(m.target.names for m in man))
+    dyn, prog, nominal_dyn, nominal_ctrl = _setup(plan)
     missions = plan.first_mission + block_index * B + np.arange(B, dtype=np.int64)
     dt = np.diff(plan.grid_s)
     kfacs = tuple(jnp.asarray(m.knowledge_factor) for m in man)
@@ -231,8 +241,6 @@ def simulate_block(plan: TsimPlan, block_index: int) -> BlockResult:
     out["failed_maneuver"][:] = -1
     out["initial_deviation"][:] = dx0
 
-    nominal_dyn = np.asarray(get_values(plan.params, plan.dyn_labels, model)) if plan.dyn_labels else np.zeros(0)
-    nominal_ctrl = np.asarray(get_values(plan.params, ctrl_labels, model)) if ctrl_labels else np.zeros(0)
     dyn_dev = dx0[:, plan.dyn_index] if plan.dyn_labels else np.zeros((B, 0))
     ctrl_actual = np.zeros((B, len(ctrl_labels)))
     ctrl_cmd = np.zeros((B, len(ctrl_labels)))
@@ -286,6 +294,7 @@ def simulate_block(plan: TsimPlan, block_index: int) -> BlockResult:
             mt = len(m.target.names)
             out["linear_design_miss"][:, j, :mt] = miss_lin
             out["design_miss"][:, j, :mt] = miss
+            out["maneuver_status"][:, j] = np.where(alive, code, STATUS_OK)
             if nonlin:
                 fail(code == STATUS_HOPELESS, STATUS_HOPELESS, j)
                 near = (code == STATUS_NEAR) & alive & (status == STATUS_OK)
@@ -324,15 +333,12 @@ def simulate_block(plan: TsimPlan, block_index: int) -> BlockResult:
     tf = plan.final
     t_val = np.asarray(prog["targets"][tf.names](jnp.asarray(x), tf.t_s, jnp.asarray(tf.offset), tf.mu))
     out["target_error"][:] = t_val - tf.reference
-    for j, m in enumerate(man):  # each maneuver's own target set, when it is the final one
-        if m.target.names == tf.names and abs(m.target.t_s - tf.t_s) < 1e-6:
-            out["maneuver_target_error"][:, j, : len(tf.names)] = out["target_error"]
     out["final_mass_kg"][:] = x[:, 6] - booked
     out["dv_total_km_s"][:] = out["dv_km_s"].sum(axis=1)
     out["status"][:] = status
     dead = ~alive
     for k in ("target_error", "final_mass_kg"):
-        out[k][dead] = np.nan if k != "final_mass_kg" else np.nan
+        out[k][dead] = np.nan
     return out
 
 
@@ -416,14 +422,8 @@ def reference_states(plan: TsimPlan, times_s) -> np.ndarray:
     """The reference (7,) at each of ``times_s`` (sorted, s), flown by the engine with every
     deviation and the noise zero through the plan's hold grid: the states the missions'
     deviations are measured from (the null run deviates by exactly zero)."""
-    B = plan.block
-    static, dyn = split_model(plan.model)
-    ctrl_labels = plan.control_labels
-    prog = _programs(
-        static, plan.dyn_labels, ctrl_labels, plan.final.names, tuple(m.target.names for m in plan.maneuvers)
-    )
-    nominal_dyn = np.asarray(get_values(plan.params, plan.dyn_labels, plan.model)) if plan.dyn_labels else np.zeros(0)
-    nominal_ctrl = np.asarray(get_values(plan.params, ctrl_labels, plan.model)) if ctrl_labels else np.zeros(0)
+    B = plan.block  # a block of identical lanes: the missions' compiled programs serve
+    dyn, prog, nominal_dyn, nominal_ctrl = _setup(plan)
     params_b = prog["lane_params"](
         plan.params, jnp.asarray(np.tile(nominal_dyn, (B, 1))), jnp.asarray(np.tile(nominal_ctrl, (B, 1)))
     )

@@ -41,7 +41,7 @@ def synthetic_product(n: int = 200, seed: int = 7) -> TsimProduct:
         "dv_km_s": dv,
         "dv_total_km_s": dv.sum(axis=1),
         "target_error": te,
-        "maneuver_target_error": rng.normal(size=(n, J, 3)),
+        "maneuver_status": rng.integers(0, 3, size=(n, J)).astype(np.int32),
         "final_mass_kg": 1000.0 - rng.random(n),
     }
     good = status <= 1

@@ -207,6 +207,7 @@ def test_hopeless_and_near_success_are_counted(base):
     dead = s == STATUS_HOPELESS
     assert np.all(np.isnan(tab["target_error"][dead])) and np.all(np.isfinite(tab["target_error"][~dead]))
     assert np.all(tab["failed_maneuver"][dead] == 0)
+    assert np.all(tab["maneuver_status"][:, 0] == s)  # the clean-up decided every status here
     assert summary.counts_of(plan, tab)["hopeless"] == int(dead.sum())
     stats = summary.statistics_of(plan, tab)
     assert stats["target_error"].count == int((~dead).sum())

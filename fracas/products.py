@@ -281,7 +281,8 @@ class GuidanceEvent:
     knowledge (m, m): the dispersion before and after the correction and the knowledge
     mapped to the target; correction_cov, execution_cov (M, M); mean, 99 % and RMS |ΔV| km/s
     (low thrust: of the arc's ΔV change); propellant_sigma_kg (low thrust); status;
-    dv_jacobian (M,): the arc's ΔV change per unit of each control (low thrust; TSIM's |ΔV|)."""
+    dv_jacobian (M,): the arc's ΔV change per unit of each control (low thrust; TSIM's |ΔV|);
+    control_matrix (m, M): K = Ψ(t_c) S, the targets' change per unit of each control (low thrust)."""
 
     name: str
     type: str
@@ -310,6 +311,7 @@ class GuidanceEvent:
     status: int = 0
     dv_variance_km2_s2: float = float("nan")  # E|ΔV|² unclipped (linear in the error sources)
     dv_jacobian: np.ndarray | None = None  # (M,) low thrust: the arc's ΔV change per control (km/s per unit)
+    control_matrix: np.ndarray | None = None  # (m, M) low thrust: K = Ψ(t_c) S, targets per control
 
 
 @dataclass

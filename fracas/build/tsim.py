@@ -27,7 +27,7 @@ import numpy as np
 from fracas.constants import DAY_S
 from fracas.dynamics.parameters import get_values
 from fracas.errors import DeckError
-from fracas.guidance.low_thrust import control_sensitivity, weighted_correction_matrix
+from fracas.guidance.low_thrust import weighted_correction_matrix
 from fracas.guidance.target_kinds import TARGET_KINDS
 from fracas.guidance.targets import target_values
 from fracas.tsim import engine
@@ -173,8 +173,7 @@ def build_plan(cfg, case, team, sampling_override: str | None = None) -> TsimPla
             ctrl, units_u = ("dv_x", "dv_y", "dv_z"), ("km/s",) * 3
             dv_jac = np.zeros(3)
         else:
-            s7 = np.asarray(control_sensitivity(pr, g.time_s, g.cutoff_s, list(g.control_labels))[0])
-            k_mat = psi[:, :nx] @ s7[:nx]
+            k_mat = np.asarray(ev.control_matrix, float)  # TEAM's K = Ψ S (not integrated again)
             ctrl, units_u = tuple(g.control_labels), tuple(g.control_units)
             dv_jac = np.asarray(ev.dv_jacobian if ev.dv_jacobian is not None else np.zeros(len(ctrl)), float)
         k_pinv = np.asarray(weighted_correction_matrix(k_mat, np.eye(m), w, tl)[0])

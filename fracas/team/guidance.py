@@ -382,6 +382,7 @@ def _low_thrust(study, span, g, k, p_c, p_k, summary=True):
         propellant_sigma_kg=sig_m,
         dv_variance_km2_s2=var_dv,
         dv_jacobian=j_dv,
+        control_matrix=np.asarray(k_mat),
     )
     return out, p_reset, [(t_c, x_exec_full[:nx, :nx])]
 

@@ -643,3 +643,99 @@ def _tom_stm_file(cfg, ref_path: Path) -> Path:
     team = parse_team_deck(text, str(ref_path.with_suffix(".team.toml")))
     path, _ = build_stm(team, cfg.resolve(cfg.tom.stm_file))
     return path
+
+
+# ----------------------------------------------------------------------------- two vehicles
+def run_rendezvous(
+    deck,
+    output: str | Path | None = None,
+    on_stage: Stage | None = None,
+    plot: str | Path | None = None,
+    write_results: bool = True,
+):
+    """``fracas run`` on a rendezvous deck (path or RendezvousDeck): both references ->
+    the two-vehicle covariance analysis for every target role -> single runs -> maneuver
+    uncertainties -> RendezvousProduct -> results file.  Outputs are checked before any
+    work.  Returns (RendezvousProduct, results path or None)."""
+    from fracas.build.rendezvous import build_rendezvous
+    from fracas.config.rendezvous import RendezvousDeck, load_rendezvous_deck
+    from fracas.io.rendezvous_results import write_rendezvous_results
+    from fracas.products import RendezvousProduct
+    from fracas.team.two_vehicle import envelope_rates, run_rendezvous_study, single_runs
+
+    say = _say(on_stage)
+    t0 = time.perf_counter()
+    say("reading the deck")
+    cfg = deck if isinstance(deck, RendezvousDeck) else load_rendezvous_deck(deck)
+    out = (
+        Path(output)
+        if output is not None
+        else (cfg.resolve(cfg.output.results) if cfg.output.results else default_output(cfg.source_path))
+    )
+    if write_results:
+        check_output_path(out, "results file")
+    if plot is not None:
+        check_output_path(plot, "plot")
+    say("integrating both references and their STMs")
+    study = build_rendezvous(cfg)
+    t1 = time.perf_counter()
+    say(f"covariance analysis ({', '.join(study.roles)})")
+    res = run_rendezvous_study(study)
+    t2 = time.perf_counter()
+    sr = cfg.single_runs
+    errs = men = env1 = env3 = se1 = se3 = None
+    if sr.runs > 0:
+        say(f"{sr.runs} single runs per role")
+        e = single_runs(res, sr.runs, sr.seed)
+        (env1, se1), (env3, se3) = envelope_rates(res, e, 1.0), envelope_rates(res, e, 3.0)
+        errs = e[:, : sr.keep]
+        J = len(study.maneuvers)
+        men = np.zeros((len(study.roles), sr.runs, J, 3))
+        for j, m in enumerate(study.maneuvers):
+            men[:, :, j] = np.einsum("ij,rnj->rni", np.asarray(m.M), e[:, :, m.k, :12])
+    t3 = time.perf_counter()
+    J = len(study.maneuvers)
+    product = RendezvousProduct(
+        title=study.title,
+        source=study.source,
+        epoch_et_s=study.epoch_et_s,
+        centre=study.centre,
+        chaser_name=study.chaser_name,
+        target_name=study.target_name,
+        roles=list(study.roles),
+        labels=study.labels,
+        units=study.units,
+        times_s=study.times_s,
+        marks=study.marks,
+        x_chaser=study.x_chaser,
+        x_target=study.x_target,
+        P_true=res.P_true,
+        P_assumed=res.P_assumed,
+        P_true_minus=res.P_true_minus,
+        P_assumed_minus=res.P_assumed_minus,
+        maneuver_names=[m.name for m in study.maneuvers],
+        maneuver_time_s=np.array([m.time_s for m in study.maneuvers], dtype=np.float64),
+        maneuver_arrival_s=np.array([m.arrival_s for m in study.maneuvers], dtype=np.float64),
+        maneuver_dv_km_s=np.array([m.dv_km_s for m in study.maneuvers], dtype=np.float64).reshape(J, 3),
+        maneuver_status=np.array([m.status for m in study.maneuvers], dtype=np.int64),
+        maneuver_cov_true=res.maneuver_cov_true,
+        maneuver_cov_assumed=res.maneuver_cov_assumed,
+        reset_times_s=np.array([study.times_s[r.k] for r in study.resets], dtype=np.float64),
+        n_runs=int(sr.runs),
+        seed=int(sr.seed),
+        run_errors=errs,
+        run_maneuver_errors=men,
+        envelope_1sigma=env1,
+        envelope_3sigma=env3,
+        envelope_1sigma_se=se1,
+        envelope_3sigma_se=se3,
+        length_unit=study.length_unit,
+        km_per_unit=study.km_per_unit,
+        timing={"build_s": t1 - t0, "analysis_s": t2 - t1, "single_runs_s": t3 - t2},
+        provenance=provenance(cfg.source_text, cfg.source_path),
+    )
+    path = None
+    if write_results:
+        say("writing the results file")
+        path = write_rendezvous_results(out, product)
+    return product, path

@@ -283,6 +283,10 @@ def check_path(path: str | Path) -> tuple[str | None, list[str]]:
         if probs:
             return mode, probs
         return mode, check_path(deck.resolve(deck.insim.team_deck))[1]
+    if mode == "rendezvous":
+        from fracas.config.rendezvous import rendezvous_problems
+
+        return mode, rendezvous_problems(deck)
     if mode == "sweep":
         study = deck.resolve(deck.sweep.study)
         if not study.is_file():

@@ -3,7 +3,8 @@
 ``mode = "team"`` (TEAM covariance analysis), ``mode = "sweep"`` (a TEAM study run with
 fields varied, :mod:`fracas.config.sweep`), ``mode = "tom"`` (TOM targeting and
 optimization, :mod:`fracas.config.tom`), ``mode = "tsim"`` (TSIM Monte Carlo,
-:mod:`fracas.config.tsim`) or ``mode = "propagate"`` (a trajectory deck; the
+:mod:`fracas.config.tsim`), ``mode = "rendezvous"`` (two-vehicle navigation,
+:mod:`fracas.config.rendezvous`) or ``mode = "propagate"`` (a trajectory deck; the
 default, so every trajectory deck stays valid as written).  TEAM
 decks written before ``mode`` existed are still recognised by their ``[ertraj]`` table.
 """
@@ -17,7 +18,7 @@ from fracas.errors import DeckError
 
 __all__ = ["MODES", "PLANNED_MODES", "deck_mode", "parse_any", "load_any"]
 
-MODES = ("propagate", "team", "sweep", "tom", "tsim")
+MODES = ("propagate", "team", "sweep", "tom", "tsim", "rendezvous")
 PLANNED_MODES: tuple[str, ...] = ()
 
 
@@ -52,6 +53,10 @@ def parse_any(text: str, source: str = "<deck>"):
         from fracas.config.tsim import parse_tsim_deck
 
         return parse_tsim_deck(text, source)
+    if mode == "rendezvous":
+        from fracas.config.rendezvous import parse_rendezvous_deck
+
+        return parse_rendezvous_deck(text, source)
     if mode == "team":
         from fracas.config.team import parse_team_deck
 

@@ -1,0 +1,208 @@
+"""Rendezvous deck -> :class:`fracas.team.two_vehicle.RendezvousStudy` (the one place the
+deck's length unit, minutes and mrad become km, km/s, s and rad).
+
+* each vehicle's reference: its trajectory deck propagated with its STM over the study's
+  event times (target times shifted by the epoch difference), or read from its STM file
+  (``stm_file``; built and written first when missing), each with its own transition
+  matrices;
+* the event times: t = 0 (the a priori), every mark, reset and maneuver time;
+* the a priori: block-diagonal [chaser; target; biases] (the vehicles' errors start
+  uncorrelated, R-649 Fig. II-4: G_0 = 0);
+* each maneuver's intercept solved on the reference states and its 3 x 12 sensitivity.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fracas.build.trajectory import build_propagation
+from fracas.config.rendezvous import RELATIVE_KIND_NAMES, RendezvousDeck, rendezvous_problems, vehicle_deck
+from fracas.config.trajectory import trajectory_hash
+from fracas.errors import ConfigError, DeckError
+from fracas.guidance.intercept import intercept, intercept_sensitivity
+from fracas.status import RunStatus
+from fracas.team.reference import run_reference
+from fracas.team.two_vehicle import BiasSpec, ManeuverSpec, RendezvousStudy, ResetSpec
+
+__all__ = ["build_rendezvous", "event_times"]
+
+_TOL_S = 1e-6
+#: canonical unit per deck unit of each relative kind's sigma: [length, length/s, mrad, mrad]
+_ANGLE = 1e-3
+
+
+def _kind_factor(kind: str, km: float) -> float:
+    return km if kind in ("range", "range_rate") else _ANGLE
+
+
+def event_times(deck: RendezvousDeck) -> tuple[np.ndarray, np.ndarray]:
+    """(times_s (K,), marks (K, 4) bool): t = 0, every mark, reset and maneuver time, merged
+    within 1e-6 s."""
+    groups: list[tuple[np.ndarray, tuple[str, ...]]] = [(np.zeros(1), ())]
+    for t in deck.tracking:
+        n = int(np.floor((t.stop_min - t.start_min) * 60.0 / t.step_s + 1e-9)) + 1
+        groups.append((t.start_min * 60.0 + t.step_s * np.arange(n), tuple(t.measurements)))
+    groups.append((np.array([r.time_min * 60.0 for r in deck.reset]), ()))
+    groups.append((np.array([m.time_min * 60.0 for m in deck.maneuver]), ()))
+    allt = np.unique(np.concatenate([g[0] for g in groups]))
+    keep = np.concatenate([[True], np.diff(allt) > _TOL_S])
+    times = allt[keep]
+    marks = np.zeros((len(times), 4), dtype=bool)
+    for ts, kinds in groups:
+        if not kinds or ts.size == 0:
+            continue
+        idx = np.searchsorted(times, ts - _TOL_S)
+        for kind in kinds:
+            marks[idx, RELATIVE_KIND_NAMES.index(kind)] = True
+    return times, marks
+
+
+def _index(times: np.ndarray, t: float) -> int:
+    return int(np.argmin(np.abs(times - t)))
+
+
+def _covariance(v, km: float) -> np.ndarray:
+    if v.covariance is not None:
+        return np.asarray(v.covariance, dtype=np.float64) * km**2
+    return np.diag(np.r_[np.asarray(v.position_sigma), np.asarray(v.velocity_sigma)] * km) ** 2
+
+
+def _reference(deck: RendezvousDeck, which: str, tdeck, t_out: np.ndarray):
+    """(states (K, 6), step STMs (K, 6, 6), primaries, mu km^3/s^2) of one vehicle at t_out
+    (s from its own epoch), in line or from its STM file."""
+    problem = build_propagation(tdeck)
+    bodies = problem.model.bodies
+    centre = tdeck.initial_state.centre
+    mu = float(np.asarray(problem.params.mu)[bodies.index(centre)])
+    lead = t_out[0] > 0.0
+    t_int = np.concatenate([[0.0], t_out]) if lead else t_out
+    traj, sens, status, failed_at = run_reference(problem, t_int, [])
+    if status != RunStatus.OK or int(traj.status) != 0:
+        raise ConfigError(
+            f"{deck.source_path}: {which}.trajectory: the reference failed at t = {failed_at / 60.0:.3f} min "
+            f"(integrator status {int(traj.status)}); expected a trajectory covering the study"
+        )
+    sl = slice(1, None) if lead else slice(None)
+    states = np.array(traj.x)[sl, :6]
+    phi = np.array(sens.stm_step)[sl, :6, :6]
+    prim = [bodies[int(i)] for i in np.asarray(traj.primary)[sl]]
+    if any(p != centre for p in prim):
+        raise ConfigError(
+            f"{deck.source_path}: {which}.trajectory: the vehicle leaves {centre}'s sphere of influence "
+            f"during the study; expected one centre"
+        )
+    return states, phi, mu, problem
+
+
+def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
+    """The study of a validated rendezvous deck (module docstring); DeckError / ConfigError
+    (one line, naming the field) for what the schema cannot see."""
+    probs = rendezvous_problems(deck)
+    if probs:
+        raise DeckError(probs[0] + (f" (and {len(probs) - 1} more errors)" if len(probs) > 1 else ""), problems=probs)
+    km = deck.km_per_unit
+    times, marks = event_times(deck)
+    da, dt = vehicle_deck(deck, "chaser"), vehicle_deck(deck, "target")
+    shift = da.epoch.et - dt.epoch.et
+    if shift < -_TOL_S:
+        raise DeckError(
+            f"{deck.source_path}: target.trajectory: its epoch is {-shift:.1f} s after the chaser's; "
+            "expected the target's epoch at or before the chaser's"
+        )
+    xa, phia, mu, prob_a = _reference(deck, "chaser", da, times)
+    xt, phit, _, _ = _reference(deck, "target", dt, times + max(shift, 0.0))
+    # the first step: Phi(t_0, t_0) = I (the a priori holds at t_0 = 0)
+    phia[0] = np.eye(6)
+    phit[0] = np.eye(6)
+
+    nz = lambda n: np.array([n.sigma, n.fraction, n.floor], dtype=np.float64)  # noqa: E731
+    noise_a = np.zeros((4, 3))
+    noise_t = np.zeros((4, 3))
+    for i, kind in enumerate(RELATIVE_KIND_NAMES):
+        n = getattr(deck.noise, kind)
+        if n is None:
+            noise_a[i] = noise_t[i] = [1.0, 0.0, 0.0]  # unused: no marks of this kind
+            continue
+        f = _kind_factor(kind, km)
+        a = nz(n) * np.array([f, 1.0, f])
+        t = np.array(
+            [
+                n.true_sigma if n.true_sigma is not None else n.sigma,
+                n.true_fraction if n.true_fraction is not None else n.fraction,
+                n.true_floor if n.true_floor is not None else n.floor,
+            ]
+        ) * np.array([f, 1.0, f])
+        noise_a[i], noise_t[i] = a, t
+
+    biases = tuple(
+        BiasSpec(
+            b.name,
+            RELATIVE_KIND_NAMES.index(b.measurement),
+            b.sigma * _kind_factor(b.measurement, km),
+            b.role,
+            b.tau_s if b.tau_s is not None else float("inf"),
+        )
+        for b in deck.bias
+    )
+    nb = len(biases)
+    P0 = np.zeros((12 + nb, 12 + nb))
+    P0[:6, :6] = _covariance(deck.chaser, km)
+    P0[6:12, 6:12] = _covariance(deck.target, km)
+    for j, b in enumerate(biases):
+        P0[12 + j, 12 + j] = b.sigma**2
+    for which, C in (("chaser", P0[:6, :6]), ("target", P0[6:12, 6:12])):
+        w = np.linalg.eigvalsh(C)
+        if w.min() < -1e-9 * max(w.max(), 1e-300):
+            raise DeckError(
+                f"{deck.source_path}: {which}.covariance: not positive semidefinite (smallest eigenvalue "
+                f"{w.min():.3g} {deck.units}^2); expected a covariance matrix"
+            )
+    load = None
+    if deck.chaser.filter_position_sigma is not None:
+        load = np.r_[np.asarray(deck.chaser.filter_position_sigma), np.asarray(deck.chaser.filter_velocity_sigma)] * km
+    resets = tuple(
+        ResetSpec(
+            _index(times, r.time_min * 60.0),
+            np.r_[np.asarray(r.position_sigma), np.asarray(r.velocity_sigma)] * km,
+            tuple(r.roles),
+        )
+        for r in deck.reset
+    )
+    mans = []
+    for m in deck.maneuver:
+        k = _index(times, m.time_min * 60.0)
+        tof = (m.arrival_min - m.time_min) * 60.0
+        dv, v1, miss, status = intercept(xa[k], xt[k], tof, mu)
+        M = np.asarray(intercept_sensitivity(xa[k], xt[k], v1, tof, mu))
+        mans.append(ManeuverSpec(m.name, k, float(times[k]), m.arrival_min * 60.0, M, np.asarray(dv), int(status)))
+    return RendezvousStudy(
+        title=deck.title,
+        source=deck.source_path or "<deck>",
+        chaser_name=deck.chaser.name,
+        target_name=deck.target.name,
+        centre=da.initial_state.centre,
+        mu_km3_s2=mu,
+        times_s=times,
+        x_chaser=xa,
+        x_target=xt,
+        phi_chaser=phia,
+        phi_target=phit,
+        marks=marks,
+        noise_assumed=noise_a,
+        noise_true=noise_t,
+        axes=np.asarray(deck.sensor.axes, dtype=np.float64),
+        P0_true=P0,
+        chaser_load=load,
+        biases=biases,
+        roles=tuple(deck.roles),
+        resets=resets,
+        maneuvers=tuple(mans),
+        length_unit=deck.units,
+        km_per_unit=km,
+        epoch_et_s=float(prob_a.epoch_et_s),
+    )
+
+
+def trajectory_hashes(deck: RendezvousDeck) -> dict[str, str]:
+    """The two trajectory decks' hashes (provenance)."""
+    return {w: trajectory_hash(vehicle_deck(deck, w)) for w in ("chaser", "target")}

@@ -1,0 +1,189 @@
+"""Two-vehicle (rendezvous) report: the terminal summary (80 columns) and the error-history
+plot, from a :class:`fracas.products.RendezvousProduct`
+(:func:`fracas.io.rendezvous_results.read_rendezvous_results`).
+
+Everything is shown in the deck's length unit (ft and fps for the Apollo example, as in
+R-649).  "RMS" is the root of the trace of a 3 x 3 block (R-649's "statistical" curves):
+of the TRUE covariance unless marked "filter" (what the filter believes: its assumed
+covariance).  The relative covariance is E_R = E_A + E_T - G - G' (R-649 Eq. 17).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from fracas.products import RendezvousProduct
+
+__all__ = ["rms_table", "summary_text", "plot_rendezvous", "report_times"]
+
+_ROLE = {"solve_for": "optimum", "consider": "Schmidt", "ignore": "Apollo"}
+
+
+def rms_table(product: RendezvousProduct, which: str = "true") -> dict[str, np.ndarray]:
+    """RMS magnitudes (R, K) in km and km/s after each event: chaser_r, chaser_v, target_r,
+    target_v, relative_r, relative_v."""
+    P = product.P_true if which == "true" else product.P_assumed
+    EA, ET, G = P[..., :6, :6], P[..., 6:12, 6:12], P[..., :6, 6:12]
+    ER = EA + ET - G - np.swapaxes(G, -1, -2)
+
+    def rms(E, s):
+        return np.sqrt(np.maximum(np.trace(E[..., s, s], axis1=-2, axis2=-1), 0.0))
+
+    r, v = slice(0, 3), slice(3, 6)
+    return {
+        "chaser_r": rms(EA, r),
+        "chaser_v": rms(EA, v),
+        "target_r": rms(ET, r),
+        "target_v": rms(ET, v),
+        "relative_r": rms(ER, r),
+        "relative_v": rms(ER, v),
+    }
+
+
+def report_times(product: RendezvousProduct) -> list[int]:
+    """Event indices the summary lists: the a priori, the first and last marks, every reset
+    and maneuver, and about six evenly spaced marks."""
+    t = np.asarray(product.times_s)
+    marked = np.nonzero(np.any(product.marks, axis=1))[0]
+    idx = {0, len(t) - 1}
+    if marked.size:
+        idx |= {int(marked[0]), int(marked[-1])}
+        idx |= {int(marked[i]) for i in np.linspace(0, marked.size - 1, 6).round().astype(int)}
+    for ts in list(product.reset_times_s) + list(product.maneuver_time_s):
+        idx.add(int(np.argmin(np.abs(t - ts))))
+    return sorted(idx)
+
+
+def _n(x: float, width: int) -> str:
+    """A number in ``width`` columns: integers for large values, 3 significant figures below 100."""
+    if not np.isfinite(x):
+        return f"{'-':>{width}}"
+    if abs(x) >= 100.0:
+        txt = f"{x:.0f}"
+        return f"{txt:>{width}}" if len(txt) < width else f"{x:>{width}.2g}"
+    return f"{x:>{width}.3g}"
+
+
+def summary_text(product: RendezvousProduct, width: int = 80) -> str:
+    """The terminal summary (fits ``width`` >= 80 columns)."""
+    u = product.length_unit
+    f = 1.0 / product.km_per_unit
+    vu = f"{u}/s" if u != "ft" else "fps"
+    tt = rms_table(product)
+    ta = rms_table(product, "assumed")
+    lines = [
+        (product.title or Path(product.source).name)[:width],
+        f"{product.chaser_name} (chaser) and {product.target_name} (target) about the {product.centre}; "
+        f"{int(np.any(product.marks, axis=1).sum())} mark times, {int(product.marks.sum())} marks, "
+        f"{len(product.reset_times_s)} resets"[:width],
+        "",
+        f"RMS errors after each event ({u}, {vu}): true; 'belief' = the filter's own",
+        f"{'t min':>6} {'filter':<8}{'chaser r':>9}{'v':>6}{'target r':>9}{'v':>6}"
+        f"{'rel r':>8}{'v':>6}{'belief r':>9}{'v':>6}",
+    ]
+    for k in report_times(product):
+        tag = ""
+        if np.any(np.abs(product.reset_times_s - product.times_s[k]) < 1e-6):
+            tag = " R"
+        for j, name in enumerate(product.maneuver_names):
+            if abs(product.maneuver_time_s[j] - product.times_s[k]) < 1e-6:
+                tag = f" {name}"[:6]
+        for r, role in enumerate(product.roles):
+            head = f"{product.times_s[k] / 60.0:6.1f}" if r == 0 else " " * 6
+            lines.append(
+                f"{head} {_ROLE.get(role, role):<8}{_n(tt['chaser_r'][r, k] * f, 9)}{_n(tt['chaser_v'][r, k] * f, 6)}"
+                f"{_n(tt['target_r'][r, k] * f, 9)}{_n(tt['target_v'][r, k] * f, 6)}"
+                f"{_n(tt['relative_r'][r, k] * f, 8)}{_n(tt['relative_v'][r, k] * f, 6)}"
+                f"{_n(ta['relative_r'][r, k] * f, 9)}{_n(ta['relative_v'][r, k] * f, 6)}" + (tag if r == 0 else "")
+            )
+    lines.append("optimum: target solve-for (R-649 Eq. 20); Schmidt: consider; Apollo: ignore (Eq. 26)")
+    lines.append("R: assumed-covariance reset")
+    if product.maneuver_names:
+        lines += [
+            "",
+            f"Maneuver error |dV_hat - dV_true| from knowledge errors, 1-sigma RMS ({vu}; R-649 Fig. II-18)",
+            f"{'maneuver':<9}{'t min':>6}{'|dV|':>8}"
+            + "".join(f"{_ROLE.get(r, r):>10}{'belief':>8}" for r in product.roles),
+        ]
+        for j, name in enumerate(product.maneuver_names):
+            row = f"{name[:8]:<9}{product.maneuver_time_s[j] / 60.0:6.1f}"
+            row += f"{np.linalg.norm(product.maneuver_dv_km_s[j]) * f:8.2f}"
+            for r in range(len(product.roles)):
+                row += f"{np.sqrt(max(np.trace(product.maneuver_cov_true[r, j]), 0.0)) * f:10.3g}"
+                row += f"{np.sqrt(max(np.trace(product.maneuver_cov_assumed[r, j]), 0.0)) * f:8.3g}"
+            if int(product.maneuver_status[j]) != 0:
+                row += "  (intercept did not converge)"
+            lines.append(row[:width])
+    if product.n_runs > 0 and product.envelope_1sigma is not None:
+        lines += ["", f"Single runs: {product.n_runs} per role (seed {product.seed}); share of error components"]
+        lines.append("inside the true sigma envelopes (Gaussian: 68.27 % and 99.73 %):")
+        for r, role in enumerate(product.roles):
+            se1 = product.envelope_1sigma_se[r] if product.envelope_1sigma_se is not None else np.nan
+            se3 = product.envelope_3sigma_se[r] if product.envelope_3sigma_se is not None else np.nan
+            lines.append(
+                f"  {_ROLE.get(role, role):<8} 1 sigma {100 * product.envelope_1sigma[r]:6.2f} % (SE {100 * se1:.2f})"
+                f"   3 sigma {100 * product.envelope_3sigma[r]:6.2f} % (SE {100 * se3:.2f})"
+            )
+    return "\n".join(line[:width] for line in lines)
+
+
+def plot_rendezvous(product: RendezvousProduct, path: str | Path) -> list[Path]:
+    """One PNG: RMS chaser, target and relative position errors and the relative velocity
+    error against time for each role (true solid, filter's belief dashed), resets and
+    maneuvers marked, and the first kept single run's error magnitudes as dots."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from fracas.io.atomic import savefig_atomic
+
+    u = product.length_unit
+    f = 1.0 / product.km_per_unit
+    vu = f"{u}/s" if u != "ft" else "fps"
+    t = product.times_s / 60.0
+    tt, ta = rms_table(product), rms_table(product, "assumed")
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), sharex=True)
+    panels = (
+        ("chaser_r", f"{product.chaser_name} inertial position ({u})", slice(0, 3)),
+        ("target_r", f"{product.target_name} inertial position ({u})", slice(6, 9)),
+        ("relative_r", f"relative position ({u})", None),
+        ("relative_v", f"relative velocity ({vu})", None),
+    )
+    errs = product.run_errors
+    for ax, (key, title, sl) in zip(axes.ravel(), panels):
+        for r, role in enumerate(product.roles):
+            c = f"C{r}"
+            ax.semilogy(t, tt[key][r] * f, "-", color=c, lw=1.4, label=f"{_ROLE.get(role, role)} (true RMS)")
+            belief = ta[key][r] * f
+            ax.semilogy(t, np.where(belief > 0.0, belief, np.nan), "--", color=c, lw=0.9, alpha=0.8)
+            if errs is not None and errs.shape[1] > 0:
+                e = errs[r, 0]
+                if key == "relative_r":
+                    mag = np.linalg.norm(e[:, 6:9] - e[:, 0:3], axis=1)
+                elif key == "relative_v":
+                    mag = np.linalg.norm(e[:, 9:12] - e[:, 3:6], axis=1)
+                else:
+                    mag = np.linalg.norm(e[:, sl], axis=1)
+                ax.semilogy(t, np.where(mag > 0.0, mag * f, np.nan), ".", color=c, ms=2.5, alpha=0.6)
+        for ts in product.reset_times_s:
+            ax.axvline(ts / 60.0, color="0.6", lw=0.8, ls=":")
+        for j, name in enumerate(product.maneuver_names):
+            ax.axvline(product.maneuver_time_s[j] / 60.0, color="k", lw=0.8, ls="-.")
+            ax.text(product.maneuver_time_s[j] / 60.0, ax.get_ylim()[1], name, fontsize=7, va="top", ha="right")
+        ax.set_title(title, fontsize=10)
+        ax.grid(alpha=0.3, which="both")
+    for ax in axes[1]:
+        ax.set_xlabel("time (min)")
+    axes[0, 0].legend(fontsize=7, loc="best")
+    fig.suptitle(
+        f"{(product.title or Path(product.source).name)[:90]}\n"
+        "solid: true RMS; dashed: the filter's own belief; dots: one single run; dotted lines: resets",
+        fontsize=9,
+    )
+    fig.tight_layout()
+    out = [savefig_atomic(fig, Path(path), dpi=110)]
+    plt.close(fig)
+    return out

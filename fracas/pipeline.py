@@ -661,7 +661,13 @@ def run_rendezvous(
     from fracas.config.rendezvous import RendezvousDeck, load_rendezvous_deck
     from fracas.io.rendezvous_results import write_rendezvous_results
     from fracas.products import RendezvousProduct
-    from fracas.team.two_vehicle import envelope_rates, run_rendezvous_study, single_runs
+    from fracas.team.two_vehicle import (
+        envelope_rates,
+        nonlinear_single_runs,
+        run_rendezvous_study,
+        sample_rms,
+        single_runs,
+    )
 
     say = _say(on_stage)
     t0 = time.perf_counter()
@@ -683,12 +689,15 @@ def run_rendezvous(
     res = run_rendezvous_study(study)
     t2 = time.perf_counter()
     sr = cfg.single_runs
-    errs = men = env1 = env3 = se1 = se3 = None
+    errs = men = env1 = env3 = se1 = se3 = rms = None
+    nonlinear = False
     if sr.runs > 0:
-        say(f"{sr.runs} single runs per role")
-        e = single_runs(res, sr.runs, sr.seed)
+        nonlinear = sr.dynamics == "two_body" or (sr.dynamics == "auto" and study.two_body)
+        say(f"{sr.runs} single runs per role ({'on the conics' if nonlinear else 'linear'})")
+        e = (nonlinear_single_runs if nonlinear else single_runs)(res, sr.runs, sr.seed)
         (env1, se1), (env3, se3) = envelope_rates(res, e, 1.0), envelope_rates(res, e, 3.0)
         errs = e[:, : sr.keep]
+        rms = sample_rms(e)
         J = len(study.maneuvers)
         men = np.zeros((len(study.roles), sr.runs, J, 3))
         for j, m in enumerate(study.maneuvers):
@@ -728,10 +737,12 @@ def run_rendezvous(
         envelope_1sigma=env1,
         envelope_3sigma=env3,
         envelope_1sigma_se=se1,
+        run_rms=rms,
         envelope_3sigma_se=se3,
         length_unit=study.length_unit,
         km_per_unit=study.km_per_unit,
         timing={"build_s": t1 - t0, "analysis_s": t2 - t1, "single_runs_s": t3 - t2},
+        run_dynamics=("two_body" if nonlinear else "linear") if sr.runs > 0 else "",
         provenance=provenance(cfg.source_text, cfg.source_path),
     )
     path = None

@@ -620,7 +620,9 @@ class RendezvousProduct:
     (R, keep, K, n) the kept runs' estimation errors, run_maneuver_errors (R, n_runs, J, 3)
     (km/s), envelope_1sigma / envelope_3sigma (R,) the fractions of single-run error
     components inside the true 1- and 3-sigma and their standard errors (_se, across
-    runs); length_unit / km_per_unit: the deck's unit
+    runs); run_dynamics: "linear" | "two_body" (how the runs flew); run_rms (R, K, 6)
+    the runs' sample RMS of chaser, target and relative position and velocity errors
+    (km, km/s); length_unit / km_per_unit: the deck's unit
     for display; provenance: deck texts and versions."""
 
     title: str
@@ -656,6 +658,8 @@ class RendezvousProduct:
     envelope_3sigma: np.ndarray | None = None
     envelope_1sigma_se: np.ndarray | None = None
     envelope_3sigma_se: np.ndarray | None = None
+    run_dynamics: str = ""
+    run_rms: np.ndarray | None = None
     length_unit: str = "km"
     km_per_unit: float = 1.0
     timing: dict[str, float] = field(default_factory=dict)

@@ -87,7 +87,7 @@ def test_mode_dispatch():
 def test_unknown_mode_or_incomplete_tsim_deck_is_refused(tmp_path):
     for mode, expected in (
         ("tsim", "insim: required"),
-        ("fly", "mode = 'fly': unknown mode (expected one of: propagate, team, sweep, tom, tsim)"),
+        ("fly", "mode = 'fly': unknown mode (expected one of: propagate, team, sweep, tom, tsim, rendezvous)"),
     ):
         deck = tmp_path / f"{mode}.toml"
         deck.write_text(f'mode = "{mode}"\n', encoding="utf-8")

@@ -174,7 +174,7 @@ def test_unreadable_decks(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text('mode = "fly"\n', encoding="utf-8")
     assert validate_path(bad) == [
-        f"{bad}: mode = 'fly': unknown mode (expected one of: propagate, team, sweep, tom, tsim)"
+        f"{bad}: mode = 'fly': unknown mode (expected one of: propagate, team, sweep, tom, tsim, rendezvous)"
     ]
 
 
@@ -204,6 +204,8 @@ def test_validate_command_lists_every_problem(tmp_path):
     def mode(d: str) -> str:
         if "_tsim" in Path(d).name:
             return "tsim"
+        if d.endswith("_rendezvous.toml"):
+            return "rendezvous"
         return next((v for k, v in kind.items() if d.endswith(k)), "propagate")
 
     expected = [f"ok: {d} ({mode(d)})" for d in decks]

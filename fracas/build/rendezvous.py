@@ -94,6 +94,12 @@ def _reference(deck: RendezvousDeck, which: str, tdeck, t_out: np.ndarray):
     return states, phi, mu, problem
 
 
+def _is_two_body(problem) -> bool:
+    """Point-mass, ballistic, one centre: the conic is the exact reference."""
+    m = problem.model
+    return not (m.third_bodies or m.j2 or m.srp or m.thrust or m.n_impulses or m.change_primary_at_soi)
+
+
 def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
     """The study of a validated rendezvous deck (module docstring); DeckError / ConfigError
     (one line, naming the field) for what the schema cannot see."""
@@ -110,7 +116,13 @@ def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
             "expected the target's epoch at or before the chaser's"
         )
     xa, phia, mu, prob_a = _reference(deck, "chaser", da, times)
-    xt, phit, _, _ = _reference(deck, "target", dt, times + max(shift, 0.0))
+    xt, phit, _, prob_t = _reference(deck, "target", dt, times + max(shift, 0.0))
+    two_body = _is_two_body(prob_a) and _is_two_body(prob_t)
+    if deck.single_runs.dynamics == "two_body" and not two_body:
+        raise DeckError(
+            f'{deck.source_path}: single_runs.dynamics = "two_body": a trajectory deck has third bodies, J2, SRP, '
+            'thrust or impulses; expected point-mass ballistic references (or dynamics = "linear")'
+        )
     # the first step: Phi(t_0, t_0) = I (the a priori holds at t_0 = 0)
     phia[0] = np.eye(6)
     phit[0] = np.eye(6)
@@ -200,6 +212,7 @@ def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
         length_unit=deck.units,
         km_per_unit=km,
         epoch_et_s=float(prob_a.epoch_et_s),
+        two_body=two_body,
     )
 
 

@@ -113,6 +113,9 @@ def _initial_state(deck: TrajectoryDeck, mu_centre: float) -> tuple[np.ndarray, 
     if st.cartesian is not None:
         r = np.asarray(st.cartesian.r_km, dtype=np.float64)
         v = np.asarray(st.cartesian.v_km_s, dtype=np.float64)
+    elif st.oem is not None:  # read from the OEM at validation (fracas.io.ccsds), ICRF axes
+        r = np.asarray(st.oem.r_km, dtype=np.float64)
+        v = np.asarray(st.oem.v_km_s, dtype=np.float64)
     elif st.elements is not None:
         e = st.elements
         if e.mean_anomaly_deg is not None:

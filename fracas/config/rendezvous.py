@@ -35,7 +35,10 @@ compared on one page::
     [[maneuver]]  name, time_min, arrival_min: an intercept maneuver solved on the
                 estimated states (chaser arrives at the target's position at arrival_min);
                 its uncertainty from knowledge errors (R-649 Fig. II-18)
-    [single_runs] runs (0: none), seed, keep (runs stored in full in the results file)
+    [single_runs] runs (0: none), seed, keep (runs stored in full in the results file),
+                dynamics = "auto" | "linear" | "two_body" (true and estimated states flown on
+                their conics with the nonlinear measurement models: the TSIM check of the
+                linear analysis; point-mass ballistic references only)
     [output]    results = "out/<deck>.h5", plot = "out/<deck>.png"
 """
 
@@ -209,7 +212,13 @@ class Maneuver(_Section):
 
 
 class SingleRuns(_Section):
+    """Single runs: how many, the seed, how many to keep in full, and how they fly: "linear"
+    (errors carried by the reference STMs), "two_body" (true and estimated states on their
+    conics, nonlinear measurements; point-mass ballistic references only) or "auto" (two_body
+    when the references allow it)."""
+
     runs: Annotated[int, Field(ge=0, le=100_000)] = 0
+    dynamics: Literal["auto", "linear", "two_body"] = "auto"
     seed: Annotated[int, Field(ge=0, lt=2**31)] = 1
     keep: Annotated[int, Field(ge=0, le=1000)] = 10
 

@@ -13,6 +13,9 @@ rad.  No JAX here.  Layout (every section but ``[epoch]``, ``[initial_state]``,
       [initial_state.elements]   a_km, e, i_deg, raan_deg, argp_deg,
                                  mean_anomaly_deg | true_anomaly_deg
       [initial_state.spherical]  r_km, lat_deg, lon_deg, v_km_s, gamma_deg, sigma_deg
+      [initial_state.oem]        path = "x.oem", at = "start" | "end" | ISO TDB epoch
+                                 (a CCSDS OEM record; [epoch] and centre may then be left
+                                 out: docs/exchange.md)
     [spacecraft]      mass_kg, area_m2 = 0, cr = 1
     [propulsion]      power_source = "solar" | "nuclear", power_kw, decay_days (nuclear),
                       efficiency, exhaust_velocity_km_s | isp_s, thrust_scale = 1
@@ -51,6 +54,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import difflib
+import functools
 import hashlib
 import json
 import math
@@ -70,6 +74,7 @@ from pydantic import (
     PlainValidator,
     PrivateAttr,
     ValidationError,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
@@ -77,7 +82,7 @@ from pydantic import (
 from fracas.config.limits import Limits, count_text
 from fracas.constants import BODIES, DAY_S
 from fracas.errors import ConfigError, DeckError
-from fracas.timescales import calendar_to_et, epoch_to_et
+from fracas.timescales import calendar_to_et, epoch_to_et, et_to_calendar
 
 __all__ = [
     "TrajectoryDeck",
@@ -311,21 +316,102 @@ class Spherical(_Section):
     sigma_deg: float
 
 
+def _oem_at(v: Any) -> str:
+    if isinstance(v, str) and v.strip().lower() in ("start", "end"):
+        return v.strip().lower()
+    try:
+        return _iso_value(v)
+    except ValueError:
+        raise ValueError('must be "start", "end" or an ISO calendar date such as "2030-01-01T00:00:00" (TDB)') from None
+
+
+class OemState(_Section):
+    """Initial state read from a CCSDS OEM (``fracas.io.ccsds``, docs/exchange.md): the record
+    at ``at`` ("start", "end" or an ISO TDB epoch; default the deck's ``[epoch]``, else "start"),
+    or the OEM's own interpolation between records.  ``path`` is relative to the deck's folder.
+    ``[epoch]`` and ``initial_state.centre`` may then be left out (they come from the OEM); the
+    state read is in ``r_km``, ``v_km_s`` (ICRF axes) after validation."""
+
+    path: Annotated[str, Field(min_length=1)]
+    at: Annotated[str, PlainValidator(_oem_at)] | None = None
+    _r_km: tuple[float, ...] = PrivateAttr(())
+    _v_km_s: tuple[float, ...] = PrivateAttr(())
+    _et: float = PrivateAttr(math.nan)
+    _how: str = PrivateAttr("")
+
+    @property
+    def r_km(self) -> list[float]:
+        return list(self._r_km)
+
+    @property
+    def v_km_s(self) -> list[float]:
+        return list(self._v_km_s)
+
+    @property
+    def record(self) -> str:
+        """Which record was taken ("record 1 of segment 1", "interpolated (HERMITE 7) ...")."""
+        return self._how
+
+
+def _oem_file(path: str, source: str | None):
+    """The OEM a deck names (relative to the deck's folder), read once per file version."""
+    p = Path(path).expanduser()
+    if not p.is_absolute() and source and not source.startswith("<"):
+        p = Path(source).parent / p
+    try:
+        st = p.stat()
+        key = (str(p), st.st_mtime_ns, st.st_size)
+    except OSError:
+        key = (str(p), 0, 0)
+    return _read_oem_cached(*key)
+
+
+@functools.lru_cache(maxsize=16)
+def _read_oem_cached(path: str, _mtime: int, _size: int):
+    from fracas.io.ccsds import read_oem
+
+    return read_oem(path)
+
+
+def _oem_sample(oem_data: dict, at: Any, source: str | None):
+    """(et, r, v, segment, how) of the OEM a deck names; FieldProblem on initial_state.oem."""
+    from fracas.errors import FracasError
+    from fracas.io.ccsds import sample_oem
+
+    path = oem_data.get("path")
+    try:
+        oem = _oem_file(path, source)
+    except FracasError as exc:
+        raise FieldProblem(("initial_state", "oem", "path"), path, str(exc)) from None
+    try:
+        return sample_oem(oem, at)
+    except FracasError as exc:
+        shown = at if isinstance(at, str) else f"{et_to_calendar(at, 6)} TDB ([epoch])"
+        raise FieldProblem(("initial_state", "oem", "at"), _Given(shown), str(exc)) from None
+
+
 class InitialState(_Section):
     centre: BodyName
     frame: Literal["EME2000", "ECLIPJ2000", "BODY_EQUATOR"] = "EME2000"
     cartesian: Cartesian | None = None
     elements: Elements | None = None
     spherical: Spherical | None = None
+    oem: OemState | None = None
 
     @model_validator(mode="after")
     def _one_table(self) -> InitialState:
-        _exactly_one(self, ("cartesian", "elements", "spherical"), what="the tables ")
+        tables = ("cartesian", "elements", "spherical")
+        if self.oem is None:
+            _exactly_one(self, tables, what="the tables ")
+        elif any(getattr(self, k) is not None for k in tables):
+            _exactly_one(self, (*tables, "oem"), what="the tables ")
+        if self.oem is not None and "frame" in self.model_fields_set and self.frame != "EME2000":
+            raise FieldProblem("frame", self.frame, "the OEM gives the axes (ICRF/EME2000); leave frame out")
         return self
 
     @property
     def kind(self) -> str:
-        return next(k for k in ("cartesian", "elements", "spherical") if getattr(self, k) is not None)
+        return next(k for k in ("cartesian", "elements", "spherical", "oem") if getattr(self, k) is not None)
 
 
 class Spacecraft(_Section):
@@ -575,6 +661,60 @@ class TrajectoryDeck(SourcedDeck):
     stop: Stop
     output: Output = Output()
     limits: Limits = Limits()
+
+    @model_validator(mode="before")
+    @classmethod
+    def _from_oem(cls, data: Any, info: ValidationInfo) -> Any:
+        """With ``[initial_state.oem]``: ``[epoch]`` and ``initial_state.centre`` from the OEM when left out."""
+        ist = data.get("initial_state") if isinstance(data, dict) else None
+        oem = ist.get("oem") if isinstance(ist, dict) else None
+        if not isinstance(oem, dict) or not isinstance(oem.get("path"), str) or not oem["path"]:
+            return data
+        if "epoch" in data and "centre" in ist:
+            return data
+        try:
+            at = _oem_at(oem["at"]) if "at" in oem else "start"
+        except ValueError:
+            return data  # the field's own validation reports it
+        if "at" not in oem and "epoch" in data:
+            try:
+                at = Epoch.model_validate(data["epoch"]).et
+            except ValidationError:
+                return data
+        source = (info.context or {}).get("source") if info is not None else None
+        et, _, _, seg, _ = _oem_sample(oem, at, source)
+        data = dict(data)
+        if "epoch" not in data:
+            data["epoch"] = {"iso": et_to_calendar(et, 9)}
+        if "centre" not in ist:
+            data["initial_state"] = {**ist, "centre": seg.centre}
+        return data
+
+    @model_validator(mode="after")
+    def _oem_state(self, info: ValidationInfo) -> TrajectoryDeck:
+        """Read the initial state of ``[initial_state.oem]`` at the deck's epoch."""
+        source = (info.context or {}).get("source") if info is not None else None
+        st = self.initial_state
+        if st.oem is None:
+            return self
+        at = st.oem.at if st.oem.at is not None else self.epoch.et
+        et, r, v, seg, how = _oem_sample(st.oem.model_dump(), at, source)
+        if abs(et - self.epoch.et) > 1e-6:
+            raise FieldProblem(
+                ("initial_state", "oem", "at"),
+                st.oem.at,
+                f"is {et_to_calendar(et, 6)} TDB but [epoch] is {et_to_calendar(self.epoch.et, 6)} TDB: "
+                "they must agree (or leave one out)",
+            )
+        if seg.centre != st.centre:
+            raise FieldProblem(
+                ("initial_state", "centre"),
+                st.centre,
+                f"the OEM's segment at that epoch has CENTER_NAME = {seg.centre.upper()}: they must agree",
+            )
+        st.oem._r_km, st.oem._v_km_s = tuple(map(float, r)), tuple(map(float, v))
+        st.oem._et, st.oem._how = float(et), how
+        return self
 
     @property
     def primary(self) -> str:
@@ -1035,7 +1175,7 @@ def parse_sourced(text: str, source: str, cls: type[SourcedDeck]) -> SourcedDeck
     data = load_toml(text, source)
     _wrong_kind(data, source, cls)
     try:
-        deck = cls.model_validate(data)
+        deck = cls.model_validate(data, context={"source": source})
     except ValidationError as exc:
         raise deck_error(validation_problems(exc, source, cls, data)) from None
     except RecursionError:  # defensive: load_toml bounds the nesting
@@ -1086,14 +1226,21 @@ def trajectory_hash(deck) -> str:
     The canonical form is the validated model as JSON (defaults filled in, floats in
     shortest round-trip form, keys sorted, no whitespace) behind a version prefix, so
     comments, layout, key order, ``7000`` vs ``7000.0``, a default written out or left
-    implicit and the file's name or place do not change the hash; any changed value does.
+    implicit and the file's name or place do not change the hash; any changed value does
+    (with ``[initial_state.oem]``, the state read from the OEM counts too).
     Every section counts (title and ``[output]`` included): the file is tied to exactly
     the deck it was built from (FRACAS writes ERTRAJ at the head of the STM tape).  The
     ``mode`` line and ``[limits]`` do not count (they say what to do with the trajectory and
     how big a run may get, not what the trajectory is).
     """
+    dump = deck.model_dump(mode="json", exclude={"mode", "limits"})
+    oem = deck.initial_state.oem
+    if oem is not None:  # the state read from the OEM counts, not only the file's name
+        dump["initial_state"]["oem"]["state"] = [*oem.r_km, *oem.v_km_s]
+    else:  # a deck without [initial_state.oem] keeps the hash it had before the option existed
+        dump["initial_state"].pop("oem", None)
     body = json.dumps(
-        deck.model_dump(mode="json", exclude={"mode", "limits"}),
+        dump,
         sort_keys=True,
         separators=(",", ":"),
         ensure_ascii=True,

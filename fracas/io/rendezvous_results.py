@@ -5,7 +5,8 @@ Layout (every dataset carries ``units`` and ``data_sha256``)::
 
     /                          file_kind = "fracas-rendezvous-results", schema_version, provenance
     /rendezvous                attrs: title, source, epoch_et_s (TDB s past J2000), centre,
-                               chaser, target, length_unit, km_per_unit, n_runs, seed
+                               chaser, target, length_unit, km_per_unit, n_runs, seed,
+                               run_dynamics ("linear" | "two_body")
       roles (R,)               "solve_for" | "consider" | "ignore" (axis 0 of the per-role arrays)
       labels, units (n,)       [chaser r, v; target r, v; biases] and their units
       times_s (K,)             s, events from the chaser's epoch
@@ -20,7 +21,8 @@ Layout (every dataset carries ``units`` and ``data_sha256``)::
                                (R, J, 3, 3) km^2/s^2
       single_runs/             (when runs were made) errors (R, keep, K, n), maneuver_errors
                                (R, N, J, 3) km/s, envelope_1sigma, envelope_3sigma (R,) and
-                               their standard errors envelope_1sigma_se, envelope_3sigma_se
+                               their standard errors envelope_1sigma_se, envelope_3sigma_se, rms (R, K, 6)
+                               the runs' sample RMS (km, km/s; columns attr)
 """
 
 from __future__ import annotations
@@ -40,6 +42,14 @@ __all__ = ["RENDEZVOUS_SCHEMA", "write_rendezvous_results", "read_rendezvous_res
 
 RENDEZVOUS_SCHEMA = 1
 FILE_KIND = "fracas-rendezvous-results"
+_RMS_COLUMNS = (
+    "chaser_position",
+    "chaser_velocity",
+    "target_position",
+    "target_velocity",
+    "relative_position",
+    "relative_velocity",
+)
 
 
 def write_rendezvous_results(path: str | os.PathLike, product: RendezvousProduct) -> Path:
@@ -58,6 +68,7 @@ def write_rendezvous_results(path: str | os.PathLike, product: RendezvousProduct
         g.attrs["km_per_unit"] = float(product.km_per_unit)
         g.attrs["n_runs"] = int(product.n_runs)
         g.attrs["seed"] = int(product.seed)
+        g.attrs["run_dynamics"] = str(product.run_dynamics)
         write_strings(g, "roles", product.roles)
         write_strings(g, "labels", product.labels)
         write_strings(g, "units", product.units)
@@ -83,6 +94,13 @@ def write_rendezvous_results(path: str | os.PathLike, product: RendezvousProduct
             write(s, "maneuver_errors", np.asarray(product.run_maneuver_errors, np.float64), "km/s")
             write(s, "envelope_1sigma", np.asarray(product.envelope_1sigma, np.float64), "1")
             write(s, "envelope_3sigma", np.asarray(product.envelope_3sigma, np.float64), "1")
+            write(
+                s,
+                "rms",
+                np.asarray(product.run_rms, np.float64),
+                "km, km/s",
+                columns=" ".join(_RMS_COLUMNS),
+            )
             write(s, "envelope_1sigma_se", np.asarray(product.envelope_1sigma_se, np.float64), "1")
             write(s, "envelope_3sigma_se", np.asarray(product.envelope_3sigma_se, np.float64), "1")
     return p
@@ -138,11 +156,13 @@ def read_rendezvous_results(path: str | os.PathLike) -> RendezvousProduct:
                 reset_times_s=arr(g, "reset_times_s"),
                 n_runs=int(a["n_runs"]),
                 seed=int(a["seed"]),
+                run_dynamics=str(a.get("run_dynamics", "")),
                 run_errors=arr(runs, "errors") if runs is not None else None,
                 run_maneuver_errors=arr(runs, "maneuver_errors") if runs is not None else None,
                 envelope_1sigma=arr(runs, "envelope_1sigma") if runs is not None else None,
                 envelope_3sigma=arr(runs, "envelope_3sigma") if runs is not None else None,
                 envelope_1sigma_se=arr(runs, "envelope_1sigma_se") if runs is not None else None,
+                run_rms=arr(runs, "rms") if runs is not None else None,
                 envelope_3sigma_se=arr(runs, "envelope_3sigma_se") if runs is not None else None,
                 length_unit=str(a["length_unit"]),
                 km_per_unit=float(a["km_per_unit"]),

@@ -16,7 +16,9 @@ import numpy as np
 
 from fracas.products import RendezvousProduct
 
-__all__ = ["rms_table", "summary_text", "plot_rendezvous", "report_times"]
+__all__ = ["rms_table", "summary_text", "plot_rendezvous", "report_times", "run_consistency"]
+
+_GROUPS = ("chaser_r", "chaser_v", "target_r", "target_v", "relative_r", "relative_v")
 
 _ROLE = {"solve_for": "optimum", "consider": "Schmidt", "ignore": "Apollo"}
 
@@ -64,6 +66,28 @@ def _n(x: float, width: int) -> str:
         txt = f"{x:.0f}"
         return f"{txt:>{width}}" if len(txt) < width else f"{x:>{width}.2g}"
     return f"{x:>{width}.3g}"
+
+
+def run_consistency(product: RendezvousProduct) -> list[tuple[str, float, float, str]]:
+    """Per role: (role, worst ratio of the runs' sample RMS to the TEAM RMS, its 5-sigma
+    bound, verdict "consistent" | "linear analysis does not hold"), over the six RMS groups
+    at every mark time.  The bound 5 sqrt(1/(2N)) is five standard errors of a sample RMS
+    ratio when one component dominates the magnitude (the largest such error)."""
+    if product.run_rms is None or product.n_runs < 2:
+        return []
+    tt = rms_table(product)
+    marked = np.any(product.marks, axis=1)
+    bound = 5.0 * np.sqrt(1.0 / (2.0 * product.n_runs))
+    out = []
+    for r, role in enumerate(product.roles):
+        team = np.stack([tt[g][r] for g in _GROUPS], axis=-1)[marked]
+        runs = product.run_rms[r][marked]
+        ok = team > 0.0
+        ratio = np.where(ok, runs / np.where(ok, team, 1.0), 1.0)
+        worst = float(ratio.flat[np.argmax(np.abs(ratio - 1.0))])
+        verdict = "consistent" if abs(worst - 1.0) <= bound else "linear analysis does not hold"
+        out.append((role, worst, bound, verdict))
+    return out
 
 
 def summary_text(product: RendezvousProduct, width: int = 80) -> str:
@@ -117,8 +141,9 @@ def summary_text(product: RendezvousProduct, width: int = 80) -> str:
                 row += "  (intercept did not converge)"
             lines.append(row[:width])
     if product.n_runs > 0 and product.envelope_1sigma is not None:
-        lines += ["", f"Single runs: {product.n_runs} per role (seed {product.seed}); share of error components"]
-        lines.append("inside the true sigma envelopes (Gaussian: 68.27 % and 99.73 %):")
+        how = {"two_body": "flown on the conics", "linear": "linear"}.get(product.run_dynamics, "")
+        lines += ["", f"Single runs: {product.n_runs} per role, {how} (seed {product.seed}); share of errors"]
+        lines.append("inside TEAM's true sigma envelopes (Gaussian: 68.27 % and 99.73 %):")
         for r, role in enumerate(product.roles):
             se1 = product.envelope_1sigma_se[r] if product.envelope_1sigma_se is not None else np.nan
             se3 = product.envelope_3sigma_se[r] if product.envelope_3sigma_se is not None else np.nan
@@ -126,13 +151,18 @@ def summary_text(product: RendezvousProduct, width: int = 80) -> str:
                 f"  {_ROLE.get(role, role):<8} 1 sigma {100 * product.envelope_1sigma[r]:6.2f} % (SE {100 * se1:.2f})"
                 f"   3 sigma {100 * product.envelope_3sigma[r]:6.2f} % (SE {100 * se3:.2f})"
             )
+        rows = run_consistency(product)
+        if rows:
+            lines.append("runs' sample RMS / TEAM RMS, worst over the marks (6 groups; bound 5 SE):")
+            for role, worst, bound, verdict in rows:
+                lines.append(f"  {_ROLE.get(role, role):<8} {worst:8.3g}  (1 +- {bound:.2f})  {verdict}")
     return "\n".join(line[:width] for line in lines)
 
 
 def plot_rendezvous(product: RendezvousProduct, path: str | Path) -> list[Path]:
     """One PNG: RMS chaser, target and relative position errors and the relative velocity
-    error against time for each role (true solid, filter's belief dashed), resets and
-    maneuvers marked, and the first kept single run's error magnitudes as dots."""
+    error against time for each role (TEAM's true RMS solid, the filter's belief dashed), the
+    single runs' sample RMS as dots, resets and maneuvers marked."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -152,21 +182,14 @@ def plot_rendezvous(product: RendezvousProduct, path: str | Path) -> list[Path]:
         ("relative_r", f"relative position ({u})", None),
         ("relative_v", f"relative velocity ({vu})", None),
     )
-    errs = product.run_errors
-    for ax, (key, title, sl) in zip(axes.ravel(), panels):
+    for ax, (key, title, _sl) in zip(axes.ravel(), panels):
         for r, role in enumerate(product.roles):
             c = f"C{r}"
             ax.semilogy(t, tt[key][r] * f, "-", color=c, lw=1.4, label=f"{_ROLE.get(role, role)} (true RMS)")
             belief = ta[key][r] * f
             ax.semilogy(t, np.where(belief > 0.0, belief, np.nan), "--", color=c, lw=0.9, alpha=0.8)
-            if errs is not None and errs.shape[1] > 0:
-                e = errs[r, 0]
-                if key == "relative_r":
-                    mag = np.linalg.norm(e[:, 6:9] - e[:, 0:3], axis=1)
-                elif key == "relative_v":
-                    mag = np.linalg.norm(e[:, 9:12] - e[:, 3:6], axis=1)
-                else:
-                    mag = np.linalg.norm(e[:, sl], axis=1)
+            if product.run_rms is not None:
+                mag = product.run_rms[r][:, _GROUPS.index(key)]
                 ax.semilogy(t, np.where(mag > 0.0, mag * f, np.nan), ".", color=c, ms=2.5, alpha=0.6)
         for ts in product.reset_times_s:
             ax.axvline(ts / 60.0, color="0.6", lw=0.8, ls=":")
@@ -180,7 +203,8 @@ def plot_rendezvous(product: RendezvousProduct, path: str | Path) -> list[Path]:
     axes[0, 0].legend(fontsize=7, loc="best")
     fig.suptitle(
         f"{(product.title or Path(product.source).name)[:90]}\n"
-        "solid: true RMS; dashed: the filter's own belief; dots: one single run; dotted lines: resets",
+        f"solid: TEAM true RMS; dashed: the filter's own belief; dots: sample RMS of {product.n_runs} single runs; "
+        "dotted lines: resets",
         fontsize=9,
     )
     fig.tight_layout()

@@ -1,0 +1,62 @@
+"""Rendezvous results file (fracas.io.rendezvous_results) and report (fracas.report.rendezvous).
+
+References: the written product itself (the file must give back every array bit for bit);
+the 80-column rule for the terminal summary; the documented layout (file_kind, units)."""
+
+import h5py
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from fracas.cli import main
+from fracas.errors import ResultsFileError
+from fracas.io.rendezvous_results import read_rendezvous_results
+from fracas.pipeline import run_rendezvous
+from fracas.report.rendezvous import plot_rendezvous, summary_text
+
+SMALL = "tests/data/rendezvous_small.toml"
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    out = tmp_path_factory.mktemp("rdv") / "small.h5"
+    product, path = run_rendezvous(SMALL, out)
+    return product, path
+
+
+def test_file_gives_back_the_product(written):
+    product, path = written
+    back = read_rendezvous_results(path)
+    for name in ("times_s", "P_true", "P_assumed", "P_true_minus", "maneuver_cov_true", "run_errors", "run_rms"):
+        assert np.array_equal(getattr(back, name), getattr(product, name)), name
+    assert back.roles == product.roles and back.labels == product.labels
+    assert back.run_dynamics == "linear" and back.n_runs == 20
+    with h5py.File(path, "r") as f:
+        assert f.attrs["file_kind"] == "fracas-rendezvous-results"
+        assert f["rendezvous/P_true"].attrs["units"] == "labels' units^2"
+
+
+def test_summary_fits_80_columns_and_names_the_roles(written):
+    product, _ = written
+    text = summary_text(product)
+    assert max(len(line) for line in text.splitlines()) <= 80
+    for word in ("optimum", "Apollo", "TPI", "Single runs"):
+        assert word in text
+
+
+def test_plot_and_report_command(written, tmp_path):
+    product, path = written
+    assert plot_rendezvous(product, tmp_path / "p.png")[0].stat().st_size > 10_000
+    r = CliRunner().invoke(main, ["report", str(path), "--plot", str(tmp_path / "q.png")])
+    assert r.exit_code == 0, r.output
+    assert "Maneuver error" in r.output and (tmp_path / "q.png").exists()
+
+
+def test_not_a_rendezvous_file(tmp_path):
+    p = tmp_path / "x.h5"
+    with h5py.File(p, "w") as f:
+        f.attrs["file_kind"] = "fracas-team-results"
+    with pytest.raises(ResultsFileError, match="expected 'fracas-rendezvous-results'"):
+        read_rendezvous_results(p)
+    with pytest.raises(ResultsFileError, match="no such results file"):
+        read_rendezvous_results(tmp_path / "none.h5")

@@ -738,6 +738,7 @@ def run_rendezvous(
         envelope_3sigma=env3,
         envelope_1sigma_se=se1,
         run_rms=rms,
+        reference_sources=list(study.reference_sources),
         envelope_3sigma_se=se3,
         length_unit=study.length_unit,
         km_per_unit=study.km_per_unit,

@@ -620,7 +620,8 @@ class RendezvousProduct:
     (R, keep, K, n) the kept runs' estimation errors, run_maneuver_errors (R, n_runs, J, 3)
     (km/s), envelope_1sigma / envelope_3sigma (R,) the fractions of single-run error
     components inside the true 1- and 3-sigma and their standard errors (_se, across
-    runs); run_dynamics: "linear" | "two_body" (how the runs flew); run_rms (R, K, 6)
+    runs); run_dynamics: "linear" | "two_body" (how the runs flew); reference_sources:
+    where each vehicle's reference came from ("integrated" or its STM file); run_rms (R, K, 6)
     the runs' sample RMS of chaser, target and relative position and velocity errors
     (km, km/s); length_unit / km_per_unit: the deck's unit
     for display; provenance: deck texts and versions."""
@@ -659,6 +660,7 @@ class RendezvousProduct:
     envelope_1sigma_se: np.ndarray | None = None
     envelope_3sigma_se: np.ndarray | None = None
     run_dynamics: str = ""
+    reference_sources: list[str] = field(default_factory=list)
     run_rms: np.ndarray | None = None
     length_unit: str = "km"
     km_per_unit: float = 1.0

@@ -3,8 +3,8 @@ deck's length unit, minutes and mrad become km, km/s, s and rad).
 
 * each vehicle's reference: its trajectory deck propagated with its STM over the study's
   event times (target times shifted by the epoch difference), or read from its STM file
-  (``stm_file``; built and written first when missing), each with its own transition
-  matrices;
+  (``stm_file``: read when it exists and was built from that trajectory deck, else
+  integrated and written there), each with its own transition matrices;
 * the event times: t = 0 (the a priori), every mark, reset and maneuver time;
 * the a priori: block-diagonal [chaser; target; biases] (the vehicles' errors start
   uncorrelated, R-649 Fig. II-4: G_0 = 0);
@@ -67,31 +67,71 @@ def _covariance(v, km: float) -> np.ndarray:
     return np.diag(np.r_[np.asarray(v.position_sigma), np.asarray(v.velocity_sigma)] * km) ** 2
 
 
-def _reference(deck: RendezvousDeck, which: str, tdeck, t_out: np.ndarray):
-    """(states (K, 6), step STMs (K, 6, 6), primaries, mu km^3/s^2) of one vehicle at t_out
-    (s from its own epoch), in line or from its STM file."""
+def _reference(deck: RendezvousDeck, which: str, tdeck, t_out: np.ndarray, marks: np.ndarray):
+    """(states (K, 6), step STMs (K, 6, 6), mu km^3/s^2, problem, source) of one vehicle at
+    t_out (s from its own epoch): from its STM file when the deck names one that exists
+    (checked against the trajectory deck's hash), else integrated in line, and then written
+    to the named STM file if there is one (so the next study reuses it)."""
+    from fracas.io.atomic import check_output_path
+    from fracas.io.stm_file import check_trajectory, read_stm_file, write_stm_file
+    from fracas.products import chain, time_indices
+
     problem = build_propagation(tdeck)
     bodies = problem.model.bodies
     centre = tdeck.initial_state.centre
     mu = float(np.asarray(problem.params.mu)[bodies.index(centre)])
-    lead = t_out[0] > 0.0
-    t_int = np.concatenate([[0.0], t_out]) if lead else t_out
-    traj, sens, status, failed_at = run_reference(problem, t_int, [])
-    if status != RunStatus.OK or int(traj.status) != 0:
-        raise ConfigError(
-            f"{deck.source_path}: {which}.trajectory: the reference failed at t = {failed_at / 60.0:.3f} min "
-            f"(integrator status {int(traj.status)}); expected a trajectory covering the study"
-        )
-    sl = slice(1, None) if lead else slice(None)
-    states = np.array(traj.x)[sl, :6]
-    phi = np.array(sens.stm_step)[sl, :6, :6]
-    prim = [bodies[int(i)] for i in np.asarray(traj.primary)[sl]]
+    v = getattr(deck, which)
+    stm_path = deck.resolve(v.stm_file) if v.stm_file else None
+    if stm_path is not None and stm_path.exists():
+        data = read_stm_file(stm_path, labels=[], times_s=t_out, epoch_et_s=float(problem.epoch_et_s))
+        check_trajectory(data, trajectory_hash(tdeck), stm_path, tdeck.source_path)
+        idx = time_indices(data, t_out)
+        phi = chain(data, t_out)[0][:, :6, :6]
+        states = np.asarray(data.states)[idx, :6]
+        prim = [data.primary[int(i)] for i in idx]
+        source = str(stm_path)
+    else:
+        if stm_path is not None:
+            check_output_path(stm_path, f"{which}.stm_file")
+        lead = t_out[0] > 0.0
+        t_int = np.concatenate([[0.0], t_out]) if lead else t_out
+        traj, sens, status, failed_at = run_reference(problem, t_int, [])
+        if status != RunStatus.OK or int(traj.status) != 0:
+            raise ConfigError(
+                f"{deck.source_path}: {which}.trajectory: the reference failed at t = {failed_at / 60.0:.3f} min "
+                f"(integrator status {int(traj.status)}); expected a trajectory covering the study"
+            )
+        sl = slice(1, None) if lead else slice(None)
+        states = np.array(traj.x)[sl, :6]
+        phi = np.array(sens.stm_step)[sl, :6, :6]
+        prim = [bodies[int(i)] for i in np.asarray(traj.primary)[sl]]
+        source = "integrated"
+        if stm_path is not None:
+            from dataclasses import replace
+
+            from fracas.build.reference import reference_product
+
+            ev = ["initial"] if lead else []
+            ev += ["measurement" if np.any(m) else "propagation" for m in marks]
+            if not lead:
+                ev[0] = "initial"
+            data = reference_product(
+                replace(problem, t_out=t_int, param_labels=()),
+                traj,
+                sens,
+                ev,
+                tdeck.source_text or "",
+                trajectory_hash(tdeck),
+                tdeck.source_path,
+            )
+            write_stm_file(stm_path, data)
+            source = f"integrated, written to {stm_path}"
     if any(p != centre for p in prim):
         raise ConfigError(
             f"{deck.source_path}: {which}.trajectory: the vehicle leaves {centre}'s sphere of influence "
             f"during the study; expected one centre"
         )
-    return states, phi, mu, problem
+    return states, phi, mu, problem, source
 
 
 def _is_two_body(problem) -> bool:
@@ -115,8 +155,8 @@ def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
             f"{deck.source_path}: target.trajectory: its epoch is {-shift:.1f} s after the chaser's; "
             "expected the target's epoch at or before the chaser's"
         )
-    xa, phia, mu, prob_a = _reference(deck, "chaser", da, times)
-    xt, phit, _, prob_t = _reference(deck, "target", dt, times + max(shift, 0.0))
+    xa, phia, mu, prob_a, src_a = _reference(deck, "chaser", da, times, marks)
+    xt, phit, _, prob_t, src_t = _reference(deck, "target", dt, times + max(shift, 0.0), marks)
     two_body = _is_two_body(prob_a) and _is_two_body(prob_t)
     if deck.single_runs.dynamics == "two_body" and not two_body:
         raise DeckError(
@@ -213,6 +253,7 @@ def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
         km_per_unit=km,
         epoch_et_s=float(prob_a.epoch_et_s),
         two_body=two_body,
+        reference_sources=(src_a, src_t),
     )
 
 

@@ -11,7 +11,9 @@ compared on one page::
     mode = "rendezvous"
     title = "..."
     units = "km" | "m" | "ft"     every length in this deck (velocities: that unit per s)
-    [chaser]    name, trajectory (a trajectory deck, relative to this deck), and its true
+    [chaser]    name, trajectory (a trajectory deck, relative to this deck), stm_file
+                (optional: the vehicle's STM file, read when it exists, else built from the
+                trajectory deck over the study's times and written), and its true
                 a-priori: position_sigma (3) + velocity_sigma (3), or covariance (6 x 6, in
                 units^2, units^2/s, units^2/s^2); filter_position_sigma / filter_velocity_sigma
                 (3 each, optional): the diagonal W load the "ignore" role's filter starts
@@ -88,6 +90,7 @@ class Vehicle(_Section):
 
     name: str
     trajectory: str
+    stm_file: str | None = None
     position_sigma: Sigma3 | None = None
     velocity_sigma: Sigma3 | None = None
     covariance: Annotated[list[Row6], Field(min_length=6, max_length=6)] | None = None

@@ -8,6 +8,7 @@ Layout (every dataset carries ``units`` and ``data_sha256``)::
                                chaser, target, length_unit, km_per_unit, n_runs, seed,
                                run_dynamics ("linear" | "two_body")
       roles (R,)               "solve_for" | "consider" | "ignore" (axis 0 of the per-role arrays)
+      reference_sources (2,)   where the chaser's and the target's references came from
       labels, units (n,)       [chaser r, v; target r, v; biases] and their units
       times_s (K,)             s, events from the chaser's epoch
       marks (K, 4)             int 0/1: range, range_rate, los_beta, los_theta measured
@@ -70,6 +71,7 @@ def write_rendezvous_results(path: str | os.PathLike, product: RendezvousProduct
         g.attrs["seed"] = int(product.seed)
         g.attrs["run_dynamics"] = str(product.run_dynamics)
         write_strings(g, "roles", product.roles)
+        write_strings(g, "reference_sources", product.reference_sources)
         write_strings(g, "labels", product.labels)
         write_strings(g, "units", product.units)
         write(g, "times_s", np.asarray(product.times_s, np.float64), "s")
@@ -136,6 +138,7 @@ def read_rendezvous_results(path: str | os.PathLike) -> RendezvousProduct:
                 chaser_name=str(a["chaser"]),
                 target_name=str(a["target"]),
                 roles=strs(g, "roles"),
+                reference_sources=strs(g, "reference_sources") if "reference_sources" in g else [],
                 labels=strs(g, "labels"),
                 units=strs(g, "units"),
                 times_s=arr(g, "times_s"),

@@ -102,6 +102,14 @@ def summary_text(product: RendezvousProduct, width: int = 80) -> str:
         f"{product.chaser_name} (chaser) and {product.target_name} (target) about the {product.centre}; "
         f"{int(np.any(product.marks, axis=1).sum())} mark times, {int(product.marks.sum())} marks, "
         f"{len(product.reset_times_s)} resets"[:width],
+        *(
+            [
+                f"references: {product.chaser_name} {product.reference_sources[0]}; "
+                f"{product.target_name} {product.reference_sources[1]}"
+            ]
+            if len(product.reference_sources) == 2
+            else []
+        ),
         "",
         f"RMS errors after each event ({u}, {vu}): true; 'belief' = the filter's own",
         f"{'t min':>6} {'filter':<8}{'chaser r':>9}{'v':>6}{'target r':>9}{'v':>6}"

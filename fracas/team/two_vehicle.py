@@ -116,7 +116,8 @@ class RendezvousStudy:
     noise_assumed / noise_true (4, 3): [sigma, fraction, floor] per kind (kind units);
     axes (3, 3): the LOS-angle sensor frame; P0_true (n, n) the true a priori; chaser_load
     (6,) or None: the ignore role's diagonal filter load (sigmas); roles: the target roles
-    to compute; two_body: both references are point-mass ballistic about the centre (the
+    to compute; reference_sources: where each vehicle's reference came from ("integrated",
+    an STM file path); two_body: both references are point-mass ballistic about the centre (the
     nonlinear single runs fly the conics exactly)."""
 
     title: str
@@ -144,6 +145,7 @@ class RendezvousStudy:
     km_per_unit: float = 1.0
     epoch_et_s: float = 0.0
     two_body: bool = False
+    reference_sources: tuple[str, str] = ("integrated", "integrated")
 
     @property
     def nb(self) -> int:

@@ -60,3 +60,29 @@ def test_not_a_rendezvous_file(tmp_path):
         read_rendezvous_results(p)
     with pytest.raises(ResultsFileError, match="no such results file"):
         read_rendezvous_results(tmp_path / "none.h5")
+
+
+def test_vehicle_stm_files_are_written_then_reused(tmp_path):
+    """Each vehicle's STM file (the two-vehicle study's 'own STM file'): a first run writes
+    both, a second reads them, and the covariances agree to 1e-12 relative (the file's step
+    matrices are the integration's own; chaining identity steps changes nothing)."""
+    from pathlib import Path
+
+    from fracas.config.rendezvous import parse_rendezvous_deck
+
+    text = Path(SMALL).read_text(encoding="utf-8")
+    text = text.replace(
+        'trajectory = "../../namelists/apollo12_lm_traj.toml"',
+        f'trajectory = "../../namelists/apollo12_lm_traj.toml"\nstm_file = "{tmp_path}/lm.h5"',
+    ).replace(
+        'trajectory = "../../namelists/apollo12_csm_traj.toml"',
+        f'trajectory = "../../namelists/apollo12_csm_traj.toml"\nstm_file = "{tmp_path}/csm.h5"',
+    )
+    deck = parse_rendezvous_deck(text, SMALL)
+    first, _ = run_rendezvous(deck, write_results=False)
+    assert (tmp_path / "lm.h5").exists() and (tmp_path / "csm.h5").exists()
+    assert first.reference_sources[0].startswith("integrated, written to")
+    second, _ = run_rendezvous(deck, write_results=False)
+    assert second.reference_sources == [f"{tmp_path}/lm.h5", f"{tmp_path}/csm.h5"]
+    scale = np.max(np.abs(first.P_true))
+    assert np.max(np.abs(second.P_true - first.P_true)) <= 1e-12 * scale

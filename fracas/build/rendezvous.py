@@ -7,7 +7,8 @@ deck's length unit, minutes and mrad become km, km/s, s and rad).
   integrated and written there), each with its own transition matrices;
 * the event times: t = 0 (the a priori), every mark, reset and maneuver time;
 * the a priori: block-diagonal [chaser; target; biases] (the vehicles' errors start
-  uncorrelated, R-649 Fig. II-4: G_0 = 0);
+  uncorrelated, R-649 Fig. II-4: G_0 = 0), or with the target's given relative to the
+  chaser's (``relative_a_priori``: E_T = E_A + E_rel, G_0 = E_A);
 * each maneuver's intercept solved on the reference states and its 3 x 12 sensitivity.
 """
 
@@ -200,6 +201,10 @@ def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
     P0 = np.zeros((12 + nb, 12 + nb))
     P0[:6, :6] = _covariance(deck.chaser, km)
     P0[6:12, 6:12] = _covariance(deck.target, km)
+    if deck.target.relative_a_priori:  # x_T = x_A + x_rel with x_rel independent of x_A
+        P0[6:12, 6:12] += P0[:6, :6]
+        P0[:6, 6:12] = P0[:6, :6]
+        P0[6:12, :6] = P0[:6, :6]
     for j, b in enumerate(biases):
         P0[12 + j, 12 + j] = b.sigma**2
     for which, C in (("chaser", P0[:6, :6]), ("target", P0[6:12, 6:12])):

@@ -18,7 +18,10 @@ compared on one page::
                 units^2, units^2/s, units^2/s^2); filter_position_sigma / filter_velocity_sigma
                 (3 each, optional): the diagonal W load the "ignore" role's filter starts
                 from (the Apollo filter's 10,000 ft / 10 fps), default the true a priori
-    [target]    name, trajectory, position_sigma + velocity_sigma or covariance, and
+    [target]    name, trajectory, position_sigma + velocity_sigma or covariance,
+                relative_a_priori = false (true: those are the errors of target - chaser,
+                independent of the chaser's, so the target's a priori is E_A + E_rel with
+                G_0 = E_A: a satellite ejected from the chaser, R-649 §II.E), and
                 roles = ["solve_for", "consider", "ignore"] (one case per role)
     [[bias]]    name, measurement (the kind it adds to, coefficient 1), sigma (the
                 measurement's deck unit: length, length/s or mrad), role = "consider" |
@@ -97,6 +100,7 @@ class Vehicle(_Section):
     filter_position_sigma: Sigma3 | None = None
     filter_velocity_sigma: Sigma3 | None = None
     roles: list[Role] | None = None
+    relative_a_priori: bool = False
 
     @model_validator(mode="after")
     def _a_priori(self) -> Vehicle:

@@ -241,6 +241,12 @@ def measurement_rows(study: RendezvousStudy) -> tuple[np.ndarray, np.ndarray, np
         axis=1,
     )
     rt = np.stack([np.asarray(noise_sigma(vals[:, i], *study.noise_true[i])) ** 2 for i in range(4)], axis=1)
+    # rows of kinds not measured at an event are never used: zero them (and give unit
+    # variances) so that a degenerate geometry there (zero range at a separation) cannot
+    # put NaN into the scan through 0 * NaN
+    m = study.marks.astype(bool)
+    H = np.where(m[:, :, None], H, 0.0)
+    ra, rt = np.where(m, ra, 1.0), np.where(m, rt, 1.0)
     return H, ra, rt, vals
 
 

@@ -29,6 +29,10 @@ demo: $(STAMP)
 	$(BIN)/fracas run namelists/near_earth_spiral_tom.toml
 	$(BIN)/fracas run namelists/near_earth_spiral_team.toml --quiet
 	$(BIN)/fracas run namelists/earth_mars_tsim.toml
+	$(BIN)/fracas run namelists/apollo12_rendezvous.toml
+	$(BIN)/fracas import-namelist namelists/legacy/earth_mars_team.nml -o out/imported_earth_mars_team.toml --force
+	$(BIN)/fracas validate out/imported_earth_mars_team.toml
+	$(BIN)/fracas export out/earth_mars_team.h5 --oem out/earth_mars_team.oem
 
 # the whole suite but the slow reference subset (< 10 min on CI's 2 cores); CI runs both
 test: $(STAMP)

@@ -321,7 +321,7 @@ def _build_oem(track: _Track, object_name: str, object_id: str, originator: str,
             "START_TIME": et_to_calendar(et[0], 6),
             "STOP_TIME": et_to_calendar(et[-1], 6),
         }
-        if n >= 2:
+        if n >= 2 and _dense_enough(et, r, v):
             meta["INTERPOLATION"] = "HERMITE"
             meta["INTERPOLATION_DEGREE"] = str(min(7, 2 * n - 1))
         epochs = _time(et)
@@ -348,6 +348,20 @@ def _comment_lines(comments: list[str]) -> str:
         for line in str(c).splitlines():
             out += f"COMMENT {line}\n"
     return out
+
+
+#: the largest record spacing, as a fraction of 2 pi r / |v| (an orbital period on a circular
+#: orbit), at which the OEM advertises Hermite interpolation: 1/20 of a period keeps degree-7
+#: Hermite interpolation of a conic at ~1e-9 relative; a coarser file (a TEAM run's
+#: measurement times, say) would be interpolated wildly by a reader, so it gets none
+DENSE_FRACTION = 0.05
+
+
+def _dense_enough(et: np.ndarray, r: np.ndarray, v: np.ndarray) -> bool:
+    """True when every record spacing is at most DENSE_FRACTION of 2 pi r/|v| at its ends."""
+    scale = 2.0 * np.pi * np.linalg.norm(r, axis=1) / np.maximum(np.linalg.norm(v, axis=1), 1e-300)
+    limit = DENSE_FRACTION * np.minimum(scale[:-1], scale[1:])
+    return bool(np.all(np.diff(et) <= limit))
 
 
 def write_oem(

@@ -664,6 +664,7 @@ def run_rendezvous(
     from fracas.team.two_vehicle import (
         envelope_rates,
         nonlinear_single_runs,
+        rms_histories,
         run_rendezvous_study,
         sample_rms,
         single_runs,
@@ -739,6 +740,8 @@ def run_rendezvous(
         envelope_1sigma_se=se1,
         run_rms=rms,
         reference_sources=list(study.reference_sources),
+        team_rms=np.stack(list(rms_histories(res, "true").values()), axis=-1),
+        assumed_rms=np.stack(list(rms_histories(res, "assumed").values()), axis=-1),
         envelope_3sigma_se=se3,
         length_unit=study.length_unit,
         km_per_unit=study.km_per_unit,

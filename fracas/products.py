@@ -621,7 +621,9 @@ class RendezvousProduct:
     (km/s), envelope_1sigma / envelope_3sigma (R,) the fractions of single-run error
     components inside the true 1- and 3-sigma and their standard errors (_se, across
     runs); run_dynamics: "linear" | "two_body" (how the runs flew); reference_sources:
-    where each vehicle's reference came from ("integrated" or its STM file); run_rms (R, K, 6)
+    where each vehicle's reference came from ("integrated" or its STM file); team_rms /
+    assumed_rms (R, K, 6) the RMS magnitudes of the true and assumed covariances after each
+    event in the same six groups as run_rms (km, km/s); run_rms (R, K, 6)
     the runs' sample RMS of chaser, target and relative position and velocity errors
     (km, km/s); length_unit / km_per_unit: the deck's unit
     for display; provenance: deck texts and versions."""
@@ -661,6 +663,8 @@ class RendezvousProduct:
     envelope_3sigma_se: np.ndarray | None = None
     run_dynamics: str = ""
     reference_sources: list[str] = field(default_factory=list)
+    team_rms: np.ndarray | None = None
+    assumed_rms: np.ndarray | None = None
     run_rms: np.ndarray | None = None
     length_unit: str = "km"
     km_per_unit: float = 1.0

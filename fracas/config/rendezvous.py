@@ -52,17 +52,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import Field, PositiveFloat, ValidationError, model_validator
+from pydantic import Field, PositiveFloat, model_validator
 
 from fracas.config.trajectory import (
     FieldProblem,
     SourcedDeck,
     _Section,
-    _strip_bom,
-    deck_error,
-    load_toml,
+    parse_sourced,
     read_deck_text,
-    validation_problems,
 )
 from fracas.errors import DeckError
 
@@ -293,15 +290,7 @@ class RendezvousDeck(SourcedDeck):
 
 def parse_rendezvous_deck(text: str, source: str = "<deck>") -> RendezvousDeck:
     """Validate rendezvous-deck TOML text; any problem -> one-line DeckError naming the field."""
-    text = _strip_bom(text)
-    data = load_toml(text, source)
-    try:
-        deck = RendezvousDeck.model_validate(data)
-    except ValidationError as exc:
-        raise deck_error(validation_problems(exc, source, RendezvousDeck, data)) from None
-    deck._source_path = source
-    deck._source_text = text
-    return deck
+    return parse_sourced(text, source, RendezvousDeck)
 
 
 def load_rendezvous_deck(path: str | Path) -> RendezvousDeck:

@@ -1150,6 +1150,8 @@ _KIND_NAMES = {
     "team": ("a TEAM deck", "fracas run"),
     "sweep": ("a sweep deck", "fracas sweep"),
     "tom": ("a TOM deck", "fracas run"),
+    "tsim": ("a TSIM deck", "fracas run"),
+    "rendezvous": ("a rendezvous deck", "fracas run"),
 }
 
 

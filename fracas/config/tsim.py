@@ -44,17 +44,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, PositiveFloat, PositiveInt, ValidationError, model_validator
+from pydantic import Field, PositiveFloat, PositiveInt, model_validator
 
 from fracas.config.trajectory import (
     FieldProblem,
     SourcedDeck,
     _Section,
-    _strip_bom,
-    deck_error,
-    load_toml,
+    parse_sourced,
     read_deck_text,
-    validation_problems,
 )
 from fracas.errors import DeckError
 
@@ -150,15 +147,7 @@ class TsimDeck(SourcedDeck):
 
 def parse_tsim_deck(text: str, source: str = "<deck>") -> TsimDeck:
     """Validate TSIM-deck TOML text; any problem -> one-line DeckError naming the field."""
-    text = _strip_bom(text)
-    data = load_toml(text, source)
-    try:
-        deck = TsimDeck.model_validate(data)
-    except ValidationError as exc:
-        raise deck_error(validation_problems(exc, source, TsimDeck, data)) from None
-    deck._source_path = source
-    deck._source_text = text
-    return deck
+    return parse_sourced(text, source, TsimDeck)
 
 
 def load_tsim_deck(path: str | Path) -> TsimDeck:

@@ -15,6 +15,9 @@ Layout (every dataset carries ``units`` and ``data_sha256``)::
       x_chaser, x_target (K, 6)  km, km/s about the centre (ICRF axes)
       P_true, P_assumed (R, K, n, n)              after each event's updates (labels' units^2)
       P_true_minus, P_assumed_minus (R, K, n, n)  before them
+      team_rms, assumed_rms (R, K, 6)  km, km/s: RMS magnitudes of the true / assumed covariance
+                               after each event: chaser, target and relative (E_R = E_A + E_T
+                               - G - G') position and velocity (columns attr)
       reset_times_s (Q,)       s, assumed-covariance resets
       timing                   JSON text (s)
       maneuvers/               names (J,), time_s, arrival_s (J,) s, dv_km_s (J, 3) km/s,
@@ -80,6 +83,8 @@ def write_rendezvous_results(path: str | os.PathLike, product: RendezvousProduct
         write(g, "x_target", np.asarray(product.x_target, np.float64), "km, km/s")
         for name in ("P_true", "P_assumed", "P_true_minus", "P_assumed_minus"):
             write(g, name, np.asarray(getattr(product, name), np.float64), "labels' units^2")
+        for name in ("team_rms", "assumed_rms"):
+            write(g, name, np.asarray(getattr(product, name), np.float64), "km, km/s", columns=" ".join(_RMS_COLUMNS))
         write(g, "reset_times_s", np.asarray(product.reset_times_s, np.float64).reshape(-1), "s")
         write(g, "timing", json.dumps(product.timing), "none", description="seconds")
         m = g.create_group("maneuvers")
@@ -157,6 +162,8 @@ def read_rendezvous_results(path: str | os.PathLike) -> RendezvousProduct:
                 maneuver_cov_true=arr(m, "cov_true"),
                 maneuver_cov_assumed=arr(m, "cov_assumed"),
                 reset_times_s=arr(g, "reset_times_s"),
+                team_rms=arr(g, "team_rms"),
+                assumed_rms=arr(g, "assumed_rms"),
                 n_runs=int(a["n_runs"]),
                 seed=int(a["seed"]),
                 run_dynamics=str(a.get("run_dynamics", "")),

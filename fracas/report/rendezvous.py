@@ -4,8 +4,9 @@ plot, from a :class:`fracas.products.RendezvousProduct`
 
 Everything is shown in the deck's length unit (ft and fps for the Apollo example, as in
 R-649).  "RMS" is the root of the trace of a 3 x 3 block (R-649's "statistical" curves):
-of the TRUE covariance unless marked "filter" (what the filter believes: its assumed
-covariance).  The relative covariance is E_R = E_A + E_T - G - G' (R-649 Eq. 17).
+of the TRUE covariance unless marked "belief" (what the filter believes: its assumed
+covariance); the run computed them (``team_rms``, ``assumed_rms``; the relative covariance
+is E_R = E_A + E_T - G - G', R-649 Eq. 17).
 """
 
 from __future__ import annotations
@@ -24,24 +25,10 @@ _ROLE = {"solve_for": "optimum", "consider": "Schmidt", "ignore": "Apollo"}
 
 
 def rms_table(product: RendezvousProduct, which: str = "true") -> dict[str, np.ndarray]:
-    """RMS magnitudes (R, K) in km and km/s after each event: chaser_r, chaser_v, target_r,
-    target_v, relative_r, relative_v."""
-    P = product.P_true if which == "true" else product.P_assumed
-    EA, ET, G = P[..., :6, :6], P[..., 6:12, 6:12], P[..., :6, 6:12]
-    ER = EA + ET - G - np.swapaxes(G, -1, -2)
-
-    def rms(E, s):
-        return np.sqrt(np.maximum(np.trace(E[..., s, s], axis1=-2, axis2=-1), 0.0))
-
-    r, v = slice(0, 3), slice(3, 6)
-    return {
-        "chaser_r": rms(EA, r),
-        "chaser_v": rms(EA, v),
-        "target_r": rms(ET, r),
-        "target_v": rms(ET, v),
-        "relative_r": rms(ER, r),
-        "relative_v": rms(ER, v),
-    }
+    """RMS magnitudes (R, K) in km and km/s after each event, as the run computed them:
+    chaser_r, chaser_v, target_r, target_v, relative_r, relative_v."""
+    rms = product.team_rms if which == "true" else product.assumed_rms
+    return {g: rms[..., i] for i, g in enumerate(_GROUPS)}
 
 
 def report_times(product: RendezvousProduct) -> list[int]:

@@ -46,7 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fracas import _jax  # noqa: F401  (float64 before any array exists)
-from fracas.filters.two_vehicle import masked_gain, relative_covariance, scalar_joseph
+from fracas.filters.two_vehicle import masked_gain, scalar_joseph
 from fracas.measurements.relative import RELATIVE_KINDS, noise_sigma, relative_measurement, vehicle_rows
 
 __all__ = [
@@ -545,7 +545,7 @@ def rms_histories(run: RendezvousRun, which: str = "true") -> dict[str, np.ndarr
     position and velocity (sqrt of the traces of E_A, E_T, E_R = E_A + E_T - G - G')."""
     P = run.P_true if which == "true" else run.P_assumed
     EA, ET, G = P[..., :6, :6], P[..., 6:12, 6:12], P[..., :6, 6:12]
-    ER = np.asarray(relative_covariance(EA, ET, G)) if EA.ndim == 2 else EA + ET - G - np.swapaxes(G, -1, -2)
+    ER = EA + ET - G - np.swapaxes(G, -1, -2)  # R-649 Eq. 17 (fracas.filters.two_vehicle.relative_covariance)
 
     def rms(E, sl):
         return np.sqrt(np.maximum(np.trace(E[..., sl, sl], axis1=-2, axis2=-1), 0.0))

@@ -20,13 +20,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracas.build.guidance import control_a_priori, guidance_specs, guidance_times
+from fracas.build.onboard import count_start_times, onboard_config
 from fracas.build.trajectory import Problem, build_propagation
 from fracas.config.limits import check_team_sizes
-from fracas.config.team import SIGMA_UNITS, APriori, TeamDeck, ThrustNoise
+from fracas.config.team import SIGMA_UNITS, APriori, TeamDeck, ThrustNoise, WhiteNoise
 from fracas.config.trajectory import BACKWARD_TEAM_PROBLEM, TrajectoryDeck, load_deck, trajectory_hash
 from fracas.constants import DAY_S
 from fracas.errors import ConfigError, DeckError
+from fracas.filters.apriori import shaped_covariance
 from fracas.filters.covariance import Layout
+from fracas.integrate.propagate import propagate
 from fracas.integrate.variational import THRUST_NOISE_LABELS
 from fracas.measurements import trakm
 from fracas.measurements.stations import DSN_STATIONS, Station
@@ -132,6 +135,54 @@ def _noise(tn: ThrustNoise) -> tuple[np.ndarray, np.ndarray]:
     return sig, tau
 
 
+def start_state(deck: TeamDeck, src: str, problem: Problem | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """(r km (3,), v km/s (3,), mu km^3/s^2): the reference state at the filter's start
+    (filter.start_days) relative to its primary, and that primary's gravitational parameter
+    (the shaped a-priori's pseudo measurements are evaluated there).  Integrates the
+    trajectory from its epoch (loading it when ``problem`` is None)."""
+    if problem is None:
+        _, problem = trajectory_problem(deck, src)
+    t0 = deck.filter.start_days * DAY_S
+    x, prim = np.asarray(problem.x0, np.float64), int(problem.model.primary)
+    if t0 > 0:
+        pr = dataclasses.replace(problem, sensitivities=False)
+        traj = propagate(pr.model, pr.params, pr.ephem, pr.epoch_et_s, pr.x0, np.array([0.0, t0]))
+        x, prim = np.asarray(traj.x, np.float64)[-1], int(np.asarray(traj.primary)[-1])
+        if not np.all(np.isfinite(x)):
+            raise _err(
+                src, "a_priori.shaped", None, f"the trajectory does not reach filter.start_days = {t0 / DAY_S:g}"
+            )
+    return x[:3], x[3:6], float(np.asarray(problem.params.mu)[prim])
+
+
+def _shape(P: np.ndarray, ap: APriori | None, state) -> np.ndarray:
+    """P with its 6x6 state block replaced by ``ap.shaped``'s correlated a-priori (UNF)."""
+    if ap is None or ap.shaped is None or P is None:
+        return P
+    sh = ap.shaped
+    r, v, mu = state
+    P = np.array(P, dtype=np.float64)
+    P[:6, :6] = np.asarray(
+        shaped_covariance(
+            r,
+            v,
+            mu,
+            sh.sigma_r_km,
+            sh.sigma_v_km_s,
+            sh.sigma_energy_km2_s2,
+            sh.sigma_h_km2_s,
+            sh.lv_crosstrack_sigma_r_km,
+            sh.lv_crosstrack_sigma_v_km_s,
+        )
+    )
+    return P
+
+
+def _white(pn: WhiteNoise, base: tuple[float, str]) -> tuple[float, str]:
+    q = base[0] if pn.white_acceleration_km2_s3 is None else float(pn.white_acceleration_km2_s3)
+    return q, base[1] if pn.direction is None else pn.direction
+
+
 def load_user_gain(spec: str, src: str) -> Callable:
     """Import ``module:function`` (FRACAS USRGAN); it must be written with jax.numpy."""
     mod, _, fn = spec.partition(":")
@@ -144,12 +195,13 @@ def load_user_gain(spec: str, src: str) -> Callable:
     return obj
 
 
-def study_numbers(deck: TeamDeck, src: str, nx: int, labels: list[str], nw: int, thrust: bool) -> dict:
+def study_numbers(deck: TeamDeck, src: str, nx: int, labels: list[str], nw: int, thrust: bool, state=None) -> dict:
     """The numbers of a study that its deck alone fixes (DATA), as build_case computes them:
     the diagonal a-priori covariances (assumed, with the ignore parameters at zero, and
     true; None without [a_priori] sigmas), the Gauss-Markov levels, the observations with
     their assumed sigmas, the true sigmas and the noise cell step.  ``labels``: the study's
-    parameters in layout order, the last ``nw`` of them ignore parameters.  Shared with
+    parameters in layout order, the last ``nw`` of them ignore parameters; ``state``: the
+    :func:`start_state` for a shaped a-priori (None: computed here when needed).  Shared with
     :func:`fracas.build.vary.derive_study` (a sweep's studies that differ only in numbers)."""
     gen = deck.gencov if (deck.gencov is not None and deck.gencov.enabled) else None
     sigma = {p.label: p.sigma for p in deck.parameter}
@@ -170,14 +222,24 @@ def study_numbers(deck: TeamDeck, src: str, nx: int, labels: list[str], nw: int,
         xs_t = _state_sigmas(gen.a_priori, nx) if (gen is not None and gen.a_priori is not None) else xs_a
         P0a = np.diag(np.concatenate([xs_a, p_sig_a]) ** 2)
         P0t = np.diag(np.concatenate([xs_t, p_sig_t]) ** 2)
+        ap_t = gen.a_priori if (gen is not None and gen.a_priori is not None) else deck.a_priori
+        if deck.a_priori.shaped is not None or ap_t.shaped is not None:
+            state = start_state(deck, src) if state is None else state
+            P0a, P0t = _shape(P0a, deck.a_priori, state), _shape(P0t, ap_t, state)
     sig_a, tau_a = _noise(deck.thrust_noise)
     sig_t, tau_t = _noise(gen.thrust_noise) if (gen is not None and gen.thrust_noise is not None) else (sig_a, tau_a)
     if (np.any(sig_a > 0) or np.any(sig_t > 0)) and not thrust:
         raise _err(src, "thrust_noise", None, "the trajectory deck has no thrust ([propulsion] and [[thrust_arc]])")
+    wq_a = _white(deck.process_noise, (0.0, "full"))
+    wq_t = _white(gen.process_noise, wq_a) if (gen is not None and gen.process_noise is not None) else wq_a
+    if gen is not None and gen.process_noise is not None and gen.process_noise.quadrature_step_hours is not None:
+        raise _err(
+            src, "gencov.process_noise.quadrature_step_hours", None, "set the quadrature step in [process_noise]"
+        )
     obs, tsig = [], []
     for t in deck.tracking:
         _, k = SIGMA_UNITS[t.type]
-        obs.append(trakm.Observation(t.type, tuple(t.stations), t.sigma * k))
+        obs.append(trakm.Observation(t.type, tuple(t.stations), t.sigma * k, *onboard_config(t)))
         tsig.append((gen.measurement_sigma.get(t.type, t.sigma) if gen is not None else t.sigma) * k)
     return {
         "P0_assumed": P0a,
@@ -188,6 +250,11 @@ def study_numbers(deck: TeamDeck, src: str, nx: int, labels: list[str], nw: int,
         "noise_tau_true": tau_t,
         "observations": obs,
         "true_sigma": np.array(tsig, dtype=np.float64),
+        "white_q_assumed": wq_a[0],
+        "white_q_true": wq_t[0],
+        "white_direction_assumed": wq_a[1],
+        "white_direction_true": wq_t[1],
+        "white_step_s": (deck.process_noise.quadrature_step_hours or deck.errcon.noise_step_hours) * 3600.0,
         "noise_step_s": noise_cell_step(  # on the deck's STM grid: in-line and file runs share the cells
             deck.errcon.noise_step_hours * 3600.0, (deck.stm.grid_hours or 0.0) * 3600.0, np.concatenate([tau_a, tau_t])
         ),
@@ -237,7 +304,12 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
 
     # ---- a-priori covariances, noise levels, measurement sigmas
     n = layout.n
-    num = study_numbers(deck, src, nx, labels, layout.nw, bool(model.thrust))
+    shaped = any(
+        a is not None and a.shaped is not None
+        for a in (deck.a_priori, gen.a_priori if gen is not None else None, deck.control)
+    )
+    state = start_state(deck, src, problem) if shaped else None
+    num = study_numbers(deck, src, nx, labels, layout.nw, bool(model.thrust), state)
     if punched is not None:
         if punched.get("trajectory_hash") and punched["trajectory_hash"] != trajectory_hash(tdeck):
             raise _err(
@@ -309,7 +381,7 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
             'filters in covariance form (use propagation = "phi" for WLS or the square-root mode)'
         )
     punch = np.array(deck.punch.times_days) * DAY_S if deck.punch is not None else np.zeros(0)
-    sched = build_schedule(start, stop, track_times, events, switches, punch)
+    sched = build_schedule(start, stop, track_times, events, switches, punch, count_start_times(deck, track_times))
     if punched is not None:  # the punched covariance already includes the events at its time
         sched.events[0] = ["initial"]
         sched.tracking[0] = []
@@ -352,6 +424,11 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
         pdot_step_s=deck.ertraj.pdot_step_hours * 3600.0,
         noise_model=deck.errcon.process_noise,
         noise_step_s=num["noise_step_s"],
+        white_q_assumed=num["white_q_assumed"],
+        white_q_true=num["white_q_true"],
+        white_direction_assumed=num["white_direction_assumed"],
+        white_direction_true=num["white_direction_true"],
+        white_step_s=num["white_step_s"],
         user_gain_spec=deck.filter.user_gain or "",
         trajectory_hash=trajectory_hash(tdeck),
         trajectory_source=tdeck.source_path or "",
@@ -363,7 +440,7 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
         P0_control=(
             np.array(punched["control"], dtype=np.float64)
             if punched is not None and punched.get("control") is not None and deck.control is None
-            else control_a_priori(deck.control, src, nx, P0t, _state_sigmas)
+            else _shape(control_a_priori(deck.control, src, nx, P0t, _state_sigmas), deck.control, state)
         ),
         budget=bool(deck.budget.enabled and deck.errcon.propagation == "phi"),
         budget_at_s=tuple(t * DAY_S for t in deck.budget.at_days),

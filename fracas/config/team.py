@@ -25,10 +25,21 @@ Layout (only ``[ertraj]`` is required)::
     [[parameter]]  label, sigma (in the label's unit), role = "solve_for" | "consider" | "ignore"
     [thrust_noise] proportionality = {sigma, tau_days}, in_plane_deg = {sigma, tau_days},
                    out_of_plane_deg = {sigma, tau_days}     (Gauss-Markov, App. 9.3)
+    [process_noise] white_acceleration_km2_s3 = 0, direction = "full" | "crosstrack" |
+                   "radial" | "along", quadrature_step_hours   (white, UNF s_q)
+    [a_priori.shaped] sigma_r_km, sigma_v_km_s, sigma_energy_km2_s2, sigma_h_km2_s,
+                   lv_crosstrack_sigma_r_km, lv_crosstrack_sigma_v_km_s  (UNF pseudo-measurements)
     [[station]]    name, radius_km, latitude_deg, longitude_deg  (override/add; <= 9 in all)
     [[tracking]]   type, stations = [..], start_days, stop_days, interval_hours, sigma
                    (range types: m; Doppler types: mm/s; azimuth/elevation: deg;
-                    star_planet_angle, planet_diameter: µrad), body, star_ra_deg, star_dec_deg
+                    star_planet_angle, planet_diameter: µrad), body, star_ra_deg, star_dec_deg,
+                   visibility = {min_elevation_deg, max_range_km} (station kinds); onboard
+                   kinds (docs/onboard_measurements.md): doppler_count_1way (m) count_interval_s;
+                   sensor_beta/theta (mrad) sensor_frame, sensor_axes, target, target_point_km,
+                   target_station; horizon_angle (mrad) horizon_azimuth_deg,
+                   boresight_depression_deg, horizon_altitude_km, horizon_sigma_m; horizon_angle
+                   and altitude (m) equatorial_radius_km, polar_radius_km; altitude
+                   altitude_model, reference_radius_km
     [[event]]      type = "eigenvector" | "propagation" | "prediction",
                    times_days = [..] | start_days + stop_days + interval_days,
                    predict_to_days (prediction)
@@ -36,7 +47,7 @@ Layout (only ``[ertraj]`` is required)::
                    process_noise = true
     [punch]        times_days = [..], file = "out/knowledge.h5"
     [gencov]       enabled = true, a_priori = {...}, [[gencov.parameter]] (true sigma of a study
-                   parameter, or a new role = "ignore" one), thrust_noise = {...},
+                   parameter, or a new role = "ignore" one), thrust_noise = {...}, process_noise = {...},
                    measurement_sigma = {type = sigma}                         ($GENCOV)
     [control]      the initial control covariance (actual − reference: injection dispersions),
                    as [a_priori]; default the true a-priori
@@ -217,8 +228,22 @@ class FilterSection(_Section):
         return self
 
 
+class ShapedAPriori(_Section):
+    """[a_priori.shaped]: the UNF correlated a-priori (digest unf-apollo.md A.6.1-A.6.3;
+    fracas.filters.apriori): sigma_r_km, sigma_v_km_s on every axis (LV crosstrack sigmas
+    optional), then W-only pseudo measurements of the energy v^2/2 - mu/r (sigma km^2/s^2) and
+    of |r x v| (sigma km^2/s) at the filter's start, relative to the primary body there."""
+
+    sigma_r_km: Annotated[float, Field(gt=0, le=MAX_POSITION_SIGMA_KM)]
+    sigma_v_km_s: Annotated[float, Field(gt=0, lt=LIGHT_KM_S)]
+    sigma_energy_km2_s2: PositiveFloat | None = None
+    sigma_h_km2_s: PositiveFloat | None = None
+    lv_crosstrack_sigma_r_km: Annotated[float, Field(gt=0, le=MAX_POSITION_SIGMA_KM)] | None = None
+    lv_crosstrack_sigma_v_km_s: Annotated[float, Field(gt=0, lt=LIGHT_KM_S)] | None = None
+
+
 class APriori(_Section):
-    """A-priori knowledge of the spacecraft state (1σ, ICRF axes)."""
+    """A-priori knowledge of the spacecraft state (1σ, ICRF axes), or ``shaped`` (UNF)."""
 
     position_sigma_km: Vector3 | None = None
     position_rss_km: Annotated[float, Field(gt=0, le=MAX_POSITION_SIGMA_KM)] | None = None
@@ -226,10 +251,16 @@ class APriori(_Section):
     velocity_rss_km_s: Annotated[float, Field(gt=0, lt=LIGHT_KM_S)] | None = None
     mass_sigma_kg: NonNeg = 0.0
     from_punch: str | None = None
+    shaped: ShapedAPriori | None = None
 
     @model_validator(mode="after")
     def _consistent(self) -> APriori:
-        if self.from_punch is None:
+        if self.shaped is not None:
+            fields = ("position_sigma_km", "position_rss_km", "velocity_sigma_km_s", "velocity_rss_km_s", "from_punch")
+            given = [a for a in fields if getattr(self, a) is not None]
+            if given:
+                raise FieldProblem(given[0], None, "not with [a_priori.shaped] (its sigma_r_km, sigma_v_km_s)")
+        elif self.from_punch is None:
             for a, b in (("position_sigma_km", "position_rss_km"), ("velocity_sigma_km_s", "velocity_rss_km_s")):
                 if (getattr(self, a) is None) == (getattr(self, b) is None):
                     raise FieldProblem((), None, f"give exactly one of {a}, {b} (or from_punch)")
@@ -245,7 +276,10 @@ class APriori(_Section):
         return self
 
     def sigmas(self) -> tuple[list[float], list[float]]:
-        """(position sigma km (3), velocity sigma km/s (3)); an RSS value is split equally."""
+        """(position sigma km (3), velocity sigma km/s (3)); an RSS value is split equally; the
+        diagonal before shaping for ``shaped``."""
+        if self.shaped is not None:
+            return [self.shaped.sigma_r_km] * 3, [self.shaped.sigma_v_km_s] * 3
         s3 = 3.0**0.5
         pos = self.position_sigma_km or [self.position_rss_km / s3] * 3
         vel = self.velocity_sigma_km_s or [self.velocity_rss_km_s / s3] * 3
@@ -290,11 +324,50 @@ class ThrustNoise(_Section):
         return self
 
 
+class WhiteNoise(_Section):
+    """[process_noise]: white acceleration noise on the velocity (Shuttle UNF s_q, digest
+    unf-apollo.md A.5.4; fracas.filters.process_noise): spectral density
+    white_acceleration_km2_s3 (km^2/s^3), direction "full" (q I3, s_q = 1), "crosstrack"
+    (q zeta zeta^T, s_q = 2), "radial" or "along"; quadrature_step_hours: the longest piece
+    of its Gauss-Legendre quadrature (default errcon.noise_step_hours; a small fraction of an
+    orbit period about a planet).  In [gencov] an omitted field keeps the filter's value."""
+
+    white_acceleration_km2_s3: Annotated[float, Field(ge=0, le=1.0)] | None = None
+    direction: Literal["full", "crosstrack", "radial", "along"] | None = None
+    quadrature_step_hours: PositiveFloat | None = None
+
+
 class StationDef(_Section):
     name: Annotated[str, BeforeValidator(canonical_name), Field(pattern=r"^[a-z][a-z0-9_]*$")]
     radius_km: Annotated[float, Field(gt=6000, lt=7000)]
     latitude_deg: Annotated[float, Field(ge=-90, le=90)]
     longitude_deg: Annotated[float, Field(ge=-360, le=360)]
+
+
+class Visibility(_Section):
+    """A station kind's beacon visibility cone (UNF; fracas.measurements.visibility)."""
+
+    min_elevation_deg: Annotated[float, Field(ge=-90, le=90)] = 0.0
+    max_range_km: PositiveFloat = 1e12
+
+
+# The onboard (Shuttle UNF) fields of a [[tracking]] entry and the kinds that take them.
+_ONBOARD_FIELDS = {
+    "count_interval_s": ("doppler_count_1way",),
+    "sensor_frame": ("sensor_beta", "sensor_theta"),
+    "sensor_axes": ("sensor_beta", "sensor_theta"),
+    "target": ("sensor_beta", "sensor_theta"),
+    "target_point_km": ("sensor_beta", "sensor_theta"),
+    "target_station": ("sensor_beta", "sensor_theta"),
+    "horizon_azimuth_deg": ("horizon_angle",),
+    "boresight_depression_deg": ("horizon_angle",),
+    "horizon_altitude_km": ("horizon_angle",),
+    "horizon_sigma_m": ("horizon_angle",),
+    "equatorial_radius_km": ("horizon_angle", "altitude"),
+    "polar_radius_km": ("horizon_angle", "altitude"),
+    "altitude_model": ("altitude",),
+    "reference_radius_km": ("altitude",),
+}
 
 
 class Tracking(_Section):
@@ -307,9 +380,68 @@ class Tracking(_Section):
     body: str | None = None
     star_ra_deg: float | None = None
     star_dec_deg: float | None = None
+    # onboard kinds (Shuttle UNF; fracas.measurements.onboard, docs/onboard_measurements.md)
+    count_interval_s: PositiveFloat | None = None
+    sensor_frame: Literal["inertial", "lvlh"] | None = None
+    sensor_axes: list[Vector3] | None = None
+    target: Literal["body", "point", "station"] | None = None
+    target_point_km: Vector3 | None = None
+    target_station: StationName | None = None
+    horizon_azimuth_deg: Annotated[float, Field(ge=-360, le=360)] | None = None
+    boresight_depression_deg: Annotated[float, Field(ge=-90, le=90)] | None = None
+    horizon_altitude_km: Annotated[float, Field(ge=0, le=1000)] | None = None
+    horizon_sigma_m: NonNeg | None = None
+    equatorial_radius_km: PositiveFloat | None = None
+    polar_radius_km: PositiveFloat | None = None
+    altitude_model: Literal["spherical", "geodetic"] | None = None
+    reference_radius_km: PositiveFloat | None = None
+    visibility: Visibility | None = None
+
+    def _check_onboard(self) -> None:
+        """The onboard fields: only with the kinds that take them, required ones present,
+        sensor axes orthonormal and right-handed, radii ordered."""
+        for name, kinds in _ONBOARD_FIELDS.items():
+            value = getattr(self, name)
+            if value is not None and self.type not in kinds:
+                raise FieldProblem(name, value, f'only for type {" / ".join(kinds)}, not "{self.type}"')
+        if self.visibility is not None and N_STATIONS[self.type] == 0:
+            raise FieldProblem("visibility", None, f'only for station kinds, not "{self.type}"')
+        if self.type == "doppler_count_1way" and self.count_interval_s is None:
+            raise FieldProblem("count_interval_s", None, 'required for type "doppler_count_1way" (s)')
+        if self.count_interval_s is not None and self.count_interval_s > 86400.0:
+            raise FieldProblem("count_interval_s", self.count_interval_s, "must be <= 86400 s")
+        if self.sensor_axes is not None:
+            a = self.sensor_axes
+            if len(a) != 3:
+                raise FieldProblem("sensor_axes", a, "must be 3 rows (i_xm, i_ym, i_zm)")
+            dots = [[sum(a[i][k] * a[j][k] for k in range(3)) for j in range(3)] for i in range(3)]
+            if any(abs(dots[i][j] - (1.0 if i == j else 0.0)) > 1e-9 for i in range(3) for j in range(3)):
+                raise FieldProblem("sensor_axes", a, "rows must be orthonormal (to 1e-9)")
+            cx = [a[0][1] * a[1][2] - a[0][2] * a[1][1], a[0][2] * a[1][0] - a[0][0] * a[1][2]]
+            cx.append(a[0][0] * a[1][1] - a[0][1] * a[1][0])
+            if sum(c * z for c, z in zip(cx, a[2])) < 0.0:
+                raise FieldProblem("sensor_axes", a, "must be right-handed (i_xm x i_ym = i_zm)")
+        target = self.target or "body"
+        if target == "point" and self.target_point_km is None:
+            raise FieldProblem("target_point_km", None, 'required with target = "point" (km from the body centre)')
+        if target != "point" and self.target_point_km is not None:
+            raise FieldProblem("target_point_km", self.target_point_km, 'only with target = "point"')
+        if target == "station" and self.target_station is None:
+            raise FieldProblem("target_station", None, 'required with target = "station"')
+        if target == "station" and self.body != "earth":
+            raise FieldProblem("body", self.body, 'must be "earth" with target = "station"')
+        if target != "station" and self.target_station is not None:
+            raise FieldProblem("target_station", self.target_station, 'only with target = "station"')
+        if (
+            self.equatorial_radius_km is not None
+            and self.polar_radius_km is not None
+            and self.polar_radius_km > self.equatorial_radius_km
+        ):
+            raise FieldProblem("polar_radius_km", self.polar_radius_km, "must be <= equatorial_radius_km")
 
     @model_validator(mode="after")
     def _consistent(self) -> Tracking:
+        self._check_onboard()
         need = N_STATIONS[self.type]
         if len(self.stations) != need:
             raise FieldProblem(
@@ -492,6 +624,7 @@ class GenCov(_Section):
     a_priori: APriori | None = None
     parameter: list[GenCovParameter] = []
     thrust_noise: ThrustNoise | None = None
+    process_noise: WhiteNoise | None = None
     measurement_sigma: dict[str, PositiveFloat] = {}
 
     @field_validator("measurement_sigma")
@@ -521,6 +654,7 @@ class TeamDeck(SourcedDeck):
     a_priori: APriori | None = None
     parameter: list[Parameter] = []
     thrust_noise: ThrustNoise = ThrustNoise()
+    process_noise: WhiteNoise = WhiteNoise()
     station: list[StationDef] = []
     tracking: list[Tracking] = []
     event: list[Event] = []
@@ -573,6 +707,12 @@ class TeamDeck(SourcedDeck):
                         s,
                         f"unknown station (expected one of: {', '.join(sorted(known))})",
                     )
+            if t.target_station is not None and t.target_station not in known:
+                raise FieldProblem(
+                    ("tracking", k, "target_station"),
+                    t.target_station,
+                    f"unknown station (expected one of: {', '.join(sorted(known))})",
+                )
         self._check_guidance()
         self._check_sizes()
         return self

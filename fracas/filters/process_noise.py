@@ -33,6 +33,20 @@ Gauss-Markov augmentation they describe (F's last block -rho, rho = diag(1/tau_i
 E[q q] = (2/tau) sigma_eta^2 delta) and are checked against closed-form covariances in
 tests/filters/test_process_noise.py.
 
+White acceleration noise (Shuttle UNF s_q, digest unf-apollo.md A.5.4; docs/process_noise.md):
+a white acceleration w(t) of spectral density q (km^2/s^3) on the velocity rows,
+delta xdot = F dx + B w, B = [0; I3; 0], E[w(t1) w(t2)^T] = q D delta(t1 - t2), with D the
+direction matrix (:func:`white_direction`): I3 ("full", UNF s_q = 1), zeta zeta^T
+("crosstrack", s_q = 2, zeta = r x v / |r x v| of the reference), r^ r^T ("radial") or
+a^ a^T ("along", a^ = zeta x r^).  Over an interval the discrete noise is
+
+    Q_d = int_{t0}^{t1} Phi(t1, s) B q D(s) B^T Phi(t1, s)^T ds,
+
+for a short interval with Phi ~ [[I, dt I], [0, I]] and constant D the zero-order-hold form
+q [[dt^3/3 D, dt^2/2 D], [dt^2/2 D, dt D]] (:func:`white_q_zoh`); exactly, by quadrature
+with the reference's transition matrices at the nodes (:func:`white_q_nodes`); PDOT adds
+the continuous Qc = B q D B^T (:func:`white_Qc`) to Pdot.
+
 Units: s for times, and whatever units the state uses (the trajectory core: km, km/s, kg;
 h in xdot units per unit of eta).  Pure jnp; every function is jit-able.
 """
@@ -41,10 +55,17 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from fracas import _jax  # noqa: F401
 
 __all__ = [
+    "WHITE_DIRECTIONS",
+    "gauss_legendre",
+    "white_direction",
+    "white_Qc",
+    "white_q_nodes",
+    "white_q_zoh",
     "covariance_derivative",
     "dyno_q",
     "effective_bias_sigma",
@@ -171,3 +192,77 @@ def effective_bias_sigma(sigma_noise, tau_days):
     sigma_bias ~ (0.30 + 0.05 tau) sigma_noise (App. 9.3 eq. 5; empirical, from GODSEP runs
     of a SEP Mercury approach, fitted for tau of about 1 to 10 days)."""
     return (0.30 + 0.05 * _f64(tau_days)) * _f64(sigma_noise)
+
+
+# ----------------------------------------------------------------------------- white acceleration noise
+#: Directions of the white acceleration noise (UNF s_q = 1: "full", s_q = 2: "crosstrack").
+WHITE_DIRECTIONS = ("full", "crosstrack", "radial", "along")
+
+
+def _unit(a):
+    return a / jnp.linalg.norm(a, axis=-1, keepdims=True)
+
+
+def white_direction(r, v, direction: str):
+    """Direction matrix D (..., 3, 3) of the white acceleration noise at the reference state
+    (UNF s_q; digest A.5.4): I3 for "full", zeta zeta^T for "crosstrack" (zeta = r x v / |r x v|,
+    the orbit normal), r^ r^T for "radial", a^ a^T for "along" (a^ = zeta x r^, the in-plane
+    horizontal).  ``r`` (..., 3) km and ``v`` (..., 3) km/s relative to the primary; ``direction``
+    is static (a Python string).  D is dimensionless; the noise is q D with q in km^2/s^3."""
+    r = _f64(r)
+    v = _f64(v)
+    if direction == "full":
+        return jnp.broadcast_to(jnp.eye(3), r.shape[:-1] + (3, 3))
+    if direction not in WHITE_DIRECTIONS:
+        raise ValueError(f"direction = {direction!r}: expected one of {WHITE_DIRECTIONS}")
+    zeta = _unit(jnp.cross(r, v))
+    rh = _unit(r)
+    u = {"crosstrack": zeta, "radial": rh, "along": jnp.cross(zeta, rh)}[direction]
+    return u[..., :, None] * u[..., None, :]
+
+
+def white_Qc(q, D, nx: int = 6):
+    """Continuous-time noise B q D B^T (..., nx, nx) of a white acceleration: q D (km^2/s^3)
+    on the velocity block [3:6, 3:6], zero elsewhere (PDOT: Pdot = F P + P F^T + Qc)."""
+    D = _f64(D)
+    out = jnp.zeros(D.shape[:-2] + (nx, nx))
+    return out.at[..., 3:6, 3:6].set(_f64(q) * D)
+
+
+def white_q_zoh(q, D, dt_s, nx: int = 6):
+    """Zero-order-hold discrete white-acceleration noise over dt_s seconds (digest A.5.4),
+    exact for a straight line (Phi = [[I, dt I], [0, I]]) with constant D::
+
+        Q_d = q [[dt^3/3 D, dt^2/2 D], [dt^2/2 D, dt D]]     (km^2, km^2/s, km^2/s^2)
+
+    q: spectral density (km^2/s^3); D (3, 3) from :func:`white_direction`; returns (nx, nx)
+    (a mass row/column is zero).  Its magnitude |dt| is used."""
+    q = _f64(q)
+    D = _f64(D)
+    dt = jnp.abs(_f64(dt_s))
+    blk = jnp.block([[dt**3 / 3.0 * D, dt**2 / 2.0 * D], [dt**2 / 2.0 * D, dt * D]])
+    return jnp.zeros((nx, nx)).at[:6, :6].set(q * blk)
+
+
+@jax.jit
+def white_q_nodes(phi_end, D, weights, q):
+    """Discrete white-acceleration noise by quadrature of the exact integral (digest A.5.4)::
+
+        Q_d = int Phi(t1, s) B q D(s) B^T Phi(t1, s)^T ds ~ sum_j w_j q Phi_j[:, 3:6] D_j Phi_j[:, 3:6]^T
+
+    phi_end (m, nx, nx): Phi(t1, s_j) from each node s_j to the interval's end t1 (the
+    reference's transition matrices); D (m, 3, 3) the direction matrices at the nodes;
+    weights (m,) quadrature weights (s), e.g. :func:`gauss_legendre`; q (km^2/s^3).
+    Returns the symmetric (nx, nx) noise at t1 (km^2, km^2/s, km^2/s^2)."""
+    pb = _f64(phi_end)[:, :, 3:6]
+    return _sym(jnp.einsum("j,jai,jik,jbk->ab", _f64(weights) * _f64(q), pb, _f64(D), pb))
+
+
+def gauss_legendre(n: int, a, b) -> tuple[np.ndarray, np.ndarray]:
+    """n-point Gauss-Legendre nodes and weights on [a, b] for each of the intervals ``a`` (m,),
+    ``b`` (m,) (s): (nodes (m, n), weights (m, n)), exact for polynomials of degree 2n - 1
+    (numpy; the node times are inputs of the reference integration, not traced)."""
+    x, w = np.polynomial.legendre.leggauss(int(n))
+    a = np.atleast_1d(np.asarray(a, np.float64))[:, None]
+    b = np.atleast_1d(np.asarray(b, np.float64))[:, None]
+    return 0.5 * (a + b) + 0.5 * (b - a) * x[None, :], 0.5 * (b - a) * w[None, :]

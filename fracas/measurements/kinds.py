@@ -18,6 +18,18 @@ label name:
     qvlbi_frequency_km_s      km/s   c df/f (+ in doppler3, - in diff_doppler; eqs. 10, 12)
     star_planet_bias_rad      rad    star-planet angle bias
     diameter_bias_rad         rad    apparent-diameter bias
+    doppler_count_bias_km[NAME]  km  one-way Doppler count bias of beacon NAME, as range change
+                                     (an oscillator offset df over dt_c: c df dt_c / f_D)
+    sensor_beta_bias_rad      rad    sensor_beta bias (UNF c = 2)
+    sensor_theta_bias_rad     rad    sensor_theta bias (UNF c = 3)
+    sensor_misalignment_{x,y,z}_rad  rad  small rotation of the sensor axes about i_xm, i_ym, i_zm
+    horizon_angle_bias_rad    rad    horizon-sensor angle bias
+    horizon_altitude_bias_km  km     horizon altitude gamma_H (UNF's horizon bias state)
+    altitude_bias_km          km     altimeter bias (UNF c = 4)
+
+The onboard kinds (Shuttle UNF; :mod:`fracas.measurements.onboard`) carry ``onboard = True``;
+their partials w.r.t. the labels in ``geometry_partials`` come from the geometry
+(misalignment g x r_rho, horizon altitude (g . N) dn/dgamma), not a unit coefficient.
 
 The config layer (:mod:`fracas.config.team`), the models (:mod:`fracas.measurements.models`)
 and the observation matrices (:mod:`fracas.measurements.trakm`) all read these tables.
@@ -35,6 +47,7 @@ __all__ = [
     "MEASUREMENT_KINDS",
     "MEASUREMENT_PARAMETERS",
     "KINDS",
+    "ONBOARD_KINDS",
     "N_STATIONS",
     "KIND_UNITS",
     "SIGMA_UNITS",
@@ -75,6 +88,8 @@ class MeasurementKind:
     needs_body: bool = False
     needs_star: bool = False
     max_sigma: float | None = None
+    onboard: bool = False
+    geometry_partials: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -207,6 +222,73 @@ _KINDS = (
         needs_body=True,
         max_sigma=3.141592653589793e6,
     ),
+    MeasurementKind(
+        "doppler_count_1way",
+        "km",
+        "m",
+        1e-3,
+        1,
+        "one-way integrated Doppler count as range change rho(t_M) - rho(t_M - dt_c)",
+        "UNF c = 0.5 one-way Doppler count (exact STM form; CR-134276, digest A.3.4)",
+        (("doppler_count_bias_km", 0, 1.0),),
+        max_sigma=1e7,
+        onboard=True,
+    ),
+    MeasurementKind(
+        "sensor_beta",
+        "rad",
+        "mrad",
+        1e-3,
+        0,
+        "sensor-frame angle beta = atan2(z, x) of the target",
+        "UNF c = 2 unified angle beta (CR-134276, digest A.3.5)",
+        (("sensor_beta_bias_rad", None, 1.0),),
+        needs_body=True,
+        max_sigma=3.141592653589793e3,
+        onboard=True,
+        geometry_partials=("sensor_misalignment_x_rad", "sensor_misalignment_y_rad", "sensor_misalignment_z_rad"),
+    ),
+    MeasurementKind(
+        "sensor_theta",
+        "rad",
+        "mrad",
+        1e-3,
+        0,
+        "sensor-frame angle theta = atan2(y, rho_a) of the target",
+        "UNF c = 3 unified angle theta (CR-134276, digest A.3.5)",
+        (("sensor_theta_bias_rad", None, 1.0),),
+        needs_body=True,
+        max_sigma=3.141592653589793e3,
+        onboard=True,
+        geometry_partials=("sensor_misalignment_x_rad", "sensor_misalignment_y_rad", "sensor_misalignment_z_rad"),
+    ),
+    MeasurementKind(
+        "horizon_angle",
+        "rad",
+        "mrad",
+        1e-3,
+        0,
+        "horizon-sensor angle psi between the oblate limb and the boresight",
+        "UNF c = 3 horizon sensor psi with horizon-altitude bias (CR-134276, digest A.3.6, A.7.2)",
+        (("horizon_angle_bias_rad", None, 1.0),),
+        needs_body=True,
+        max_sigma=3.141592653589793e3,
+        onboard=True,
+        geometry_partials=("horizon_altitude_bias_km",),
+    ),
+    MeasurementKind(
+        "altitude",
+        "km",
+        "m",
+        1e-3,
+        0,
+        "altitude above the body (spherical or geodetic)",
+        "UNF c = 4 altitude (CR-134276, digest A.3.7)",
+        (("altitude_bias_km", None, 1.0),),
+        needs_body=True,
+        max_sigma=1e7,
+        onboard=True,
+    ),
 )
 #: name -> :class:`MeasurementKind`, in the order decks and reports list them
 MEASUREMENT_KINDS: dict[str, MeasurementKind] = {k.name: k for k in _KINDS}
@@ -231,12 +313,39 @@ _PARAMS = (
     ),
     MeasurementParam("star_planet_bias_rad", "rad", False, "star-planet angle bias", max_sigma=3.141592653589793),
     MeasurementParam("diameter_bias_rad", "rad", False, "apparent-diameter bias", max_sigma=3.141592653589793),
+    MeasurementParam(
+        "doppler_count_bias_km",
+        "km",
+        True,
+        "one-way Doppler count bias of a beacon (range change; c df dt_c / f_D for an oscillator offset df)",
+        max_sigma=1e4,
+    ),
+    MeasurementParam("sensor_beta_bias_rad", "rad", False, "sensor_beta bias (UNF c = 2)", max_sigma=3.141592653589793),
+    MeasurementParam(
+        "sensor_theta_bias_rad", "rad", False, "sensor_theta bias (UNF c = 3)", max_sigma=3.141592653589793
+    ),
+    MeasurementParam(
+        "sensor_misalignment_x_rad", "rad", False, "sensor-axes rotation about i_xm", max_sigma=3.141592653589793
+    ),
+    MeasurementParam(
+        "sensor_misalignment_y_rad", "rad", False, "sensor-axes rotation about i_ym", max_sigma=3.141592653589793
+    ),
+    MeasurementParam(
+        "sensor_misalignment_z_rad", "rad", False, "sensor-axes rotation about i_zm", max_sigma=3.141592653589793
+    ),
+    MeasurementParam("horizon_angle_bias_rad", "rad", False, "horizon-sensor angle bias", max_sigma=3.141592653589793),
+    MeasurementParam(
+        "horizon_altitude_bias_km", "km", False, "horizon altitude gamma_H (UNF horizon bias)", 0.5, max_sigma=1e3
+    ),
+    MeasurementParam("altitude_bias_km", "km", False, "altimeter bias (UNF c = 4)", max_sigma=1e4),
 )
 #: label name -> :class:`MeasurementParam`
 MEASUREMENT_PARAMETERS: dict[str, MeasurementParam] = {p.name: p for p in _PARAMS}
 
 # --- derived views (the names older modules export) -----------------------------------
 KINDS = tuple(MEASUREMENT_KINDS)
+#: the Shuttle UNF onboard kinds (fracas.measurements.onboard), in catalogue order
+ONBOARD_KINDS = tuple(k.name for k in _KINDS if k.onboard)
 N_STATIONS = {k.name: k.n_stations for k in _KINDS}
 KIND_UNITS = {k.name: k.unit for k in _KINDS}
 #: unit of ``sigma`` in a [[tracking]] entry, per type, and the factor to km, km/s or rad

@@ -66,6 +66,8 @@ __all__ = [
     "star_planet_angle_partials",
     "planet_diameter",
     "planet_diameter_partials",
+    "ONBOARD_KINDS",
+    "TRAKM_KINDS",
 ]
 
 # The data types and their participating stations (0: spacecraft-based), from the catalogue.
@@ -379,3 +381,28 @@ PARTIAL_FUNCTIONS = {
     "star_planet_angle": star_planet_angle_partials,
     "planet_diameter": planet_diameter_partials,
 }
+
+# The Shuttle UNF onboard kinds (their own signatures and TRAKM kernel; fracas.measurements.onboard).
+from fracas.measurements import onboard as _onboard  # noqa: E402
+
+ONBOARD_KINDS = kinds.ONBOARD_KINDS
+#: the kinds with the uniform signatures of this module's docstring
+TRAKM_KINDS = tuple(k for k in KINDS if k not in ONBOARD_KINDS)
+VALUE_FUNCTIONS.update(
+    {
+        "doppler_count_1way": _onboard.doppler_count_1way,
+        "sensor_beta": _onboard.sensor_beta,
+        "sensor_theta": _onboard.sensor_theta,
+        "horizon_angle": _onboard.horizon_angle,
+        "altitude": _onboard.altitude,
+    }
+)
+PARTIAL_FUNCTIONS.update(
+    {
+        "doppler_count_1way": _onboard.doppler_count_1way_partials,
+        "sensor_beta": _onboard.sensor_beta_partials,
+        "sensor_theta": _onboard.sensor_theta_partials,
+        "horizon_angle": _onboard.horizon_angle_partials,
+        "altitude": _onboard.altitude_partials,
+    }
+)

@@ -44,6 +44,7 @@ from fracas.team.transitions import (
     map_cell_noise,
     noise_partials,
     primary_index,
+    white_unit_noise,
 )
 
 __all__ = [
@@ -78,6 +79,7 @@ class BatchSetup:
     meas: MeasurementSet
     phi_aug: np.ndarray
     _nodes: dict | None = field(default=None, repr=False)
+    _white: dict = field(default_factory=dict, repr=False)
 
     @property
     def K(self) -> int:
@@ -210,6 +212,8 @@ def batch_noise(setup: BatchSetup, studies: list[Study]) -> tuple[np.ndarray, np
     :func:`fracas.team.transitions.process_noise`), assumed and true."""
     B, K, nx = len(studies), setup.K, setup.study.nx
     Qa, Qt = np.zeros((B, K, nx, nx)), np.zeros((B, K, nx, nx))
+    if K >= 2:
+        _add_white(setup, studies, Qa, Qt)
     noisy = [i for i, s in enumerate(studies) if s.has_noise]
     if not noisy or K < 2:
         return Qa, Qt
@@ -231,8 +235,27 @@ def batch_noise(setup: BatchSetup, studies: list[Study]) -> tuple[np.ndarray, np
     else:
         Q = map_cell_noise(nd, q, K)
     n = len(noisy)
-    Qa[idx], Qt[idx] = Q[:n], Q[n:]
+    Qa[idx] += Q[:n]
+    Qt[idx] += Q[n:]
     return Qa, Qt
+
+
+def _add_white(setup: BatchSetup, studies: list[Study], Qa: np.ndarray, Qt: np.ndarray) -> None:
+    """Add every study's white-acceleration noise (q times the unit-density noise of its
+    direction, :func:`fracas.team.transitions.white_unit_noise`, computed once per direction
+    and quadrature step for the group) to Qa, Qt in place."""
+    t = np.asarray(setup.ref.times_s, dtype=np.float64)
+    for i, s in enumerate(studies):
+        if not s.has_white_noise:
+            continue
+        true = (s.white_q_true, s.white_direction_true) if s.gencov else (s.white_q_assumed, s.white_direction_assumed)
+        for Q, (q, d) in ((Qa, (s.white_q_assumed, s.white_direction_assumed)), (Qt, true)):
+            if q <= 0:
+                continue
+            key = (d, float(s.white_step_s))
+            if key not in setup._white:
+                setup._white[key] = white_unit_noise(s, t, setup.ref.states[0], [d])[d]
+            Q[i] += q * setup._white[key]
 
 
 def batch_R(setup: BatchSetup, studies: list[Study]) -> tuple[np.ndarray, np.ndarray]:

@@ -90,13 +90,22 @@ def budget_sources(study: Study, meas) -> list[dict]:
         out.append(
             {"name": f"{kind} noise", "P0t": zero, "P0c": zero, "thrust": False, "kind": kind, "resolution": False}
         )
+    white = study.white_q_true > 0 if study.gencov else study.white_q_assumed > 0
     if (
         study.gencov
         and np.any(study.noise_sigma_true > 0)
         or (not study.gencov and np.any(study.noise_sigma_assumed > 0))
+        or white
     ):
         out.append(
-            {"name": "thrust noise", "P0t": zero, "P0c": zero, "thrust": True, "kind": None, "resolution": False}
+            {
+                "name": "process noise" if white else "thrust noise",
+                "P0t": zero,
+                "P0c": zero,
+                "thrust": True,
+                "kind": None,
+                "resolution": False,
+            }
         )
     if any(g.type == "impulsive" and g.sigma_res_km_s > 0 for g in study.guidance):
         out.append(

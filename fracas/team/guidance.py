@@ -240,7 +240,7 @@ def _thrust_at(study: Study, t_s: float, x: np.ndarray, body: str) -> tuple[floa
 def _noise_between(study: Study, span: ReferenceSpan, t_a: float, t_b: float) -> np.ndarray:
     """True DYNO Q̃ (nx, nx) accumulated from t_a to t_b, split at the thrust switches."""
     nx = study.nx
-    if not study.has_noise or t_b <= t_a:
+    if not study.has_process_noise or t_b <= t_a:
         return np.zeros((nx, nx))
     cuts = [t_a] + [s for s in study.thrust_switches_s if t_a + EPS_T < s < t_b - EPS_T] + [t_b]
     t = np.array(cuts)

@@ -76,18 +76,49 @@ def assemble_measurements(study: Study, ref: Reference, m_pad: int = 4) -> Measu
     eye = np.broadcast_to(np.eye(m_pad), (K, m_pad, m_pad))
     if not pairs:
         return MeasurementSet(np.zeros((K, m_pad, n)), eye.copy(), eye.copy(), [], {})
-    ks = sorted({k for k, _ in pairs})
+    starts, no_start = _count_starts(study, ref, pairs)
+    ks = sorted({k for k, _ in pairs} | {k0 for k0, _, _ in starts.values()})
     body_names = sorted({t.body for t in study.tracking if t.body})
     bodies = sorted({ref.primary[k] for k in ks} | {"earth"} | set(body_names))
     pos, vel = _ephemeris_states(study, ref, ks, bodies)
     bi = {b: i for i, b in enumerate(bodies)}
     stars = {j: t.star_unit for j, t in enumerate(study.tracking) if t.star_unit is not None}
-    geos: dict[tuple[int, str | None], trakm.Geometry] = {}
+    geos: dict[tuple[int, str | None, float], trakm.Geometry] = {}
     items = []
     for k, j in pairs:
         t = study.tracking[j]
-        key = (k, t.body)
+        ob = study.observations[j]
+        dt_c = ob.sensor.count_interval_s if ob.kind == "doppler_count_1way" else 0.0
+        key = (k, t.body, dt_c)
         geo = geos.get(key)
+        if geo is None and dt_c > 0.0 and (k, j) in starts:
+            k0, phi_0m, dx0 = starts[(k, j)]
+            a, a0, p = ks.index(k), ks.index(k0), bi[ref.primary[k]]
+            x, x0 = ref.states[k], ref.states[k0]
+            geo = geos[key] = trakm.Geometry(
+                et_s=float(study.problem.epoch_et_s + ref.times_s[k]),
+                sc_r=x[:3],
+                sc_v=x[3:6],
+                earth_r=pos[a, bi["earth"]] - pos[a, p],
+                earth_v=vel[a, bi["earth"]] - vel[a, p],
+                et0_s=float(study.problem.epoch_et_s + ref.times_s[k0]),
+                sc_r0=x0[:3],
+                earth_r0=pos[a0, bi["earth"]] - pos[a0, p],
+                phi_0m=phi_0m,
+                dx0_dp=dx0,
+            )
+        if geo is None and dt_c > 0.0:  # the count started before the study (or on another primary)
+            geo = geos[key] = trakm.Geometry(
+                et_s=float(study.problem.epoch_et_s + ref.times_s[k]),
+                sc_r=ref.states[k][:3],
+                sc_v=ref.states[k][3:6],
+                earth_r=np.zeros(3),
+                earth_v=np.zeros(3),
+                et0_s=float(study.problem.epoch_et_s + ref.times_s[k]),
+                sc_r0=ref.states[k][:3],
+                earth_r0=np.zeros(3),
+                phi_0m=np.eye(7),
+            )
         if geo is None:
             a, p = ks.index(k), bi[ref.primary[k]]
             o_r, o_v = pos[a, p], vel[a, p]
@@ -109,9 +140,10 @@ def assemble_measurements(study: Study, ref: Reference, m_pad: int = 4) -> Measu
     skipped: dict[int, int] = {}
     records: list[MeasurementRecord] = []
     per_k: dict[int, int] = {}
+    visible = _visible(study, ref, pairs, items)
     for i, (k, j) in enumerate(pairs):
         e = float(batch.elevation_deg[i])
-        used = not (np.isfinite(e) and e < study.min_elevation_deg)
+        used = not (np.isfinite(e) and e < study.min_elevation_deg) and visible[i] and (k, j) not in no_start
         rec = MeasurementRecord(
             k,
             j,
@@ -138,5 +170,57 @@ def assemble_measurements(study: Study, ref: Reference, m_pad: int = 4) -> Measu
     jj = np.array([records[i].tracking for i in ii], dtype=np.intp)
     H[kk, rr] = batch.H[ii]
     Ra[kk, rr, rr] = batch.sigma[ii] ** 2
-    Rt[kk, rr, rr] = study.true_sigma[jj] ** 2
+    extra = np.zeros(len(pairs)) if batch.extra_variance is None else batch.extra_variance
+    Rt[kk, rr, rr] = study.true_sigma[jj] ** 2 + extra[ii]
     return MeasurementSet(H, Ra, Rt, records, skipped)
+
+
+def _count_starts(study: Study, ref: Reference, pairs):
+    """One-way Doppler counts: (k, j) -> (k0, Phi(t0, t_M) (7, 7), {label: d x(t0)/d p (7,)})
+    with t0 = t_M - dt_c a schedule time (the deck builder adds it, fracas.build.onboard), and
+    the set of counts whose start is not in the schedule or not on the same primary (skipped).
+
+    Phi(t_M, t0) and Theta(t_M, t0) are chained from the reference's step matrices
+    (x_k = Phi_k x_{k-1} + Theta_k p); at fixed x(t_M), d x(t0)/d p = -Phi(t0, t_M) Theta(t_M, t0).
+    """
+    times = ref.times_s
+    out: dict = {}
+    missing: set = set()
+    for k, j in pairs:
+        ob = study.observations[j]
+        if ob.kind != "doppler_count_1way":
+            continue
+        t0 = times[k] - ob.sensor.count_interval_s
+        k0 = int(np.argmin(np.abs(times - t0)))
+        if abs(times[k0] - t0) > 1.5e-3 or k0 >= k or ref.primary[k0] != ref.primary[k]:
+            missing.add((k, j))
+            continue
+        phi = np.eye(7)
+        theta = np.zeros((7, ref.theta.shape[2]))
+        for i in range(k0 + 1, k + 1):
+            phi = ref.phi[i] @ phi
+            theta = ref.phi[i] @ theta + ref.theta[i]
+        phi_0m = np.linalg.inv(phi)
+        dx0 = {lab: -(phi_0m @ theta[:, c]) for c, lab in enumerate(ref.labels)}
+        out[(k, j)] = (k0, phi_0m, dx0)
+    return out, missing
+
+
+def _visible(study: Study, ref: Reference, pairs, items) -> np.ndarray:
+    """Beacon visibility cones (fracas.measurements.visibility) of the entries that set one:
+    every participating station must see the spacecraft (elevation mask, maximum range)."""
+    from fracas.measurements.stations import station_state
+    from fracas.measurements.visibility import beacon_visible
+
+    out = np.ones(len(pairs), dtype=bool)
+    for i, (_, j) in enumerate(pairs):
+        ob = study.observations[j]
+        if ob.visibility is None:
+            continue
+        geo = items[i][1]
+        for name in ob.stations:
+            st = study.stations[name]
+            r_b, _ = station_state(st.radius_km, st.latitude_rad, st.longitude_rad, geo.et_s)
+            r_p = np.asarray(geo.sc_r) - np.asarray(geo.earth_r)
+            out[i] &= bool(beacon_visible(r_p, np.asarray(r_b), ob.visibility[0], ob.visibility[1]))
+    return out

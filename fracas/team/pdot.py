@@ -9,7 +9,8 @@ full force model).  Ṗ is integrated with RK4 on a uniform grid inside every in
 between events (step <= ``ertraj.pdot_step_hours``); measurement updates are the same
 as in PHI mode.  The noise states are carried like ignore-block rows (their gains are
 zero: they are considered, not estimated) but the filter knows them (the assumed
-covariance has them too).
+covariance has them too).  White acceleration noise ([process_noise], UNF s_q) adds
+Q_c = B q D(x) Bᵀ on the velocity block at every node (D of the reference state there).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import numpy as np
 
 from fracas import _jax  # noqa: F401  (x64 before jax)
 from fracas.filters.covariance import Layout
-from fracas.filters.process_noise import pdot_propagate
+from fracas.filters.process_noise import pdot_propagate, white_direction, white_Qc
 from fracas.integrate.propagate import propagate
 from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at
 from fracas.team.result import NOISE_STATE_LABELS, TeamResult, finish
@@ -106,14 +107,20 @@ def run_pdot(study: Study, ref, meas):
     F[:, :nx, dyn_cols] = B_dyn
     F[:, :nx, n:] = h
     Fs, Qcs = [], []
-    for sig, tau in (
-        (study.noise_sigma_assumed, study.noise_tau_assumed),
-        (study.noise_sigma_true, study.noise_tau_true),
+    white_true = (study.white_q_true, study.white_direction_true) if study.gencov else None
+    for (sig, tau), (wq, wd) in zip(
+        (
+            (study.noise_sigma_assumed, study.noise_tau_assumed),
+            (study.noise_sigma_true, study.noise_tau_true),
+        ),
+        ((study.white_q_assumed, study.white_direction_assumed), white_true or (0.0, "full")),
     ):
         Fx = F.copy()
         Fx[:, np.arange(n, n + 3), np.arange(n, n + 3)] = -1.0 / tau
         Qc = np.zeros((n + 3, n + 3))
         Qc[np.arange(n, n + 3), np.arange(n, n + 3)] = 2.0 * sig**2 / tau
+        if wq > 0:  # white acceleration (UNF s_q): Qc = B q D(x) B^T at every node
+            Qc = Qc[None] + np.asarray(white_Qc(wq, white_direction(xs[:, :3], xs[:, 3:6], wd), n + 3))
         Fs.append(Fx)
         Qcs.append(Qc)
     t_nodes = time.perf_counter() - t0
@@ -132,9 +139,10 @@ def run_pdot(study: Study, ref, meas):
             seg = slice(start, start + 2 * N + 1)
             start += 2 * N + 1
             dt = (t[k] - t[k - 1]) / N
-            Pa = pdot(Pa, jnp.asarray(Fs[0][seg]), jnp.asarray(Qcs[0]), dt)
+            qa, qt = (q[seg] if q.ndim == 3 else q for q in Qcs)
+            Pa = pdot(Pa, jnp.asarray(Fs[0][seg]), jnp.asarray(qa), dt)
             if study.gencov:
-                Pt = pdot(Pt, jnp.asarray(Fs[1][seg]), jnp.asarray(Qcs[1]), dt)
+                Pt = pdot(Pt, jnp.asarray(Fs[1][seg]), jnp.asarray(qt), dt)
         am, ap, tm, tp, sg = _scan(
             Pa,
             Pt,

@@ -99,11 +99,14 @@ def build_schedule(
     events: list[tuple[str, np.ndarray, float | None]],
     thrust_switches: list[tuple[float, str]],
     punch_times: np.ndarray | None = None,
+    grid_times: np.ndarray | None = None,
 ) -> Schedule:
     """SCHED: merge tracking, user events, thrust switches and punch times inside [start, stop].
 
     tracking_times[j]: observation times (s) of tracking entry j; events: (type, times_s,
-    predict_to_s or None); thrust_switches: (t_s, "thrust_on" | "thrust_off").
+    predict_to_s or None); thrust_switches: (t_s, "thrust_on" | "thrust_off"); grid_times:
+    extra output times of the reference that carry no event (the starts t_M - dt_c of
+    one-way Doppler counts, whose state and transition the count's H row needs).
     """
     lo, hi = _key(start_s), _key(stop_s)
     per: dict[int, set[str]] = {lo: {"initial"}}
@@ -131,6 +134,10 @@ def build_schedule(
         add(float(t), kind)
     for t in np.atleast_1d(np.zeros(0) if punch_times is None else punch_times):
         add(float(t), "punch")
+    for t in np.atleast_1d(np.zeros(0) if grid_times is None else grid_times):
+        k = _key(float(t))
+        if lo <= k <= hi:
+            per.setdefault(k, set())
     add(stop_s, "final")
     keys = sorted(per)
     order = {e: i for i, e in enumerate(EVENT_ORDER)}

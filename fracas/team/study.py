@@ -92,7 +92,11 @@ class Study:
     pdot_step_s: the largest RK4 step of PDOT propagation (s); noise_model: PHI mode's
     thrust-noise model, "grid" (DYNO on fixed cells of noise_step_s, s) or "interval"
     (FRACAS's DYNO per schedule interval; fracas.team.transitions); source: where the study came
-    from (a deck path, for messages); user_gain_spec: the "module:function" of a user gain.
+    from (a deck path, for messages); user_gain_spec: the "module:function" of a user gain;
+    white_q_assumed / white_q_true (km^2/s^3), white_direction_* ("full", "crosstrack",
+    "radial", "along"): white acceleration process noise on the velocity (UNF s_q, digest
+    unf-apollo.md A.5.4), assumed and true; white_step_s: its quadrature pieces' longest
+    length (s; fracas.team.transitions.white_unit_noise).
     """
 
     source: str
@@ -138,6 +142,11 @@ class Study:
     P0_control: np.ndarray | None = None
     budget: bool = False
     budget_at_s: tuple[float, ...] = ()
+    white_q_assumed: float = 0.0
+    white_q_true: float = 0.0
+    white_direction_assumed: str = "full"
+    white_direction_true: str = "full"
+    white_step_s: float = 3600.0
 
     @property
     def nx(self) -> int:
@@ -157,4 +166,15 @@ class Study:
 
     @property
     def has_noise(self) -> bool:
+        """Whether there is Gauss-Markov thrust noise (assumed, or true with gencov)."""
         return bool(np.any(self.noise_sigma_assumed > 0) or (self.gencov and np.any(self.noise_sigma_true > 0)))
+
+    @property
+    def has_white_noise(self) -> bool:
+        """Whether there is white acceleration noise (assumed, or true with gencov)."""
+        return bool(self.white_q_assumed > 0 or (self.gencov and self.white_q_true > 0))
+
+    @property
+    def has_process_noise(self) -> bool:
+        """Whether there is any process noise (Gauss-Markov thrust or white acceleration)."""
+        return self.has_noise or self.has_white_noise

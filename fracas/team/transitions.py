@@ -46,6 +46,14 @@ Two thrust-noise models for PHI mode (``errcon.process_noise``, ``Study.noise_mo
   (exact, as PDOT does) because it keeps the filter's state, layout and products
   unchanged; PDOT remains the exact model (``errcon.propagation = "pdot"``).
 
+White acceleration noise (UNF s_q, digest unf-apollo.md A.5.4; ``[process_noise]``,
+:func:`white_noise`; docs/process_noise.md) is added to either model's Q: the exact
+integral Q = int Phi(t_k, s) B q D(s) B^T Phi(t_k, s)^T ds over each interval, by
+Gauss-Legendre quadrature (``WHITE_NODES`` points) on pieces of at most
+``Study.white_step_s`` (a grid anchored at the epoch, cut at the thrust switches and the
+schedule times) with the reference integrated through the nodes.  The integral composes
+exactly, so it does not depend on the event times beyond quadrature error.
+
 Shared by the PHI engine, PDOT and prediction events; jitted kernels are compiled once
 per padded size (see :func:`bucket`).
 """
@@ -57,7 +65,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fracas import _jax  # noqa: F401
-from fracas.filters.process_noise import dyno_q
+from fracas.filters.process_noise import dyno_q, gauss_legendre, white_direction, white_q_nodes
 from fracas.integrate.propagate import propagate_with_sensitivities
 from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at
 from fracas.products import TIME_TOL_S, ReferenceTrajectory, chain, time_indices
@@ -75,6 +83,9 @@ __all__ = [
     "noise_cell_step",
     "noise_settings",
     "process_noise",
+    "white_noise",
+    "white_unit_noise",
+    "WHITE_NODES",
     "EPS_T",
 ]
 
@@ -141,8 +152,11 @@ def interval_noise(study: Study, t: np.ndarray, states: np.ndarray, primary: lis
     """
     K, nx = len(t), study.nx
     zeros = np.zeros((K, nx, nx))
-    if not study.has_noise or K < 2:
+    if not study.has_process_noise or K < 2:
         return zeros, zeros.copy()
+    wa, wt = white_noise(study, t, np.asarray(states)[0])
+    if not study.has_noise:
+        return wa, wt
     dt = np.diff(t)
     prim = primary_index(study, primary)
     t_nodes = np.concatenate([t[:-1] + np.minimum(EPS_T, dt / 2), t[1:] - np.minimum(EPS_T, dt / 2)])
@@ -161,7 +175,7 @@ def interval_noise(study: Study, t: np.ndarray, states: np.ndarray, primary: lis
     ):
         q = np.asarray(_dyno_batch(*args, jnp.asarray(sig), jnp.asarray(tau), jnp.asarray(pad(dt))))[:m]
         out.append(np.concatenate([zeros[:1], q]))
-    return out[0], out[1]
+    return out[0] + wa, out[1] + wt
 
 
 def _noise_cells(study: Study, t0: float, t1: float, step_s: float | None = None) -> np.ndarray:
@@ -347,8 +361,11 @@ def grid_noise(study: Study, t: np.ndarray, x0: np.ndarray, product: ReferenceTr
     t = np.asarray(t, dtype=np.float64)
     K, nx = len(t), study.nx
     zeros = np.zeros((K, nx, nx))
-    if not study.has_noise or K < 2:
+    if not study.has_process_noise or K < 2:
         return zeros, zeros.copy()
+    wa, wt = white_noise(study, t, x0)
+    if not study.has_noise:
+        return wa, wt
     cells, U, step_phi, xs, prim = cell_reference(study, t, x0, product)
     ci = cell_inputs(study, t, cells, U, step_phi, xs, prim)
     nc = ci["nc"]
@@ -362,7 +379,7 @@ def grid_noise(study: Study, t: np.ndarray, x0: np.ndarray, product: ReferenceTr
     ):
         qc = np.asarray(_dyno_batch(*args, jnp.asarray(sig), jnp.asarray(tau), jnp.asarray(pad(ci["dt"]))))[:nc]
         out.append(map_cell_noise(ci, qc, K))
-    return out[0], out[1]
+    return out[0] + wa, out[1] + wt
 
 
 def noise_settings(study: Study, ref) -> dict:
@@ -371,17 +388,27 @@ def noise_settings(study: Study, ref) -> dict:
     "stm_file" (read from the study's STM file), "reference" (the in-line reference,
     integrated once through the cell ends, :func:`fracas.team.reference.integrate_reference`)
     or "integrated" (integrated again for the noise: a file without a usable grid)."""
+    white = {}
+    if study.has_white_noise:
+        white = {
+            "white_noise_direction": study.white_direction_assumed,
+            "white_noise_step_s": float(study.white_step_s),
+        }
+        if study.gencov:
+            white["white_noise_direction_true"] = study.white_direction_true
     if study.propagation == "pdot":
-        return {"process_noise": "pdot"}
+        return {"process_noise": "pdot", **white}
     if study.noise_model == "interval":
-        return {"process_noise": "interval"}
+        return {"process_noise": "interval", **white}
+    if not study.has_noise and study.has_white_noise:
+        return {"process_noise": "grid", **white}
     t = np.asarray(ref.times_s, np.float64)
     product = getattr(ref, "product", None)
     step = _stm_step(study, product, t) if product is not None and len(t) > 1 else None
     if step is not None:
         where = "reference" if ref.source == "integrated" else "stm_file"
-        return {"process_noise": "grid", "noise_cells": where, "noise_cell_s": float(step)}
-    return {"process_noise": "grid", "noise_cells": "integrated", "noise_cell_s": float(study.noise_step_s)}
+        return {"process_noise": "grid", "noise_cells": where, "noise_cell_s": float(step), **white}
+    return {"process_noise": "grid", "noise_cells": "integrated", "noise_cell_s": float(study.noise_step_s), **white}
 
 
 def _stm_step(study: Study, data: ReferenceTrajectory, t: np.ndarray) -> float | None:
@@ -402,6 +429,72 @@ def process_noise(study: Study, ref) -> tuple[np.ndarray, np.ndarray]:
     if study.noise_model == "interval":
         return interval_noise(study, ref.times_s, ref.states, ref.primary, ref.phi)
     return grid_noise(study, ref.times_s, ref.states[0], getattr(ref, "product", None))
+
+
+# ----------------------------------------------------------------------------- white acceleration noise
+WHITE_NODES = 4  # Gauss-Legendre points per piece: exact to degree 7 in the piece's time
+
+
+@jax.jit
+def _white_pieces(phi_end, D, w):
+    return jax.vmap(white_q_nodes, in_axes=(0, 0, 0, None))(phi_end, D, w, jnp.float64(1.0))
+
+
+def white_unit_noise(study: Study, t: np.ndarray, x0: np.ndarray, directions) -> dict[str, np.ndarray]:
+    """The white-acceleration noise of unit spectral density (q = 1 km^2/s^3) over each
+    interval (t_{k-1}, t_k] of ``t`` (element 0 zero), for each name in ``directions``:
+    {direction: (K, nx, nx)}.  The exact integral (UNF s_q, digest A.5.4) by
+    :data:`WHITE_NODES`-point Gauss-Legendre quadrature on the pieces between the union of
+    ``t`` and a grid of ``study.white_step_s`` anchored at the epoch (cut at the thrust
+    switches); ``x0`` (7,), the reference state at t[0], is integrated through the nodes
+    (NaN where that integration fails).  Each piece's Q (:func:`white_q_nodes`, with
+    Phi(piece end, node) chained from the integration's steps) is mapped to the next time
+    of ``t`` with the reference transitions, so the sum composes exactly."""
+    t = np.asarray(t, dtype=np.float64)
+    K, nx = len(t), study.nx
+    out = {d: np.zeros((K, nx, nx)) for d in directions}
+    if K < 2 or not out:
+        return out
+    cells = _noise_cells(study, float(t[0]), float(t[-1]), study.white_step_s)
+    U = _union(cells, t)
+    M = len(U)
+    nodes, w = gauss_legendre(WHITE_NODES, U[:-1], U[1:])
+    V = np.concatenate([U[:1], np.concatenate([nodes, U[1:, None]], axis=1).ravel()])  # node..., piece end
+    pr = study.problem
+    nv = len(V)
+    Vp = np.concatenate([V, np.repeat(V[-1:], bucket(nv) - nv)])  # a few sizes share one compile
+    traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, x0, Vp, ())
+    step = np.asarray(sens.stm_step)[:nv, :nx, :nx]
+    xs = np.asarray(traj.x)[:nv]
+    nn = WHITE_NODES + 1
+    st = step[1:].reshape(M - 1, nn, nx, nx)  # st[p, j]: Phi over the j-th sub-step of piece p
+    phi_end = np.empty((M - 1, WHITE_NODES, nx, nx))
+    acc = np.broadcast_to(np.eye(nx), (M - 1, nx, nx)).copy()
+    for j in range(WHITE_NODES - 1, -1, -1):  # Phi(end, node j) = Phi(end, node j+1) Phi(node j+1, node j)
+        acc = acc @ st[:, j + 1]
+        phi_end[:, j] = acc
+    piece_phi = acc @ st[:, 0]  # Phi(U_p+1, U_p)
+    xn = xs[1:].reshape(M - 1, nn, 7)[:, :WHITE_NODES]
+    step_phi = np.concatenate([np.eye(nx)[None], piece_phi])
+    sched = {int(np.argmin(np.abs(U - tk))): k for k, tk in enumerate(t)}
+    ci = {"U": U, "step_phi": step_phi, "cell_at": {i: i - 1 for i in range(1, M)}, "sched": sched}
+    for d in directions:
+        D = np.asarray(white_direction(jnp.asarray(xn[..., :3]), jnp.asarray(xn[..., 3:6]), d))
+        qp = np.asarray(_white_pieces(jnp.asarray(phi_end), jnp.asarray(D), jnp.asarray(w)))
+        out[d] = map_cell_noise(ci, qp, K)
+    return out
+
+
+def white_noise(study: Study, t: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The white-acceleration noise (K, nx, nx) over each interval of ``t``, assumed and
+    true (``study.white_q_*`` times :func:`white_unit_noise` of its direction); zeros
+    without white noise."""
+    K, nx = len(t), study.nx
+    levels = [(study.white_q_assumed, study.white_direction_assumed)]
+    levels.append((study.white_q_true, study.white_direction_true) if study.gencov else levels[0])
+    dirs = sorted({d for q, d in levels if q > 0})
+    unit = white_unit_noise(study, t, x0, dirs) if study.has_white_noise else {}
+    return tuple(q * unit[d] if q > 0 else np.zeros((K, nx, nx)) for q, d in levels)
 
 
 _bucket = bucket  # old private name

@@ -58,7 +58,7 @@ def _args(kind, g, rng):
 
 
 # --- analytic partials against AD ------------------------------------------------------
-@pytest.mark.parametrize("kind", M.KINDS)
+@pytest.mark.parametrize("kind", M.TRAKM_KINDS)  # the onboard kinds: tests/measurements/test_onboard.py
 def test_analytic_partials_match_ad(kind):
     # Analytic and AD Jacobians evaluate the same algebra in a different order: each carries
     # O(10) roundings of relative size eps = 2.2e-16, amplified by the geometry's condition

@@ -90,7 +90,8 @@ def integrate_reference(study: Study) -> Reference:
     if extra.size:
         near = np.abs(extra[:, None] - times[None, :]).min(axis=1) <= TIME_TOL_S
         ex = np.unique(extra[~near])
-        ex = ex[np.concatenate([[True], np.diff(ex) > TIME_TOL_S])]  # a target on a cell end is one time
+        if ex.size:  # a target on a cell end is one time (every cell end may be a schedule time)
+            ex = ex[np.concatenate([[True], np.diff(ex) > TIME_TOL_S])]
         t_all = np.unique(np.concatenate([[0.0], times, ex]))
         return _integrate_with_cells(study, times, t_all, labels)
     lead = times[0] > 0.0

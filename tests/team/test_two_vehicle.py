@@ -149,6 +149,7 @@ def _variant(deck, chaser=None, target=None):
     return deck.model_copy(update=upd)
 
 
+@pytest.mark.slow
 def test_optimum_covariance_insensitive_to_initial_loads():
     """R-649 Figs. II-19-24: diagonal loads 20,000 ft / 20 fps (chaser), 5,000 ft / 5 fps
     (target) and the reverse give, after the early transient, nearly the same covariance
@@ -168,6 +169,7 @@ def test_optimum_covariance_insensitive_to_initial_loads():
     assert rel["A"][0] > 1.5 * rel["A"][1]  # the load mattered at the start
 
 
+@pytest.mark.slow
 def test_single_runs_have_the_true_covariance(apollo):
     """Monte Carlo against covariance (digest §C.3 item 6): 400 single runs per role, errors
     carried by sampling with the TEAM gains.  At the end of tracking each sample variance of
@@ -211,6 +213,7 @@ def test_apollo_filter_equals_optimum_when_the_target_is_perfect():
     assert _rel(run.P_assumed[1][:, :6, :6], run.P_true[0][:, :6, :6]) < 1e-9
 
 
+@pytest.mark.slow
 def test_radar_bias_solve_for_is_estimated_and_consider_is_not():
     """A range bias (R-649 §IV's 'simple expedient of including beta in the estimated
     state'): solve-for shrinks its variance (a little: the bias is weakly observable);
@@ -271,6 +274,7 @@ def test_nonlinear_runs_without_errors_fly_the_reference():
     assert np.max(np.abs(e[..., 3:6])) < 1e-9  # km/s
 
 
+@pytest.mark.slow
 def test_nonlinear_runs_agree_with_linear_analysis_for_the_optimum_filter(apollo):
     """TSIM check of the linear analysis (digest §C.3 item 6): the filter flown as an EKF on
     the conics, 200 runs.  For the optimum filter the runs' sample RMS stays within 5

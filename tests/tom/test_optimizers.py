@@ -14,6 +14,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from fracas.config.tom import parse_tom_deck
 from fracas.pipeline import run_tom
@@ -36,6 +37,7 @@ def _run(tmp_path, optimizer):
     return prod
 
 
+@pytest.mark.slow
 def test_projected_gradient_matches_slsqp_and_hohmann(tmp_path):
     """Final masses within 0.1 % of each other (the issue's bound) and, both, within 1e-5 of
     Hohmann's (each stops at its own first-order test: theta < 1e-3 rad for the projected

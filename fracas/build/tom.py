@@ -347,6 +347,17 @@ def reference_deck_text(case: TomCase, u) -> str:
     cm = prob.controls
     u = np.asarray(u, float)
     prm = prob.params_at(u)
+    # a state read from an OEM ([initial_state.oem]) is written out as the cartesian state it
+    # gave, with its centre and epoch explicit: the reference deck is written elsewhere, where
+    # the OEM's relative path would not resolve, and the OEM may have supplied both
+    st0 = traj.initial_state
+    if st0.oem is not None:
+        ist = data.setdefault("initial_state", {})
+        ist.pop("oem", None)
+        ist["centre"], ist["frame"] = st0.centre, st0.frame
+        ist["cartesian"] = {"r_km": [float(a) for a in st0.oem.r_km], "v_km_s": [float(a) for a in st0.oem.v_km_s]}
+        if "epoch" not in data:
+            data["epoch"] = traj.epoch.model_dump(mode="json", exclude_none=True)
     # initial state (when any state or v∞ control moved it): cartesian in the deck's frame
     if np.any(cm.x0_matrix) or max(cm.vinf_index) >= 0:
         x0 = cm.x0_of(u)

@@ -239,7 +239,7 @@ def parse_tom_deck(text: str, source: str = "<deck>") -> TomDeck:
         if "title" in data:
             traj_data["title"] = data["title"]
         try:
-            inline = TrajectoryDeck.model_validate(traj_data)
+            inline = TrajectoryDeck.model_validate(traj_data, context={"source": source})
         except ValidationError as exc:
             problems += validation_problems(exc, source, TrajectoryDeck, traj_data)
     if problems:

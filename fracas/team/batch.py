@@ -131,9 +131,10 @@ def structure_mismatch(a: Study, b: Study) -> str | None:
                 for x, y in zip(a.tracking, b.tracking)
             ),
         ),
-        (
+        (  # onboard sensor settings and beacon cones shape H and the schedule: not batchable numbers
             "observations",
-            [(o.kind, o.stations) for o in a.observations] == [(o.kind, o.stations) for o in b.observations],
+            [(o.kind, o.stations, o.sensor, o.visibility) for o in a.observations]
+            == [(o.kind, o.stations, o.sensor, o.visibility) for o in b.observations],
         ),
         ("stations", a.stations == b.stations),
         ("shapes", a.P0_assumed.shape == b.P0_assumed.shape and a.true_sigma.shape == b.true_sigma.shape),

@@ -290,3 +290,24 @@ def test_observation_needs_a_count_interval():
     ob = trakm.Observation("altitude", (), 0.01)
     assert ob.sensor == trakm.OnboardSensor()
     assert dataclasses.replace(ob, sigma=0.02).sensor == ob.sensor
+
+
+def test_onboard_settings_are_structure_for_batched_sweeps():
+    """A sweep batches studies that differ only in numbers (P0, sigmas) and shares the first
+    study's H.  Onboard sensor settings (here the horizon scan azimuth) and beacon cones
+    shape H and the schedule, so two studies differing in them must not be batched
+    together: structure_mismatch names the observations."""
+    import dataclasses
+
+    from fracas.pipeline import load_team
+    from fracas.team.batch import structure_mismatch
+
+    study = load_team("namelists/near_earth_spiral_horizon_team.toml").study
+    assert structure_mismatch(study, study) is None
+    k = next(i for i, o in enumerate(study.observations) if o.sensor is not None)
+    o = study.observations[k]
+    moved = dataclasses.replace(
+        o, sensor=dataclasses.replace(o.sensor, horizon_azimuth_rad=o.sensor.horizon_azimuth_rad + 0.1)
+    )
+    other = dataclasses.replace(study, observations=[*study.observations[:k], moved, *study.observations[k + 1 :]])
+    assert structure_mismatch(study, other) == "observations"

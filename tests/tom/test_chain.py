@@ -74,3 +74,37 @@ def test_tom_reference_deck_feeds_team(tmp_path, monkeypatch):
     r = CliRunner().invoke(main, ["run", str(team), "-o", str(out), "--quiet"])
     assert r.exit_code == 0, r.output
     assert out.exists()
+
+
+def test_reference_deck_of_an_oem_started_trajectory_is_self_contained(tmp_path):
+    """A TOM deck whose initial state comes from an OEM ([initial_state.oem], epoch and
+    centre taken from the file) writes a reference deck that stands alone: the OEM record's
+    state as cartesian, with the epoch and centre explicit, so it validates in another
+    folder and starts from exactly the OEM's state."""
+    from fracas.build.tom import build_tom, reference_deck_text
+    from fracas.config.tom import parse_tom_deck
+    from fracas.config.trajectory import parse_deck
+
+    oem = tmp_path / "start.oem"
+    oem.write_text(
+        "CCSDS_OEM_VERS = 2.0\nCREATION_DATE = 2026-12-01T00:00:00\nORIGINATOR = TEST\n\nMETA_START\n"
+        "OBJECT_NAME = X\nOBJECT_ID = X\nCENTER_NAME = EARTH\nREF_FRAME = ICRF\nTIME_SYSTEM = TDB\n"
+        "START_TIME = 2030-01-01T00:00:00.000000\nSTOP_TIME = 2030-01-01T00:01:00.000000\nMETA_STOP\n\n"
+        "2030-01-01T00:00:00.000000 6678.137 0.0 0.0 0.0 7.725760634075587 0.0\n"
+        "2030-01-01T00:01:00.000000 6676.0 463.0 0.0 -0.5 7.7 0.0\n",
+        encoding="utf-8",
+    )
+    text = (ROOT / "tests" / "data" / "hohmann_tom.toml").read_text(encoding="utf-8")
+    head = '[epoch]\niso = "2030-01-01T00:00:00"\n\n[initial_state]\ncentre = "earth"\nframe = "EME2000"\n\n'
+    cart = "[initial_state.cartesian]\nr_km = [6678.137, 0.0, 0.0]\nv_km_s = [0.0, 7.725760634075587, 0.0]"
+    assert head in text and cart in text
+    text = text.replace(head, "").replace(cart, f'[initial_state.oem]\npath = "{oem}"\nat = "start"')
+    deck = parse_tom_deck(text, str(tmp_path / "tom.toml"))
+    case = build_tom(deck)
+    out = reference_deck_text(case, np.asarray(case.u0))
+    other = tmp_path / "elsewhere" / "ref.toml"
+    other.parent.mkdir()
+    ref = parse_deck(out, str(other))
+    assert ref.initial_state.oem is None and ref.initial_state.centre == "earth"
+    assert ref.epoch.et == case.trajectory.epoch.et
+    assert ref.initial_state.cartesian.r_km == [6678.137, 0.0, 0.0]

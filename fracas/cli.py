@@ -263,7 +263,8 @@ def run(
     debug: bool,
 ) -> None:
     """Run a DECK in the mode it names (mode = "team": a TEAM study; mode = "tom": targeting and
-    optimization; mode = "tsim": a Monte Carlo with guidance; a trajectory deck: a propagation)."""
+    optimization; mode = "tsim": a Monte Carlo with guidance; mode = "rendezvous": two-vehicle
+    navigation; a trajectory deck: a propagation)."""
     debug = debug or bool((ctx.obj or {}).get("debug"))
     with _errors(debug):
         from fracas.config.modes import deck_mode

@@ -86,3 +86,18 @@ def test_vehicle_stm_files_are_written_then_reused(tmp_path):
     assert second.reference_sources == [f"{tmp_path}/lm.h5", f"{tmp_path}/csm.h5"]
     scale = np.max(np.abs(first.P_true))
     assert np.max(np.abs(second.P_true - first.P_true)) <= 1e-12 * scale
+
+
+def test_run_command_writes_results_and_plot(tmp_path):
+    """``fracas run`` on a rendezvous deck: exit 0, the results file and the plot written,
+    the JSON line naming them."""
+    import json
+
+    out, png = tmp_path / "r.h5", tmp_path / "r.png"
+    r = CliRunner().invoke(main, ["run", SMALL, "-o", str(out), "--plot", str(png), "--json"])
+    assert r.exit_code == 0, r.output
+    info = json.loads(r.stdout.strip().splitlines()[-1])
+    assert info["results"] == str(out) and info["roles"] == ["solve_for", "ignore"]
+    assert out.exists() and png.exists()
+    r = CliRunner().invoke(main, ["run", SMALL, "--stm", "x.h5"])
+    assert r.exit_code == 2 and "not for rendezvous decks" in r.output

@@ -585,8 +585,9 @@ def run_sweep(
             for j in range(len(new)):
                 progress(done - len(new) + j + 1, len(todo))
 
-    # guidance studies are not batched (fracas.team.batch.prepare): one by one from the start
-    group_of = _groups(studies, fields) if (batch and res_dir is None and not base.guidance) else {}
+    # guidance and reset studies are not batched (fracas.team.batch.prepare): one by one from the start
+    batchable = not base.guidance and not base.resets
+    group_of = _groups(studies, fields) if (batch and res_dir is None and batchable) else {}
     from fracas.team.batch import MAX_BATCH
 
     mb = int(max_batch or MAX_BATCH)

@@ -348,7 +348,7 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
         start = float(punched["time_s"])
     if start >= stop:
         raise _err(src, "filter.start_days", start / DAY_S, f"must be before the end of the study ({stop / DAY_S:g} d)")
-    events = []
+    events, resets = [], []
     for k, e in enumerate(deck.event):
         ts = np.array(e.times(), dtype=np.float64) * DAY_S
         if np.any(ts > dur):
@@ -369,6 +369,9 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
                     "must be after every time of the prediction event",
                 )
         events.append((e.type, ts, None if e.predict_to_days is None else e.predict_to_days * DAY_S))
+        if e.type == "reset":
+            sig = tuple(float(x) for x in (*e.position_sigma_km, *e.velocity_sigma_km_s))
+            resets += [(float(t), sig) for t in ts if start - 1e-9 <= t <= stop + 1e-9]
     guid = guidance_specs(deck, tdeck, src)
     if guid:
         events.append(("guidance", guidance_times(guid)[0], None))
@@ -434,6 +437,7 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
         trajectory_source=tdeck.source_path or "",
         punched=punched,
         guidance=guid,
+        resets=tuple(resets),
         guidance_model=deck.errcon.guidance_model,
         guidance_reset=deck.errcon.guidance_reset,
         guidance_estimates=deck.errcon.guidance_estimates,

@@ -40,9 +40,12 @@ Layout (only ``[ertraj]`` is required)::
                    boresight_depression_deg, horizon_altitude_km, horizon_sigma_m; horizon_angle
                    and altitude (m) equatorial_radius_km, polar_radius_km; altitude
                    altitude_model, reference_radius_km
-    [[event]]      type = "eigenvector" | "propagation" | "prediction",
+    [[event]]      type = "eigenvector" | "propagation" | "prediction" | "reset",
                    times_days = [..] | start_days + stop_days + interval_days,
-                   predict_to_days (prediction)
+                   predict_to_days (prediction); position_sigma_km, velocity_sigma_km_s
+                   (reset: the ASSUMED covariance's state block restarts from these sigmas
+                   with its correlations zeroed, the UNF/Apollo W reinitialization; the true
+                   covariance continues; needs [gencov]; PHI propagation, Kalman-Schmidt)
     [print]        every = 1 (print every n-th measurement event), correlations = true,
                    process_noise = true
     [punch]        times_days = [..], file = "out/knowledge.h5"
@@ -461,18 +464,29 @@ class Tracking(_Section):
 
 
 class Event(_Section):
-    type: Literal["eigenvector", "propagation", "prediction"]
+    """An [[event]]: eigenvector, propagation, prediction (predict_to_days) or reset
+    (position_sigma_km, velocity_sigma_km_s: the assumed-covariance reset, UNF/Apollo W
+    reinitialization; generalized covariance only)."""
+
+    type: Literal["eigenvector", "propagation", "prediction", "reset"]
     times_days: list[NonNeg] = []
     start_days: NonNeg | None = None
     stop_days: NonNeg | None = None
     interval_days: PositiveFloat | None = None
     predict_to_days: PositiveFloat | None = None
+    position_sigma_km: Annotated[list[Annotated[float, Field(gt=0)]], Field(min_length=3, max_length=3)] | None = None
+    velocity_sigma_km_s: Annotated[list[Annotated[float, Field(gt=0)]], Field(min_length=3, max_length=3)] | None = None
 
     @model_validator(mode="after")
     def _consistent(self) -> Event:
         rng = (self.start_days, self.stop_days, self.interval_days)
         if not self.times_days and any(v is None for v in rng):
             raise FieldProblem((), None, "give times_days, or start_days + stop_days + interval_days")
+        given = self.position_sigma_km is not None or self.velocity_sigma_km_s is not None
+        if self.type == "reset" and (self.position_sigma_km is None or self.velocity_sigma_km_s is None):
+            raise FieldProblem("position_sigma_km", self.position_sigma_km, "position_sigma_km and velocity_sigma_km_s")
+        if self.type != "reset" and given:
+            raise FieldProblem("position_sigma_km", self.position_sigma_km, "only for reset events")
         if self.type == "prediction" and self.predict_to_days is None:
             raise FieldProblem("predict_to_days", None, "required for a prediction event")
         if self.type != "prediction" and self.predict_to_days is not None:
@@ -690,6 +704,22 @@ class TeamDeck(SourcedDeck):
                         "ignore",
                         f"{g.label} is already a study parameter (parameter[{seen[g.label]}])",
                     )
+        for k, e in enumerate(self.event):
+            if e.type != "reset":
+                continue
+            if self.gencov is None or not self.gencov.enabled:
+                raise FieldProblem(
+                    ("event", k, "type"),
+                    "reset",
+                    "a [gencov] section (a reset changes only the filter's assumed covariance; "
+                    "without generalized covariance nothing would report the true errors)",
+                )
+            if self.errcon.propagation != "phi" or self.filter.type != "kalman_schmidt":
+                raise FieldProblem(
+                    ("event", k, "type"),
+                    "reset",
+                    'errcon.propagation = "phi" and filter.type = "kalman_schmidt" (reset events)',
+                )
         names = [s.name for s in self.station]
         if len(set(names)) != len(names):
             raise FieldProblem("station", names, "station names must be unique")

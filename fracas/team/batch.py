@@ -90,8 +90,8 @@ def prepare(study: Study, ref: Reference) -> BatchSetup:
     """The shared part of a group (PHI propagation, built-in gains, no guidance events:
     a guidance event feeds its execution errors back into the filter, which the batched
     scan does not do; such studies run one by one)."""
-    if study.propagation != "phi" or study.filter_kind == "user" or study.guidance:
-        raise ValueError("batched studies need PHI propagation, a built-in gain and no guidance events")
+    if study.propagation != "phi" or study.filter_kind == "user" or study.guidance or study.resets:
+        raise ValueError("batched studies need PHI propagation, a built-in gain, no guidance and no reset events")
     return BatchSetup(study, ref, assemble_measurements(study, ref), augmented_transitions(study, ref))
 
 

@@ -16,7 +16,7 @@ from fracas.filters import square_root as sqr
 from fracas.team.study import Study
 from fracas.team.transitions import bucket
 
-__all__ = ["run_filter", "filter_scan"]
+__all__ = ["run_filter", "filter_scan", "reset_state_block", "reset_arrays"]
 
 
 def _gain(kind, user_gain, layout, Pa, Pnc, H, R):
@@ -30,17 +30,52 @@ def _gain(kind, user_gain, layout, Pa, Pnc, H, R):
     return K, Pnc
 
 
+def reset_state_block(P, flag, cov6):
+    """The assumed-covariance reset (UNF/Apollo W reinitialization, digest unf-apollo.md
+    A.6.1, C.1): where ``flag`` > 0 the position/velocity block of P becomes ``cov6`` (6, 6)
+    and every correlation of those six states is zeroed; P unchanged otherwise."""
+    n = P.shape[0]
+    keep = jnp.concatenate([jnp.zeros(6, dtype=P.dtype), jnp.ones(n - 6, dtype=P.dtype)])
+    Pr = (P * keep[:, None] * keep[None, :]).at[:6, :6].set(cov6)
+    return jnp.where(flag > 0.0, Pr, P)
+
+
 @partial(jax.jit, static_argnames=("layout", "kind", "gencov", "square_root", "user_gain"))
-def _scan(P0a, P0t, phi_aug, Qa, Qt, H, Ra, Rt, Xa=None, Xt=None, *, layout, kind, gencov, square_root, user_gain=None):
+def _scan(
+    P0a,
+    P0t,
+    phi_aug,
+    Qa,
+    Qt,
+    H,
+    Ra,
+    Rt,
+    Xa=None,
+    Xt=None,
+    reset_flag=None,
+    reset_cov=None,
+    *,
+    layout,
+    kind,
+    gencov,
+    square_root,
+    user_gain=None,
+):
     """One pass of the filter over K events.  Xa / Xt (K, nx, nx), optional: maneuver
     execution-error covariance added to the assumed / true knowledge after the event's
-    measurement update (guidance events, GUIDM); the ``P_plus`` outputs include it."""
+    measurement update (guidance events, GUIDM); the ``P_plus`` outputs include it.
+    reset_flag (K,), reset_cov (K, 6, 6), optional: assumed-covariance resets applied after
+    the time update and before the event's measurements (:func:`reset_state_block`); the
+    ``Pa_minus`` outputs are after the reset (the filter's a priori for the marks)."""
     n_est = layout.n_est
     eye_n = jnp.eye(layout.n)
     if Xa is None:
         Xa = jnp.zeros_like(Qa)
     if Xt is None:
         Xt = jnp.zeros_like(Qt)
+    if reset_flag is None:
+        reset_flag = jnp.zeros(Qa.shape[0], dtype=Qa.dtype)
+        reset_cov = jnp.zeros((Qa.shape[0], 6, 6), dtype=Qa.dtype)
     nx = Qa.shape[-1]
 
     def add_exec(P, x):
@@ -48,11 +83,12 @@ def _scan(P0a, P0t, phi_aug, Qa, Qt, H, Ra, Rt, Xa=None, Xt=None, *, layout, kin
 
     def step(carry, ev):
         A, T, Pnc = carry
-        phi, qa, qt, h, ra, rt, xa, xt = ev
+        phi, qa, qt, h, ra, rt, xa, xt, fl, rc = ev
         if kind == "wls":
             Pnc = cov.wls_time_update(Pnc, phi, layout)
         if square_root:
             Wa = sqr.sqrt_time_update(A, phi, qa)
+            Wa = jnp.where(fl > 0.0, sqr.factor(reset_state_block(Wa @ Wa.T, fl, rc)), Wa)
             Pa_m = Wa @ Wa.T
             if kind == "kalman_schmidt":
                 K = sqr.sqrt_kalman_schmidt_gain(Wa, h, ra, layout)
@@ -62,7 +98,7 @@ def _scan(P0a, P0t, phi_aug, Qa, Qt, H, Ra, Rt, Xa=None, Xt=None, *, layout, kin
             Pa_p = Wa1 @ Wa1.T
             A1 = Wa1
         else:
-            Pa_m = cov.time_update(A, phi, qa)
+            Pa_m = reset_state_block(cov.time_update(A, phi, qa), fl, rc)
             K, Pnc = _gain(kind, user_gain, layout, Pa_m, Pnc, h, ra)
             Pa_p = add_exec(cov.joseph_update(Pa_m, h, ra, K), xa)
             A1 = Pa_p
@@ -85,7 +121,7 @@ def _scan(P0a, P0t, phi_aug, Qa, Qt, H, Ra, Rt, Xa=None, Xt=None, *, layout, kin
     else:
         A0, T0 = P0a, P0t
     Pnc0 = P0a[:n_est, :n_est]
-    _, outs = jax.lax.scan(step, (A0, T0, Pnc0), (phi_aug, Qa, Qt, H, Ra, Rt, Xa, Xt))
+    _, outs = jax.lax.scan(step, (A0, T0, Pnc0), (phi_aug, Qa, Qt, H, Ra, Rt, Xa, Xt, reset_flag, reset_cov))
     return outs
 
 
@@ -103,6 +139,18 @@ def _pad_events(K: int, Kp: int, arrays):
     return out
 
 
+def reset_arrays(study: Study, Kp: int) -> tuple[np.ndarray, np.ndarray]:
+    """(flag (Kp,), cov (Kp, 6, 6)) of the study's reset events on its schedule (zeros when none)."""
+    flag, rcov = np.zeros(Kp), np.zeros((Kp, 6, 6))
+    times = study.schedule.times_s
+    for t, sig in study.resets:
+        k = int(np.argmin(np.abs(times - t)))
+        if abs(times[k] - t) <= 1e-3:
+            flag[k] = 1.0
+            rcov[k] = np.diag(np.asarray(sig, dtype=np.float64) ** 2)
+    return flag, rcov
+
+
 def run_filter(study: Study, phi_aug, Qa, Qt, meas, Xa=None, Xt=None, host: bool = True):
     """Run the jitted scan over the schedule (padded to a bucket size); numpy outputs.
 
@@ -114,6 +162,7 @@ def run_filter(study: Study, phi_aug, Qa, Qt, meas, Xa=None, Xt=None, host: bool
     Kp = bucket(K)
     Xa = np.zeros_like(Qa) if Xa is None else Xa
     Xt = np.zeros_like(Qt) if Xt is None else Xt
+    flag, rcov = reset_arrays(study, Kp)
     phi_aug, Qa, Qt, H, Ra, Rt, Xa, Xt = _pad_events(
         K,
         Kp,
@@ -140,6 +189,8 @@ def run_filter(study: Study, phi_aug, Qa, Qt, meas, Xa=None, Xt=None, host: bool
             jnp.asarray(Rt),
             jnp.asarray(Xa),
             jnp.asarray(Xt),
+            jnp.asarray(flag),
+            jnp.asarray(rcov),
             layout=study.layout,
             kind=study.filter_kind,
             gencov=study.gencov,

@@ -21,6 +21,7 @@ EVENT_ORDER = (
     "thrust_on",
     "thrust_off",
     "propagation",
+    "reset",
     "measurement",
     "guidance",
     "eigenvector",

@@ -91,7 +91,8 @@ class Study:
     trajectory (sorted, s); trajectory_end_s: where the reference trajectory ends (s);
     pdot_step_s: the largest RK4 step of PDOT propagation (s); noise_model: PHI mode's
     thrust-noise model, "grid" (DYNO on fixed cells of noise_step_s, s) or "interval"
-    (FRACAS's DYNO per schedule interval; fracas.team.transitions); source: where the study came
+    (FRACAS's DYNO per schedule interval; fracas.team.transitions); resets: (t_s, six
+    sigmas km, km/s) of the assumed-covariance reset events; source: where the study came
     from (a deck path, for messages); user_gain_spec: the "module:function" of a user gain;
     white_q_assumed / white_q_true (km^2/s^3), white_direction_* ("full", "crosstrack",
     "radial", "along"): white acceleration process noise on the velocity (UNF s_q, digest
@@ -136,6 +137,7 @@ class Study:
     trajectory_source: str = ""
     punched: dict | None = None
     guidance: tuple[GuidanceSpec, ...] = ()
+    resets: tuple[tuple[float, tuple[float, ...]], ...] = ()
     guidance_model: str = "report"
     guidance_reset: str = "state"
     guidance_estimates: str = "state"

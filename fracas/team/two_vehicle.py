@@ -48,6 +48,7 @@ import numpy as np
 from fracas import _jax  # noqa: F401  (float64 before any array exists)
 from fracas.filters.two_vehicle import masked_gain, scalar_joseph
 from fracas.measurements.relative import RELATIVE_KINDS, noise_sigma, relative_measurement, vehicle_rows
+from fracas.team.scan import reset_state_block as _reset
 
 __all__ = [
     "ROLES",
@@ -279,14 +280,6 @@ def role_setup(study: RendezvousStudy, role: str, Q_true: np.ndarray) -> RoleCas
 
 
 # ----------------------------------------------------------------------------- scans
-def _reset(P, flag, cov6):
-    n = P.shape[0]
-    keep = jnp.concatenate([jnp.zeros(6, dtype=jnp.float64), jnp.ones(n - 6, dtype=jnp.float64)])
-    Pr = P * keep[:, None] * keep[None, :]
-    Pr = Pr.at[:6, :6].set(cov6)
-    return jnp.where(flag > 0.0, Pr, P)
-
-
 @jax.jit
 def _scan(P0a, P0t, est, phi, Qa, Qt, H, ra, rt, active, flag, rcov):
     def step(carry, inp):

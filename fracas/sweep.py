@@ -586,7 +586,7 @@ def run_sweep(
                 progress(done - len(new) + j + 1, len(todo))
 
     # guidance and reset studies are not batched (fracas.team.batch.prepare): one by one from the start
-    batchable = not base.guidance and not base.resets
+    batchable = not base.guidance and not any(e.type == "reset" for e in base.event)
     group_of = _groups(studies, fields) if (batch and res_dir is None and batchable) else {}
     from fracas.team.batch import MAX_BATCH
 

@@ -646,6 +646,26 @@ def _tom_stm_file(cfg, ref_path: Path) -> Path:
 
 
 # ----------------------------------------------------------------------------- two vehicles
+def _check_runs_size(cfg, study) -> None:
+    """One line naming single_runs.runs when the runs' error histories (roles x runs x
+    events x states float64, held at once, and about as much again while they are flown)
+    would take over a quarter of the machine's memory."""
+    runs = cfg.single_runs.runs
+    try:
+        mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):  # not on this platform: no check
+        return
+    need = 2 * len(study.roles) * runs * len(study.times_s) * study.n * 8
+    if runs and need > mem / 4:
+        from fracas.errors import DeckError
+
+        raise DeckError(
+            f"{cfg.source_path}: single_runs.runs = {runs}: the runs' error histories would take "
+            f"{need / 2**30:.1f} GiB of this machine's {mem / 2**30:.1f} GiB (expected at most a quarter); "
+            "use fewer runs or fewer roles"
+        )
+
+
 def run_rendezvous(
     deck,
     output: str | Path | None = None,
@@ -685,6 +705,7 @@ def run_rendezvous(
         check_output_path(plot, "plot")
     say("integrating both references and their STMs")
     study = build_rendezvous(cfg)
+    _check_runs_size(cfg, study)
     t1 = time.perf_counter()
     say(f"covariance analysis ({', '.join(study.roles)})")
     res = run_rendezvous_study(study)

@@ -101,3 +101,16 @@ def test_run_command_writes_results_and_plot(tmp_path):
     assert out.exists() and png.exists()
     r = CliRunner().invoke(main, ["run", SMALL, "--stm", "x.h5"])
     assert r.exit_code == 2 and "not for rendezvous decks" in r.output
+
+
+def test_too_many_single_runs_is_refused_in_one_line(monkeypatch):
+    """A run whose single-run histories would not fit in a quarter of the memory is refused
+    before the analysis and the runs, naming single_runs.runs (the memory is faked small here)."""
+    import os
+
+    from fracas.errors import DeckError
+
+    real = os.sysconf
+    monkeypatch.setattr(os, "sysconf", lambda k: 1 if k == "SC_PHYS_PAGES" else real(k))
+    with pytest.raises(DeckError, match=r"single_runs\.runs = 20: .* GiB"):
+        run_rendezvous(SMALL, write_results=False)

@@ -39,13 +39,14 @@ import h5py
 import numpy as np
 
 from fracas.errors import ResultsFileError
-from fracas.io.hdf5 import atomic_h5, read_provenance, read_str, write, write_provenance, write_strings
+from fracas.io.hdf5 import Checked, atomic_h5, read_provenance, write, write_provenance, write_strings
 from fracas.products import RendezvousProduct
 
 __all__ = ["RENDEZVOUS_SCHEMA", "write_rendezvous_results", "read_rendezvous_results", "FILE_KIND"]
 
 RENDEZVOUS_SCHEMA = 1
 FILE_KIND = "fracas-rendezvous-results"
+_COVARIANCES = ("P_true", "P_assumed", "P_true_minus", "P_assumed_minus")
 _RMS_COLUMNS = (
     "chaser_position",
     "chaser_velocity",
@@ -81,7 +82,7 @@ def write_rendezvous_results(path: str | os.PathLike, product: RendezvousProduct
         write(g, "marks", np.asarray(product.marks, np.int64), "1", columns="range range_rate los_beta los_theta")
         write(g, "x_chaser", np.asarray(product.x_chaser, np.float64), "km, km/s")
         write(g, "x_target", np.asarray(product.x_target, np.float64), "km, km/s")
-        for name in ("P_true", "P_assumed", "P_true_minus", "P_assumed_minus"):
+        for name in _COVARIANCES:
             write(g, name, np.asarray(getattr(product, name), np.float64), "labels' units^2")
         for name in ("team_rms", "assumed_rms"):
             write(g, name, np.asarray(getattr(product, name), np.float64), "km, km/s", columns=" ".join(_RMS_COLUMNS))
@@ -128,13 +129,24 @@ def read_rendezvous_results(path: str | os.PathLike) -> RendezvousProduct:
         kind = kind.decode() if isinstance(kind, bytes) else str(kind)
         if kind != FILE_KIND:
             raise ResultsFileError(f"{src}: file_kind = {kind!r}: expected {FILE_KIND!r}")
+        c = Checked(f, src, ResultsFileError)
+        if not isinstance(f.get("rendezvous"), h5py.Group):
+            raise c.fail("rendezvous", "missing, expected the rendezvous group (incomplete file?)")
+        a = f["rendezvous"].attrs
         try:
-            g = f["rendezvous"]
-            a = g.attrs
-            m = g["maneuvers"]
-            runs = g.get("single_runs")
-            arr = lambda grp, k: np.array(grp[k])  # noqa: E731
-            strs = lambda grp, k: [str(x) for x in read_str(grp[k])]  # noqa: E731
+            roles = c.strs("rendezvous/roles")
+            labels = c.strs("rendezvous/labels")
+            R, n = len(roles), len(labels)
+            times = c.num("rendezvous/times_s", (None,), finite=True)
+            K = times.shape[0]
+            names = c.strs("rendezvous/maneuvers/names")
+            J = len(names)
+            pr = {k: c.num(f"rendezvous/{k}", (R, K, n, n)) for k in _COVARIANCES}
+            rms = {k: c.num(f"rendezvous/{k}", (R, K, 6)) for k in ("team_rms", "assumed_rms")}
+            m = "rendezvous/maneuvers/"
+            runs = "rendezvous/single_runs/"
+            has_runs = "single_runs" in f["rendezvous"]
+            run = (lambda k, shape: c.num(runs + k, shape)) if has_runs else (lambda k, shape: None)  # noqa: E731
             return RendezvousProduct(
                 title=str(a["title"]),
                 source=str(a["source"]),
@@ -142,42 +154,40 @@ def read_rendezvous_results(path: str | os.PathLike) -> RendezvousProduct:
                 centre=str(a["centre"]),
                 chaser_name=str(a["chaser"]),
                 target_name=str(a["target"]),
-                roles=strs(g, "roles"),
-                reference_sources=strs(g, "reference_sources") if "reference_sources" in g else [],
-                labels=strs(g, "labels"),
-                units=strs(g, "units"),
-                times_s=arr(g, "times_s"),
-                marks=arr(g, "marks").astype(bool),
-                x_chaser=arr(g, "x_chaser"),
-                x_target=arr(g, "x_target"),
-                P_true=arr(g, "P_true"),
-                P_assumed=arr(g, "P_assumed"),
-                P_true_minus=arr(g, "P_true_minus"),
-                P_assumed_minus=arr(g, "P_assumed_minus"),
-                maneuver_names=strs(m, "names"),
-                maneuver_time_s=arr(m, "time_s"),
-                maneuver_arrival_s=arr(m, "arrival_s"),
-                maneuver_dv_km_s=arr(m, "dv_km_s"),
-                maneuver_status=arr(m, "status"),
-                maneuver_cov_true=arr(m, "cov_true"),
-                maneuver_cov_assumed=arr(m, "cov_assumed"),
-                reset_times_s=arr(g, "reset_times_s"),
-                team_rms=arr(g, "team_rms"),
-                assumed_rms=arr(g, "assumed_rms"),
+                roles=roles,
+                reference_sources=c.strs("rendezvous/reference_sources", 2),
+                labels=labels,
+                units=c.strs("rendezvous/units", n),
+                times_s=times,
+                marks=c.num("rendezvous/marks", (K, 4), integer=True).astype(bool),
+                x_chaser=c.num("rendezvous/x_chaser", (K, 6), finite=True),
+                x_target=c.num("rendezvous/x_target", (K, 6), finite=True),
+                **pr,
+                maneuver_names=names,
+                maneuver_time_s=c.num(m + "time_s", (J,)),
+                maneuver_arrival_s=c.num(m + "arrival_s", (J,)),
+                maneuver_dv_km_s=c.num(m + "dv_km_s", (J, 3)),
+                maneuver_status=c.num(m + "status", (J,), integer=True),
+                maneuver_cov_true=c.num(m + "cov_true", (R, J, 3, 3)),
+                maneuver_cov_assumed=c.num(m + "cov_assumed", (R, J, 3, 3)),
+                reset_times_s=c.num("rendezvous/reset_times_s", (None,)),
+                **rms,
                 n_runs=int(a["n_runs"]),
                 seed=int(a["seed"]),
                 run_dynamics=str(a.get("run_dynamics", "")),
-                run_errors=arr(runs, "errors") if runs is not None else None,
-                run_maneuver_errors=arr(runs, "maneuver_errors") if runs is not None else None,
-                envelope_1sigma=arr(runs, "envelope_1sigma") if runs is not None else None,
-                envelope_3sigma=arr(runs, "envelope_3sigma") if runs is not None else None,
-                envelope_1sigma_se=arr(runs, "envelope_1sigma_se") if runs is not None else None,
-                run_rms=arr(runs, "rms") if runs is not None else None,
-                envelope_3sigma_se=arr(runs, "envelope_3sigma_se") if runs is not None else None,
+                run_errors=run("errors", (R, None, K, n)),
+                run_maneuver_errors=run("maneuver_errors", (R, None, J, 3)),
+                envelope_1sigma=run("envelope_1sigma", (R,)),
+                envelope_3sigma=run("envelope_3sigma", (R,)),
+                envelope_1sigma_se=run("envelope_1sigma_se", (R,)),
+                envelope_3sigma_se=run("envelope_3sigma_se", (R,)),
+                run_rms=run("rms", (R, K, 6)),
                 length_unit=str(a["length_unit"]),
                 km_per_unit=float(a["km_per_unit"]),
-                timing=json.loads(read_str(g["timing"])),
+                timing=json.loads(c.text("rendezvous/timing")),
                 provenance=read_provenance(f),
             )
-        except (KeyError, ValueError, TypeError, OSError) as exc:
-            raise ResultsFileError(f"{src}: incomplete rendezvous results file: {exc}") from None
+        except (KeyError, ValueError, TypeError) as exc:  # an attribute missing or of the wrong type
+            raise ResultsFileError(
+                f"{src}: rendezvous: attribute {exc}: missing or unreadable (incomplete file?)"
+            ) from None

@@ -114,3 +114,23 @@ def test_too_many_single_runs_is_refused_in_one_line(monkeypatch):
     monkeypatch.setattr(os, "sysconf", lambda k: 1 if k == "SC_PHYS_PAGES" else real(k))
     with pytest.raises(DeckError, match=r"single_runs\.runs = 20: .* GiB"):
         run_rendezvous(SMALL, write_results=False)
+
+
+def test_damaged_or_incomplete_file_is_refused_naming_the_dataset(written, tmp_path):
+    """Every dataset is checked (dtype, shape, SHA-256) on reading: an edited covariance or a
+    missing dataset is one ResultsFileError naming the file and the dataset."""
+    import shutil
+
+    _, path = written
+    bad = tmp_path / "edited.h5"
+    shutil.copy(path, bad)
+    with h5py.File(bad, "r+") as f:
+        f["rendezvous/P_true"][0, 0, 0, 0] += 1.0
+    with pytest.raises(ResultsFileError, match=r"edited\.h5: rendezvous/P_true: SHA-256 checksum mismatch"):
+        read_rendezvous_results(bad)
+    gone = tmp_path / "gone.h5"
+    shutil.copy(path, gone)
+    with h5py.File(gone, "r+") as f:
+        del f["rendezvous/maneuvers/cov_true"]
+    with pytest.raises(ResultsFileError, match=r"rendezvous/maneuvers/cov_true: missing"):
+        read_rendezvous_results(gone)

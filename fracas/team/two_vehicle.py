@@ -226,11 +226,14 @@ def _phi_aug(study: RendezvousStudy) -> tuple[np.ndarray, np.ndarray]:
     return phi, Q
 
 
+#: every relative kind at every event, compiled once per process (one trace per event count)
+_measurements_at = jax.jit(jax.vmap(relative_measurement, in_axes=(0, 0, None)))
+
+
 def measurement_rows(study: RendezvousStudy) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """H (K, 4, n), r_assumed, r_true (K, 4) (kind units^2) and the nominal values q (K, 4)."""
     K, n = len(study.times_s), study.n
-    fn = jax.jit(jax.vmap(relative_measurement, in_axes=(0, 0, None)))
-    vals, gs, _ = (np.asarray(a) for a in fn(study.x_chaser, study.x_target, study.axes))
+    vals, gs, _ = (np.asarray(a) for a in _measurements_at(study.x_chaser, study.x_target, study.axes))
     H = np.zeros((K, 4, n))
     bA, bT = vehicle_rows(gs)
     H[:, :, :6] = np.asarray(bA)

@@ -76,7 +76,9 @@ def _remove_checkpoints(folder: Path) -> None:
 
 
 def plan_key(cfg: TsimDeck, team_text: str) -> str:
-    """What a checkpoint must match to be resumed: both decks' texts and the fracas version."""
+    """What a checkpoint must match to be resumed: the TSIM deck's text, ``team_text`` (pass
+    :func:`_team_key` of the TEAM deck: its text, its trajectory deck's and its STM file's
+    identity, so a changed reference is never resumed into) and the fracas version."""
     from fracas import __version__
 
     h = hashlib.sha256()
@@ -127,12 +129,15 @@ def _team_for(cfg: TsimDeck, say):
 
     team_deck = tsim_team_deck(cfg)
     changes = {**cfg.insim.team_changes, "errcon.guidance_model": "tsim"}
-    team_deck = vary_many(team_deck, changes)
+    try:
+        team_deck = vary_many(team_deck, changes)
+    except DeckError as exc:
+        raise DeckError(f"{cfg.source_path}: insim.team_changes: {exc}") from None
     key = _team_key(team_deck) + repr(sorted(changes.items()))
     if key in _TEAM_RUNS:
         return _TEAM_RUNS[key]
     say("running TEAM (guidance model tsim) for the knowledge and guidance matrices")
-    prod, _, _ = pipeline.run_team(team_deck, write_results=False, on_stage=None)
+    prod, _, _ = pipeline.run_team(team_deck, write_results=False, on_stage=say)
     if prod is None or not prod.guidance:
         raise DeckError(f"{cfg.source_path}: insim.team_deck: the TEAM run made no guidance events")
     _TEAM_RUNS[key] = (team_deck, build_case(team_deck), prod)
@@ -230,7 +235,7 @@ def run_tsim(
     say("building the Monte Carlo plan (reference through the noise grid)")
     plan = build_plan(cfg, case, team)
     _check_table_size(cfg, plan)
-    key = plan_key(cfg, team_deck.source_text or "")
+    key = plan_key(cfg, _team_key(team_deck))
     done = _read_checkpoints(ckpt, key)
     per_task = max(1, -(-(batch_missions or cfg.insim.batch_missions) // plan.block))
     remaining = [b for b in range(plan.n_blocks) if b not in done]

@@ -26,7 +26,7 @@ import numpy as np
 
 from fracas.constants import DAY_S
 from fracas.dynamics.parameters import get_values
-from fracas.errors import DeckError
+from fracas.errors import DeckError, NumericalError
 from fracas.guidance.low_thrust import weighted_correction_matrix
 from fracas.guidance.target_kinds import TARGET_KINDS
 from fracas.guidance.targets import target_values
@@ -64,7 +64,7 @@ def _grid(key_times: list[float], t_end: float, step_s: float | None) -> np.ndar
     return g
 
 
-def build_plan(cfg, case, team, sampling_override: str | None = None) -> TsimPlan:
+def build_plan(cfg, case, team) -> TsimPlan:
     """The plan of TSIM deck ``cfg`` (TsimDeck) on TEAM case ``case`` with its TEAM product
     ``team`` (run with the ``tsim`` guidance model).  DeckError for what only now shows."""
     study = case.study
@@ -75,7 +75,7 @@ def build_plan(cfg, case, team, sampling_override: str | None = None) -> TsimPla
     model, params = pr.model, pr.params
     nx, n = study.nx, study.layout.n
     labels = tuple(study.labels)
-    method = sampling_override or ins.sampling
+    method = ins.sampling
     centre = model.bodies[model.primary]
 
     # injection and parameter dispersions
@@ -125,7 +125,13 @@ def build_plan(cfg, case, team, sampling_override: str | None = None) -> TsimPla
         grid_s=grid, x_ref=np.zeros((len(key_times), 7)), maneuvers=(), final=blank_t, final_team={},
         seed=0, near_success_factor=1.0, isp_s=float(np.asarray(params.impulse_isp_s)), first_mission=0, missions=1,
     )  # fmt: skip
-    x_key = engine.reference_states(skeleton, key_times)
+    x_key, failed_at = engine.reference_states(skeleton, key_times)
+    if np.isfinite(failed_at):
+        raise NumericalError(
+            f"{cfg.source_path}: insim.team_deck: the reference trajectory of {cfg.insim.team_deck} could not be "
+            f"flown through the Monte Carlo hold grid to {failed_at / DAY_S:.6g} d (expected a trajectory that "
+            "reaches every maneuver and target time)"
+        )
     ref_at = dict(zip(key_times, x_key))
     mu_of = {}
 
@@ -180,16 +186,15 @@ def build_plan(cfg, case, team, sampling_override: str | None = None) -> TsimPla
         kk = np.asarray(weighted_correction_matrix(k_mat, k_mat, w, tl)[0])
         maneuvers.append(
             ManeuverPlan(
-                name=g.name, type=g.type, time_s=float(g.time_s), cutoff_s=float(g.cutoff_s),
+                name=g.name, type=g.type, time_s=float(g.time_s),
                 law=s.law if s is not None else "linear", max_iterations=s.max_iterations if s is not None else 8,
                 target=tp, gamma=np.asarray(ev.gamma, float), knowledge_factor=kfac, control_labels=ctrl,
-                control_units=units_u, k_mat=np.asarray(k_mat), k_pinv=k_pinv, kk=kk, dv_jacobian=dv_jac,
+                control_units=units_u, k_pinv=k_pinv, kk=kk, dv_jacobian=dv_jac,
                 sigma_p=k * g.sigma_p, sigma_pointing_rad=k * g.sigma_pointing_rad, sigma_res_km_s=k * g.sigma_res_km_s,
                 team={
                     "correction_cov": np.asarray(ev.correction_cov) * k * k,
                     "dv_mean_km_s": k * ev.dv_mean_km_s,
                     "dv_99_km_s": k * ev.dv_99_km_s,
-                    "dv_rms_km_s": k * ev.dv_rms_km_s,
                     "target_cov_before": np.asarray(ev.target_cov_before) * k * k,
                     "target_cov_after": np.asarray(ev.target_cov_after) * k * k,
                 },

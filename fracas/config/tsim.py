@@ -32,8 +32,9 @@ as written by an analyst: km, km/s, kg, days.  No JAX here::
                    injection), position_sigma_km (3), velocity_sigma_km_s (3), mass_sigma_kg
     [[maneuver]]   name (a TEAM [[guidance]] name; maneuvers not named fly linear
                    guidance), law = "linear" | "nonlinear", max_iterations = 8,
-                   tolerance (one per target, target units; default 1e-3 km / 1e-6 km/s /
-                   1e-6 rad-like), knowledge = "team" | "deck" (knowledge covariance from
+                   tolerance (one per target, target units; default 0.1 km / 1e-6 km/s /
+                   1e-7 rad / 1 s: fracas.build.tsim.default_tolerance), knowledge = "team" |
+                   "deck" (knowledge covariance from
                    the TEAM run, or knowledge_position_sigma_km / knowledge_velocity_sigma_km_s
                    given here), enabled = true (false: the event is not flown)
     [output]       results = "out/<deck>_tsim.h5", plot = "out/<deck>_tsim.png"
@@ -57,7 +58,6 @@ from fracas.errors import DeckError
 
 __all__ = ["TsimDeck", "InSim", "Injection", "Maneuver", "parse_tsim_deck", "load_tsim_deck", "tsim_problems"]
 
-BLOCK_MISSIONS = 32  # missions per compiled block (fixed: mission i always flies in the same lane)
 MAX_MISSIONS = 10_000_000
 
 Vector3 = Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=3, max_length=3)]
@@ -138,11 +138,6 @@ class TsimDeck(SourcedDeck):
                 raise FieldProblem(("maneuver", k, "name"), m.name, f"repeats maneuver[{seen[m.name]}]")
             seen[m.name] = k
         return self
-
-    @property
-    def batch_blocks(self) -> int:
-        """Blocks of :data:`BLOCK_MISSIONS` per task (the batch size rounded up)."""
-        return max(1, -(-self.insim.batch_missions // BLOCK_MISSIONS))
 
 
 def parse_tsim_deck(text: str, source: str = "<deck>") -> TsimDeck:

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from fracas.products import TsimProduct
+from fracas.report.guidance import ellipse_points
 
 __all__ = ["summary_text", "plot_tsim", "successful"]
 
@@ -123,10 +124,9 @@ def summary_text(product: TsimProduct, width: int = 80) -> str:
 
 
 def _ellipse(cov: np.ndarray, k: float, center=(0.0, 0.0), npts: int = 181) -> tuple[np.ndarray, np.ndarray]:
-    w, v = np.linalg.eigh(0.5 * (cov + cov.T))
-    t = np.linspace(0.0, 2.0 * np.pi, npts)
-    pts = v @ (np.sqrt(np.maximum(w, 0.0))[:, None] * np.vstack([np.cos(t), np.sin(t)])) * k
-    return pts[0] + center[0], pts[1] + center[1]
+    """(x, y) of the k-sigma ellipse of a 2x2 covariance about ``center`` (report.guidance.ellipse_points)."""
+    pts = ellipse_points(cov, k, npts) + np.asarray(center, dtype=float)
+    return pts[:, 0], pts[:, 1]
 
 
 def _label(name: str, unit: str) -> str:

@@ -418,10 +418,12 @@ def _impulsive_design(plan, prog, dyn, m, x, know, est, dv0, nominal_dyn, ctrl_n
     return dv, code, iters, miss_linear, np.where(alive[:, None], dT, 0.0)
 
 
-def reference_states(plan: TsimPlan, times_s) -> np.ndarray:
-    """The reference (7,) at each of ``times_s`` (sorted, s), flown by the engine with every
-    deviation and the noise zero through the plan's hold grid: the states the missions'
-    deviations are measured from (the null run deviates by exactly zero)."""
+def reference_states(plan: TsimPlan, times_s) -> tuple[np.ndarray, float]:
+    """(states, failed_at_s): the reference (7,) at each of ``times_s`` (sorted, s), flown by
+    the engine with every deviation and the noise zero through the plan's hold grid (the
+    states the missions' deviations are measured from: the null run deviates by exactly
+    zero), and the first of those times it could not be flown to (NaN when it flew; the
+    states from there on are not finite).  Nothing raises here: the build reports it."""
     B = plan.block  # a block of identical lanes: the missions' compiled programs serve
     dyn, prog, nominal_dyn, nominal_ctrl = _setup(plan)
     params_b = prog["lane_params"](
@@ -437,7 +439,8 @@ def reference_states(plan: TsimPlan, times_s) -> np.ndarray:
                 dyn, params_b, plan.ephem, jnp.asarray(plan.epoch_et_s), x, jnp.asarray(t0), jnp.asarray(t1), zero, ok
             )
         if not bool(np.asarray(ok)[0]):
-            raise RuntimeError(f"the reference trajectory could not be flown to {t / 86400.0:.6g} d")
+            out += [np.full(7, np.nan)] * (len(times_s) - len(out))
+            return np.stack(out), float(t)
         out.append(np.asarray(x)[0].copy())
         t_prev = t
-    return np.stack(out)
+    return np.stack(out), float("nan")

@@ -13,14 +13,13 @@ import numpy as np
 
 from fracas.dynamics.model import ForceModel, Params
 
-__all__ = ["ManeuverPlan", "TargetPlan", "TsimPlan", "STATUS_NAMES"]
+__all__ = ["ManeuverPlan", "TargetPlan", "TsimPlan"]
 
 # Mission status (one per mission, the per-mission table's ``status``)
 STATUS_OK = 0
 STATUS_NEAR = 1  # a nonlinear design accepted within near_success_factor × tolerance
 STATUS_HOPELESS = 2  # a nonlinear design that did not converge: the mission ends there
 STATUS_INTEGRATION = 3  # the core stopped early (stop condition, step limit, non-finite)
-STATUS_NAMES = {0: "ok", 1: "near success", 2: "hopeless maneuver", 3: "integration failed"}
 
 
 @dataclass(frozen=True)
@@ -43,12 +42,12 @@ class TargetPlan:
 class ManeuverPlan:
     """One maneuver ($INMAN): the TEAM guidance event it flies and TEAM's predictions.
 
-    type: "impulsive" | "primary" | "vernier"; time_s: t_G or t_I; cutoff_s (low thrust);
+    type: "impulsive" | "primary" | "vernier"; time_s: t_G or t_I;
     law: "linear" | "nonlinear"; gamma (M, n): δU = −Γ δX̂ (TEAM's guidance matrix about the
     reference, over the augmented state); knowledge_factor (n, n): L with L Lᵀ = P_k, the
     knowledge covariance sampled at the maneuver; control_labels (M,) (low thrust: the
-    arc parameters it changes); k_mat (m, M): K = ∂T/∂U about the reference (impulsive:
-    Ψ_v), k_pinv (M, m): its weighted pseudo-inverse K^{+W}, kk (M, M) = K^{+W} K (how much of
+    arc parameters it changes); k_pinv (M, m): the weighted pseudo-inverse K^{+W} of
+    K = ∂T/∂U about the reference (impulsive: Ψ_v), kk (M, M) = K^{+W} K (how much of
     an earlier command on the same arc a vernier replaces); dv_jacobian (M,): the arc ΔV
     change per control (low thrust, km/s per unit); sigma_p, sigma_pointing_rad,
     sigma_res_km_s: execution errors (Gates; low thrust: sigma_p fraction of each control);
@@ -58,7 +57,6 @@ class ManeuverPlan:
     name: str
     type: str
     time_s: float
-    cutoff_s: float
     law: str
     max_iterations: int
     target: TargetPlan
@@ -66,7 +64,6 @@ class ManeuverPlan:
     knowledge_factor: np.ndarray
     control_labels: tuple[str, ...]
     control_units: tuple[str, ...]
-    k_mat: np.ndarray
     k_pinv: np.ndarray
     kk: np.ndarray
     dv_jacobian: np.ndarray

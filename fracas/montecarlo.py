@@ -235,6 +235,7 @@ def run_tsim(
     say("building the Monte Carlo plan (reference through the noise grid)")
     plan = build_plan(cfg, case, team)
     _check_table_size(cfg, plan)
+    _check_a_priori(cfg, plan, earlier)
     key = plan_key(cfg, _team_key(team_deck))
     done = _read_checkpoints(ckpt, key)
     per_task = max(1, -(-(batch_missions or cfg.insim.batch_missions) // plan.block))
@@ -329,6 +330,42 @@ def table_bytes(plan) -> int:
 
     per = sum(int(np.prod(shape, dtype=np.int64)) * np.dtype(dt).itemsize for shape, dt in block_fields(plan).values())
     return int(per) * plan.n_blocks * plan.block
+
+
+def _statistic_shapes(plan) -> dict[str, tuple[int, ...]]:
+    """The mean's shape of every statistic this plan's run makes (fracas.tsim.summary)."""
+    out = {"target_error": (len(plan.final.names),), "dv_total_km_s": (1,), "final_mass_kg": (1,)}
+    for m in plan.maneuvers:
+        out[f"dv_km_s[{m.name}]"] = (1,)
+        out[f"correction[{m.name}]"] = (m.n_controls,)
+        out[f"state_deviation[{m.name}]"] = (plan.nx,)
+    return out
+
+
+def _check_a_priori(cfg: TsimDeck, plan, earlier: list) -> None:
+    """Before any mission flies: one line naming insim.a_priori_statistics[j] when an earlier
+    file's statistics cannot be merged with this run's: a statistic of another shape (another
+    TEAM deck or target set), or the same seed with overlapping mission ranges (the same
+    missions counted twice)."""
+    from fracas.io.tsim_results import tsim_settings
+
+    src, shapes = cfg.source_path, _statistic_shapes(plan)
+    lo, hi = plan.first_mission, plan.first_mission + plan.missions
+    for j, (f, (_, prev)) in enumerate(zip(cfg.insim.a_priori_statistics, earlier)):
+        where = f"{src}: insim.a_priori_statistics[{j}] = {f!r}"
+        for name, (_, mean, _) in prev.items():
+            if name in shapes and np.shape(mean) != shapes[name]:
+                raise DeckError(
+                    f"{where}: statistic {name} has shape {np.shape(mean)}, this run's {shapes[name]} "
+                    "(expected a run of the same TEAM deck and targets)"
+                )
+        st = tsim_settings(cfg.resolve(f))
+        a, n = int(st.get("first_mission", -1)), int(st.get("missions", 0))
+        if int(st.get("seed", -1)) == cfg.insim.seed and a < hi and lo < a + n:
+            raise DeckError(
+                f"{where}: missions {a}..{a + n - 1} with seed {cfg.insim.seed} overlap this run's {lo}..{hi - 1} "
+                "(expected disjoint missions: set insim.first_mission past them, or another seed)"
+            )
 
 
 def _check_table_size(cfg: TsimDeck, plan) -> None:

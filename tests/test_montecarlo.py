@@ -179,3 +179,14 @@ def test_a_table_too_big_for_memory_is_refused_in_one_line(tmp_path, monkeypatch
     with pytest.raises(DeckError, match=r"insim.missions = 100000: the per-mission table would take .* GiB"):
         run_tsim(deck, tmp_path / "big.h5")
     assert not (tmp_path / "big.h5").exists()
+
+
+def test_a_priori_file_of_the_same_missions_is_refused(tmp_path):
+    """STAT-1 merging needs disjoint missions: an a-priori file made with the same seed over
+    an overlapping mission range would count missions twice, so the run is refused in one
+    line naming insim.a_priori_statistics[0], before any mission flies."""
+    run_tsim(_deck(tmp_path, "h1.toml", missions=32), tmp_path / "h1.h5")
+    again = _deck(tmp_path, "again.toml", missions=32, first_mission=16)
+    again.write_text(again.read_text().replace("[insim]\n", '[insim]\na_priori_statistics = ["h1.h5"]\n', 1))
+    with pytest.raises(DeckError, match=r"insim\.a_priori_statistics\[0\] = 'h1\.h5': missions 0\.\.31 with seed"):
+        run_tsim(again, tmp_path / "again.h5")

@@ -483,7 +483,7 @@ def read_tsim_results(path: str | os.PathLike, *, verify: bool = True) -> TsimPr
 def tsim_statistics(path: str | os.PathLike, *, verify: bool = True) -> tuple[int, dict]:
     """Only the statistics of an earlier TSIM results file (for a-priori merging):
     (the number of successful missions they cover -- ok + near + a_priori of its counts --,
-    name -> (count, mean, covariance))."""
+    name -> (count, mean, covariance)).  See :func:`tsim_settings` for the run they came from."""
     p = Path(path)
     _check_path(p, "TSIM results file")
     try:
@@ -492,6 +492,18 @@ def tsim_statistics(path: str | os.PathLike, *, verify: bool = True) -> tuple[in
             counts = _counts(c)
             ok = sum(int(counts.get(k, 0)) for k in ("ok", "near", "a_priori"))
             return ok, _statistics(c)
+    except OSError as exc:
+        raise ResultsFileError(f"{p}: cannot read as HDF5 ({exc}), expected a TSIM results file") from None
+
+
+def tsim_settings(path: str | os.PathLike, *, verify: bool = True) -> dict:
+    """The settings of an earlier TSIM run (seed, first_mission, missions, ...) from its results file."""
+    p = Path(path)
+    _check_path(p, "TSIM results file")
+    try:
+        with h5py.File(p, "r") as f:
+            c = _open_checked(p, f, _KIND, TSIM_SCHEMA, "TSIM results file", verify)
+            return _json(c, "tsim/settings", dict)
     except OSError as exc:
         raise ResultsFileError(f"{p}: cannot read as HDF5 ({exc}), expected a TSIM results file") from None
 

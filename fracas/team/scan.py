@@ -88,7 +88,8 @@ def _scan(
             Pnc = cov.wls_time_update(Pnc, phi, layout)
         if square_root:
             Wa = sqr.sqrt_time_update(A, phi, qa)
-            Wa = jnp.where(fl > 0.0, sqr.factor(reset_state_block(Wa @ Wa.T, fl, rc)), Wa)
+            # refactor only at a reset (lax.cond: the Cholesky is not paid on every step)
+            Wa = jax.lax.cond(fl > 0.0, lambda W: sqr.factor(reset_state_block(W @ W.T, fl, rc)), lambda W: W, Wa)
             Pa_m = Wa @ Wa.T
             if kind == "kalman_schmidt":
                 K = sqr.sqrt_kalman_schmidt_gain(Wa, h, ra, layout)

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from fracas.constants import BODIES
+from fracas.constants import BODIES, pole_unit_vector
 from fracas.measurements.trakm import OnboardSensor
 
 __all__ = ["EARTH_FLATTENING", "onboard_config", "count_start_times"]
@@ -21,12 +21,6 @@ __all__ = ["EARTH_FLATTENING", "onboard_config", "count_start_times"]
 #: WGS-84 flattening of the Earth (the polar radius default of the onboard kinds)
 EARTH_FLATTENING = 1.0 / 298.257223563
 _ONBOARD = ("doppler_count_1way", "sensor_beta", "sensor_theta", "horizon_angle", "altitude")
-
-
-def _pole(body: str) -> tuple[float, float, float]:
-    b = BODIES[body]
-    ra, de = math.radians(b.pole_ra_deg), math.radians(b.pole_dec_deg)
-    return (math.cos(de) * math.cos(ra), math.cos(de) * math.sin(ra), math.sin(de))
 
 
 def onboard_config(t) -> tuple[OnboardSensor | None, tuple[float, float] | None]:
@@ -48,7 +42,7 @@ def onboard_config(t) -> tuple[OnboardSensor | None, tuple[float, float] | None]
         a = t.equatorial_radius_km or BODIES[t.body].radius_km
         flat = EARTH_FLATTENING if t.body == "earth" else 0.0
         b = t.polar_radius_km or a * (1.0 - flat)
-        kw.update(equatorial_radius_km=float(a), polar_radius_km=float(min(a, b)), pole=_pole(t.body))
+        kw.update(equatorial_radius_km=float(a), polar_radius_km=float(min(a, b)), pole=pole_unit_vector(t.body))
     if t.sensor_frame is not None:
         kw["sensor_frame"] = t.sensor_frame
     if t.sensor_axes is not None:

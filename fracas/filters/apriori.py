@@ -32,6 +32,7 @@ import jax
 import jax.numpy as jnp
 
 from fracas import _jax  # noqa: F401  (float64 before any array exists)
+from fracas.dynamics.relative_motion import hill_axes
 from fracas.filters.square_root import factor, potter_update
 
 __all__ = [
@@ -88,12 +89,8 @@ def lv_axes(r, v):
     """M_R-LV (3, 3), rows i_x, i_y, i_z of the Draper local-vertical frame (digest A.6.1):
     i_z = -unit(r) (down), i_y = -unit(r x v) (crosstrack, minus the orbit normal),
     i_x = i_y x i_z (along track, forward for a circular orbit).  x_LV = M_R-LV x_ref."""
-    r, v = _f64(r), _f64(v)
-    iz = -r / jnp.linalg.norm(r)
-    h = jnp.cross(r, v)
-    iy = -h / jnp.linalg.norm(h)
-    ix = jnp.cross(iy, iz)
-    return jnp.stack([ix, iy, iz])
+    C = hill_axes(_f64(r), _f64(v))[0]  # rows radial, along, normal
+    return jnp.stack([C[1], -C[2], -C[0]])
 
 
 @jax.jit

@@ -49,6 +49,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from fracas import _jax  # noqa: F401  (x64 first)
+from fracas.dynamics.relative_motion import hill_axes
 
 __all__ = [
     "lvlh_axes",
@@ -91,10 +92,7 @@ def lvlh_axes(r, v):
     (i_t forward, i_h orbit normal, i_r up): i_r = r/|r|, i_h = unit(r x v), i_t = i_h x i_r
     (right-handed: i_t x i_h = i_r).  A [[tracking]] entry's ``sensor_axes`` with
     ``sensor_frame = "lvlh"`` are components on these rows."""
-    r, v = _f64(r), _f64(v)
-    i_r = _unit(r)
-    i_h = _unit(jnp.cross(r, v))
-    return jnp.stack([jnp.cross(i_h, i_r), i_h, i_r])
+    return hill_axes(_f64(r), _f64(v))[0][jnp.array([1, 2, 0])]  # Hill rows (radial, along, normal) reordered
 
 
 def horizon_sensor_axes(r, v, azimuth_rad, depression_rad):

@@ -409,22 +409,6 @@ def _np_unit(x):
     return x / np.linalg.norm(x)
 
 
-def _np_lvlh(r, v):
-    """numpy :func:`onboard.lvlh_axes`: rows (forward, orbit normal, up)."""
-    up = _np_unit(r)
-    h = _np_unit(np.cross(r, v))
-    return np.stack([np.cross(h, up), h, up])
-
-
-def _np_horizon_axes(r, v, az, dep):
-    """numpy :func:`onboard.horizon_sensor_axes`."""
-    t, h, up = _np_lvlh(r, v)
-    i_phi = math.cos(az) * t + math.sin(az) * h
-    x_m = math.cos(dep) * i_phi - math.sin(dep) * up
-    i_2 = np.cross(i_phi, up)
-    return np.stack([x_m, np.cross(i_2, x_m), i_2])
-
-
 def _onboard_row(ob: Observation, geometry: Geometry, stations: Mapping[str, Station], i: int) -> np.ndarray:
     """Packed onboard input row of one observation (the sensor frame built at the reference)."""
     sen = ob.sensor
@@ -468,11 +452,11 @@ def _onboard_row(ob: Observation, geometry: Geometry, stations: Mapping[str, Sta
         dep = sen.boresight_depression_rad
         if dep is None:
             dep = math.acos(min(1.0, a_f / np.linalg.norm(r_rel)))
-        axes = _np_horizon_axes(r_rel, v_rel, sen.horizon_azimuth_rad, dep)
+        axes = np.asarray(onboard.horizon_sensor_axes(r_rel, v_rel, sen.horizon_azimuth_rad, dep))
     else:
         axes = np.asarray(sen.sensor_axes, dtype=np.float64)
         if sen.sensor_frame == "lvlh":
-            axes = axes @ _np_lvlh(r_rel, v_rel)
+            axes = axes @ np.asarray(onboard.lvlh_axes(r_rel, v_rel))
     x[_J_AX : _J_AX + 9] = axes.reshape(9)
     x[_J_OFF : _J_OFF + 3] = np.asarray(sen.target_point_km, dtype=np.float64)
     x[_J_TST] = 1.0 if sen.target == "station" else 0.0

@@ -23,6 +23,7 @@ import numpy as np
 from jax import lax
 
 from fracas import _jax  # noqa: F401  (float64 before any array exists)
+from fracas.dynamics.relative_motion import hill_axes
 
 __all__ = [
     "STREAM_INITIAL",
@@ -147,13 +148,7 @@ def rtn_matrix(r, v) -> jax.Array:
     """Rotation C (3×3) from RTN (= RIC: radial, transverse/in-track, normal/cross-track) to
     the inertial frame of r (km) and v (km/s): columns R = r/|r|, T = N × R,
     N = (r × v)/|r × v|, so x_inertial = C x_rtn and P_inertial = C P_rtn Cᵀ."""
-    r = jnp.asarray(r, jnp.float64)
-    v = jnp.asarray(v, jnp.float64)
-    e_r = r / jnp.linalg.norm(r)
-    h = jnp.cross(r, v)
-    e_n = h / jnp.linalg.norm(h)
-    e_t = jnp.cross(e_n, e_r)
-    return jnp.stack([e_r, e_t, e_n], axis=1)
+    return hill_axes(jnp.asarray(r, jnp.float64), jnp.asarray(v, jnp.float64))[0].T  # Hill rows = RTN
 
 
 def rotate_state_covariance(p, c) -> jax.Array:

@@ -135,6 +135,27 @@ def _reference(deck: RendezvousDeck, which: str, tdeck, t_out: np.ndarray, marks
     return states, phi, mu, problem, source
 
 
+def _check_marks(deck: RendezvousDeck, times: np.ndarray, marks: np.ndarray, xa: np.ndarray, xt: np.ndarray) -> None:
+    """DeckError naming the tracking entry and time of a mark whose geometry is degenerate:
+    the vehicles at one place (range 1 m or less: no range rate or angle there) or the
+    line of sight along the sensor's i_ym axis (beta undefined)."""
+    r = xt[:, :3] - xa[:, :3]
+    rho = np.linalg.norm(r, axis=1)
+    s = r @ np.asarray(deck.sensor.axes, dtype=np.float64).T
+    flat = np.hypot(s[:, 0], s[:, 2]) <= 1e-9 * np.maximum(rho, 1e-300)
+    angles = marks[:, 2] | marks[:, 3]
+    bad = np.any(marks, axis=1) & ((rho <= 1e-3) | ~np.isfinite(rho) | (angles & flat))
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        t_min = times[k] / 60.0
+        i = next((i for i, t in enumerate(deck.tracking) if t.start_min - 1e-9 <= t_min <= t.stop_min + 1e-9), 0)
+        raise DeckError(
+            f"{deck.source_path}: tracking[{i}]: a mark at {t_min:.3f} min has range {rho[k] * 1e3:.3g} m"
+            + (" along the sensor's i_ym axis" if rho[k] > 1e-3 else "")
+            + " (expected two separated vehicles: no relative measurement is defined there)"
+        )
+
+
 def _is_two_body(problem) -> bool:
     """Point-mass, ballistic, one centre: the conic is the exact reference."""
     m = problem.model
@@ -178,13 +199,7 @@ def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
             continue
         f = _kind_factor(kind, km)
         a = nz(n) * np.array([f, 1.0, f])
-        t = np.array(
-            [
-                n.true_sigma if n.true_sigma is not None else n.sigma,
-                n.true_fraction if n.true_fraction is not None else n.fraction,
-                n.true_floor if n.true_floor is not None else n.floor,
-            ]
-        ) * np.array([f, 1.0, f])
+        t = np.array(n.true_model(), dtype=np.float64) * np.array([f, 1.0, f])
         noise_a[i], noise_t[i] = a, t
 
     biases = tuple(
@@ -207,13 +222,7 @@ def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
         P0[6:12, :6] = P0[:6, :6]
     for j, b in enumerate(biases):
         P0[12 + j, 12 + j] = b.sigma**2
-    for which, C in (("chaser", P0[:6, :6]), ("target", P0[6:12, 6:12])):
-        w = np.linalg.eigvalsh(C)
-        if w.min() < -1e-9 * max(w.max(), 1e-300):
-            raise DeckError(
-                f"{deck.source_path}: {which}.covariance: not positive semidefinite (smallest eigenvalue "
-                f"{w.min():.3g} {deck.units}^2); expected a covariance matrix"
-            )
+    _check_marks(deck, times, marks, xa, xt)
     load = None
     if deck.chaser.filter_position_sigma is not None:
         load = np.r_[np.asarray(deck.chaser.filter_position_sigma), np.asarray(deck.chaser.filter_velocity_sigma)] * km
@@ -230,6 +239,13 @@ def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
         k = _index(times, m.time_min * 60.0)
         tof = (m.arrival_min - m.time_min) * 60.0
         dv, v1, miss, status = intercept(xa[k], xt[k], tof, mu)
+        if int(status) != 0:
+            j = deck.maneuver.index(m)
+            raise DeckError(
+                f"{deck.source_path}: maneuver[{j}].arrival_min = {m.arrival_min:g}: no intercept of the target "
+                f"found from {m.time_min:g} min (miss {float(miss):.3g} km after the iterations; expected a "
+                "transfer the conic targeting can reach: change the times, avoid a 180-deg transfer)"
+            )
         M = np.asarray(intercept_sensitivity(xa[k], xt[k], v1, tof, mu))
         mans.append(ManeuverSpec(m.name, k, float(times[k]), m.arrival_min * 60.0, M, np.asarray(dv), int(status)))
     return RendezvousStudy(

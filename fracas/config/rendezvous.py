@@ -30,8 +30,9 @@ compared on one page::
                 "los_beta", "los_theta"): marks every step_s from start to stop (min from
                 the chaser's epoch)
     [noise.<kind>]  the filter's (assumed) white noise: sigma (constant) or fraction (of
-                the measured value) with floor; true_sigma / true_fraction / true_floor for
-                the real world (default: the same).  Units: length, length/s, mrad.
+                the measured value) with floor; the real world's: true_sigma, or
+                true_fraction + true_floor (default: the filter's).  Units: length,
+                length/s, mrad.
     [sensor]    axes (3 x 3, rows i_xm, i_ym, i_zm in inertial axes; identity default):
                 the frame of the two LOS angles (the Apollo radar: the IMU stable platform)
     [[reset]]   time_min, position_sigma (3), velocity_sigma (3), roles (default
@@ -52,6 +53,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Literal
 
+import numpy as np
 from pydantic import Field, PositiveFloat, model_validator
 
 from fracas.config.trajectory import (
@@ -62,6 +64,9 @@ from fracas.config.trajectory import (
     read_deck_text,
 )
 from fracas.errors import DeckError
+
+#: a covariance's correlation form may dip this far below zero (rounding); fracas.filters.covariance.PSD_TOLERANCE
+PSD_TOLERANCE = 1.0e-6
 
 __all__ = [
     "RendezvousDeck",
@@ -164,7 +169,21 @@ class Noise(_Section):
             raise FieldProblem("sigma", self.sigma, "> 0, or fraction > 0 with floor > 0 (a zero variance)")
         if self.sigma > 0.0 and self.fraction > 0.0:
             raise FieldProblem("fraction", self.fraction, "either sigma or fraction + floor, not both")
+        if self.true_sigma is not None and (self.true_fraction is not None or self.true_floor is not None):
+            raise FieldProblem("true_fraction", self.true_fraction, "either true_sigma or true_fraction + true_floor")
+        if (self.true_fraction is None) != (self.true_floor is None):
+            raise FieldProblem("true_fraction", self.true_fraction, "true_fraction and true_floor together")
         return self
+
+    def true_model(self) -> tuple[float, float, float]:
+        """(sigma, fraction, floor) of the real world: the true_* model when one is given
+        (it replaces the filter's whole: a true_sigma means constant noise, whatever the
+        filter assumes), else the filter's own."""
+        if self.true_sigma is not None:
+            return (self.true_sigma, 0.0, 0.0)
+        if self.true_fraction is not None:
+            return (0.0, self.true_fraction, float(self.true_floor))
+        return (self.sigma, self.fraction, self.floor)
 
 
 class NoiseTable(_Section):
@@ -330,11 +349,32 @@ def rendezvous_problems(deck: RendezvousDeck) -> list[str]:
             + [r.time_min for r in deck.reset]
             + [m.arrival_min for m in deck.maneuver]
         )
+        shift_min = (decks["chaser"].epoch.et - decks["target"].epoch.et) / 60.0
+        if shift_min < -1e-8:
+            out.append(
+                f"{src}: target.trajectory: its epoch is {-shift_min:.3f} min after the chaser's; "
+                "expected the target's epoch at or before the chaser's"
+            )
         for which, d in decks.items():
             dur_min = d.duration_days * 1440.0
-            if dur_min + 1e-9 < end:
+            need = end + (max(shift_min, 0.0) if which == "target" else 0.0)
+            if dur_min + 1e-9 < need:
                 out.append(
                     f"{src}: {which}.trajectory: {getattr(deck, which).trajectory} lasts {dur_min:.1f} min; "
-                    f"expected >= {end:.1f} min (the last mark, reset or arrival)"
+                    f"expected >= {need:.1f} min (the last mark, reset or arrival"
+                    + (", from its own earlier epoch)" if which == "target" and shift_min > 0 else ")")
+                )
+    for which in ("chaser", "target"):
+        cov = getattr(deck, which).covariance
+        if cov is not None:
+            w = np.linalg.eigvalsh(np.asarray(cov, dtype=np.float64))
+            scale = np.sqrt(np.abs(np.diag(cov))).max() if np.any(np.diag(cov)) else 1.0
+            # scale-free: the smallest eigenvalue of the correlation form, as TEAM's psd_check
+            d = np.sqrt(np.maximum(np.diag(cov), 1e-300 * scale**2))
+            wc = np.linalg.eigvalsh(np.asarray(cov, dtype=np.float64) / np.outer(d, d))
+            if wc.min() < -PSD_TOLERANCE:
+                out.append(
+                    f"{src}: {which}.covariance: not positive semidefinite (smallest eigenvalue {w.min():.4g} "
+                    f"{deck.units}^2 units; of the correlation matrix {wc.min():.3g}); expected a covariance matrix"
                 )
     return out

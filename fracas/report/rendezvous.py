@@ -46,13 +46,13 @@ def report_times(product: RendezvousProduct) -> list[int]:
 
 
 def _n(x: float, width: int) -> str:
-    """A number in ``width`` columns: integers for large values, 3 significant figures below 100."""
+    """A number right-justified in ``width`` columns with at least one leading space:
+    integers from 100 up, else 3 (then fewer) significant figures."""
     if not np.isfinite(x):
         return f"{'-':>{width}}"
-    if abs(x) >= 100.0:
-        txt = f"{x:.0f}"
-        return f"{txt:>{width}}" if len(txt) < width else f"{x:>{width}.2g}"
-    return f"{x:>{width}.3g}"
+    tries = ([f"{x:.0f}"] if abs(x) >= 100.0 else []) + [f"{x:.3g}", f"{x:.2g}", f"{x:.1e}", f"{x:.0e}"]
+    txt = next((t for t in tries if len(t) <= width - 1), tries[-1])
+    return f"{txt:>{width}}"
 
 
 def run_consistency(product: RendezvousProduct) -> list[tuple[str, float, float, str]]:
@@ -128,12 +128,10 @@ def summary_text(product: RendezvousProduct, width: int = 80) -> str:
         ]
         for j, name in enumerate(product.maneuver_names):
             row = f"{name[:8]:<9}{product.maneuver_time_s[j] / 60.0:6.1f}"
-            row += f"{np.linalg.norm(product.maneuver_dv_km_s[j]) * f:8.2f}"
+            row += _n(np.linalg.norm(product.maneuver_dv_km_s[j]) * f, 8)
             for r in range(len(product.roles)):
-                row += f"{np.sqrt(max(np.trace(product.maneuver_cov_true[r, j]), 0.0)) * f:10.3g}"
-                row += f"{np.sqrt(max(np.trace(product.maneuver_cov_assumed[r, j]), 0.0)) * f:8.3g}"
-            if int(product.maneuver_status[j]) != 0:
-                row += "  (intercept did not converge)"
+                row += _n(np.sqrt(max(np.trace(product.maneuver_cov_true[r, j]), 0.0)) * f, 10)
+                row += _n(np.sqrt(max(np.trace(product.maneuver_cov_assumed[r, j]), 0.0)) * f, 8)
             lines.append(row[:width])
     if product.n_runs > 0 and product.envelope_1sigma is not None:
         how = {"two_body": "flown on the conics", "linear": "linear"}.get(product.run_dynamics, "")

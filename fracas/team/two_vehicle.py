@@ -428,7 +428,12 @@ def _nonlinear_runs(
                 resid = y[j] - q_hat
                 if j >= 2:  # angles: the residual wrapped to (-pi, pi] (UNF section 4)
                     resid = jnp.arctan2(jnp.sin(resid), jnp.cos(resid))
-                g = masked_gain(Pa, h, r_a, est) * act[j]
+                # an unmeasured kind contributes nothing, even where its geometry is degenerate
+                on = act[j] > 0.0
+                h = jnp.where(on, h, 0.0)
+                r_a = jnp.where(on, r_a, 1.0)
+                resid = jnp.where(on, resid, 0.0)
+                g = jnp.where(on, masked_gain(Pa, h, r_a, est), 0.0)
                 es = es + g * resid
                 Pa = scalar_joseph(Pa, h, r_a, g)
             return (tr, es, Pa), es - tr

@@ -77,6 +77,9 @@ def _plain_loop(study, role):
             if role == "solve_for":
                 wA, wT, _ = tv.optimum_gains(*blocks, bA, bT, bb, ra[k, j])
                 blocks = list(tv.block_update(*blocks, bA, bT, bb, rt[k, j], wA, wT))
+            elif role == "consider":  # Schmidt: the chaser's row of Eq. 20, the target not updated
+                wA = tv.optimum_gains(*blocks, bA, bT, bb, ra[k, j])[0]
+                blocks = list(tv.block_update(*blocks, bA, bT, bb, rt[k, j], wA, np.zeros(6)))
             else:  # ignore: the Apollo filter, Eq. 26 on its own W W'
                 wA = np.asarray(tv.apollo_gain(W, bA, ra[k, j]))
                 W = (np.eye(6) - np.outer(wA, bA)) @ W @ (np.eye(6) - np.outer(bA, wA)) + ra[k, j] * np.outer(wA, wA)
@@ -90,7 +93,7 @@ def _plain_loop(study, role):
     return out
 
 
-@pytest.mark.parametrize("role", ["solve_for", "ignore"])
+@pytest.mark.parametrize("role", ["solve_for", "consider", "ignore"])
 def test_engine_equals_r649_block_equations_along_the_run(apollo, role):
     study, run = apollo
     r = study.roles.index(role)

@@ -729,6 +729,17 @@ def export(
         for out, what in ((oem_out, "OEM"), (opm_out, "OPM"), (csv_out, "CSV")):
             if out is not None:
                 check_output_path(out, what)
+        entries, team = [], None
+        if events:  # everything checked and selected before any file is written
+            if ccsds.file_kind(file) != "team":
+                raise FracasError(f"{file}: --covariance-at needs a TEAM results file")
+            if covariance == "none":
+                raise FracasError(f"{file}: --covariance none: --opm and --csv write covariances")
+            from fracas.io.team_results import read_team_results
+
+            team = read_team_results(file)
+            picked = ccsds.select_events(team, list(events))
+            entries = [ccsds.covariance_at(team, k, covariance, before_update) for k in picked]
         if oem_out is not None:
             ccsds.write_oem(
                 oem_out,
@@ -742,16 +753,7 @@ def export(
                 originator=originator,
             )
             click.echo(f"written: {oem_out}")
-        if events:
-            if ccsds.file_kind(file) != "team":
-                raise FracasError(f"{file}: --covariance-at needs a TEAM results file")
-            if covariance == "none":
-                raise FracasError(f"{file}: --covariance none: --opm and --csv write covariances")
-            from fracas.io.team_results import read_team_results
-
-            team = read_team_results(file)
-            picked = ccsds.select_events(team, list(events))
-            entries = [ccsds.covariance_at(team, k, covariance, before_update) for k in picked]
+        if entries:
             if opm_out is not None:
                 name = object_name or str(team["attrs"].get("title", "")) or "SPACECRAFT"
                 for c in entries:

@@ -760,6 +760,11 @@ def _loc_text(path: tuple) -> str:
     return out
 
 
+#: the most entries an indexed namelist variable may give (the TOML decks' own event and arc
+#: limits are of this order; fracas.config.limits)
+MAX_ENTRIES = 20_000
+
+
 def _fill(tgt: _Target, part: str, prefix: tuple, f: NmlField, value: Any, src: str, group: str) -> None:
     """Write one namelist variable's value(s) into the part's data."""
     root = tgt.parts.setdefault(part, {})
@@ -789,6 +794,10 @@ def _fill(tgt: _Target, part: str, prefix: tuple, f: NmlField, value: Any, src: 
         return
     head, tail = f.path[:star], f.path[star + 1 :]
     entries = _as_list(value)
+    if len(entries) > MAX_ENTRIES:  # a huge index (TON(3000000) = 1.0) would build millions of tables
+        raise DeckError(
+            f"{_where(src, group, f.name, len(entries))}: index {len(entries)}: expected at most {MAX_ENTRIES} entries"
+        )
     if list_kind and entries and not any(isinstance(e, list) for e in entries):
         entries = [entries]  # NAME = a, b (no index): the values of entry 1
     for k, entry in enumerate(entries, start=1):

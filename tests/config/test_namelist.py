@@ -403,3 +403,14 @@ def test_docs_table_names_every_field():
             assert re.search(rf"\| `{f.name}(\(|`)", doc), f"{group}.{f.name} is not in docs/namelist.md"
     for group, name in KNOWN_UNMAPPED:
         assert f"`${group}.{name}`" in doc
+
+
+def test_huge_index_is_refused_in_one_line(tmp_path):
+    """TON(3000000) = 1.0, a 40-byte line, used to build three million thrust-arc tables
+    (minutes and gigabytes); it is refused naming the variable and the limit."""
+    from fracas.config.namelist import MAX_ENTRIES, import_namelist
+
+    p = tmp_path / "big.nml"
+    p.write_text("$DATA\n MASS0 = 1000.0\n TON(3000000) = 1.0\n$END\n", encoding="utf-8")
+    with pytest.raises(DeckError, match=rf"\$DATA\.TON\(3000000\): index 3000000: expected at most {MAX_ENTRIES}"):
+        import_namelist(p, str(p))

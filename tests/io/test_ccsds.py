@@ -474,3 +474,30 @@ def test_oem_table_with_another_state_table_is_refused(work, traj_oem):
     p.write_text(text, encoding="utf-8")
     with pytest.raises(DeckError, match=r"initial_state = \{cartesian, oem\}: give exactly one of the tables"):
         load_deck(p)
+
+
+def test_export_writes_nothing_when_a_later_part_is_refused(work, team_file):
+    """All of an export is checked before any file is written: a bad --covariance-at (an
+    unknown event, or NaN days, which used to pick event #0) leaves no OEM behind."""
+    oem_out = work / "partial.oem"
+    one_line_error(
+        fracas("export", team_file, "--oem", oem_out, "--covariance-at", "nosuchevent", "--opm", work / "p.opm"),
+        "no such event",
+    )
+    one_line_error(fracas("export", team_file, "--covariance-at", "nan", "--csv", work / "n.csv"), "finite time")
+    assert not oem_out.exists() and not (work / "n.csv").exists()
+
+
+def test_team_file_of_another_trajectory_is_refused(work, team_file):
+    """--team must hold covariances of this trajectory: a trajectory a year later (no TEAM
+    epoch in its span) is refused instead of giving an OEM without covariances."""
+    from fracas.pipeline import propagate_deck
+
+    text = (work / "leo.toml").read_text(encoding="utf-8")
+    assert 'iso = "2030-01-01T00:00:00"' in text
+    (work / "later.toml").write_text(text.replace('iso = "2030-01-01T00:00:00"', 'iso = "2031-01-01T00:00:00"'))
+    _, later = propagate_deck(work / "later.toml", work / "later.h5")
+    one_line_error(
+        fracas("export", later, "--team", team_file, "--oem", work / "later.oem"), "none of its", "covariance epochs"
+    )
+    assert not (work / "later.oem").exists()

@@ -38,7 +38,7 @@ Pure numpy/JAX; the scans are jitted once per shape; nothing raises inside them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import partial
 
 import jax
@@ -189,10 +189,9 @@ class RoleCase:
 class RendezvousRun:
     """A run's covariances per role (axis 0: role, in study.roles order): P_true / P_assumed
     (R, K, n, n) after each event's updates, P_true_minus / P_assumed_minus before them;
-    gains (R, K, 4, n); H (K, 4, n) and r_true / r_assumed (K, 4) the marks' rows and
-    variances; maneuver_cov_true / _assumed (R, J, 3, 3) the maneuver-solution covariances
-    (km^2/s^2); single-run errors (R, N, K, n) when asked (only the kept runs), envelope
-    rates."""
+    gains (R, K, 4, n); H (K, 4, n) and r_true (K, 4) the marks' rows and true variances
+    (what the single runs draw from); maneuver_cov_true / _assumed (R, J, 3, 3) the
+    maneuver-solution covariances (km^2/s^2)."""
 
     study: RendezvousStudy
     P_true: np.ndarray
@@ -202,11 +201,8 @@ class RendezvousRun:
     gains: np.ndarray
     H: np.ndarray
     r_true: np.ndarray
-    r_assumed: np.ndarray
-    Q_true: np.ndarray
     maneuver_cov_true: np.ndarray
     maneuver_cov_assumed: np.ndarray
-    runs: dict = field(default_factory=dict)
 
 
 # ----------------------------------------------------------------------------- setup
@@ -325,7 +321,7 @@ def run_rendezvous_study(study: RendezvousStudy) -> RendezvousRun:
         M = np.asarray(m.M)
         mt[:, j] = M @ Pt[:, m.k, :12, :12] @ M.T
         ma[:, j] = M @ Pa[:, m.k, :12, :12] @ M.T
-    return RendezvousRun(study, Pt, Pa, Pt_m, Pa_m, K, H, rt, ra, Qt, mt, ma)
+    return RendezvousRun(study, Pt, Pa, Pt_m, Pa_m, K, H, rt, mt, ma)
 
 
 @partial(jax.jit, static_argnames=("n_runs",))

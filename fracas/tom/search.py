@@ -214,7 +214,10 @@ class IterationRecord:
 class SearchResult:
     """Outcome of the search.  ``u``/``evaluation``: the best iterate (the converged one when
     ``search_converged``).  ``search_converged`` is the algorithm's own test; re-verify it.
-    ``time_*``: wall seconds in ``sensitivities`` calls, in ``evaluate`` calls, and in the rest."""
+    ``time_*``: wall seconds in ``sensitivities`` calls, in ``evaluate`` calls, and in the rest.
+    ``first_order_optimality``: the NLP solvers' own measure at the returned point where they
+    report one (trust-constr: ‖∇ₓL‖∞ of the Lagrangian in scaled controls Ũ, objective −F/ΔF_max);
+    nan where the search has none."""
 
     u: np.ndarray
     evaluation: Evaluation
@@ -226,6 +229,7 @@ class SearchResult:
     time_sensitivities_s: float
     time_line_search_s: float
     time_bookkeeping_s: float
+    first_order_optimality: float = math.nan
 
 
 # ------------------------------------------------------------------------------ pure kernels

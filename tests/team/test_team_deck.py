@@ -89,10 +89,13 @@ def test_missing_a_priori():
 
 def test_a_priori_not_needed_without_analysis():
     """The rule behind the refusal above: a deck that only builds an STM file needs no a priori."""
-    text = re.sub(r"\[a_priori\]\n(.+\n)+", "", small_text()).replace(
-        "[ertraj]", "[errcon]\nanalysis = false\n\n[ertraj]"
-    )
-    parse_team_deck(text, SRC)
+    without = re.sub(r"\[a_priori\]\n(.+\n)+", "", small_text())
+    text = without.replace("[ertraj]", "[errcon]\nanalysis = false\n\n[ertraj]")
+    assert text != without and "[a_priori]" not in text
+    deck = parse_team_deck(text, SRC)
+    assert deck.errcon.analysis is False and deck.a_priori is None
+    # the same deck with analysis on is refused for the missing a priori (the rule's other side)
+    assert "a_priori: required when errcon.analysis = true" in refusal(text.replace("analysis = false", "analysis = true"))
 
 
 def test_a_priori_exactly_one_of_sigma_and_rss():

@@ -95,7 +95,8 @@ def test_a_priori_not_needed_without_analysis():
     deck = parse_team_deck(text, SRC)
     assert deck.errcon.analysis is False and deck.a_priori is None
     # the same deck with analysis on is refused for the missing a priori (the rule's other side)
-    assert "a_priori: required when errcon.analysis = true" in refusal(text.replace("analysis = false", "analysis = true"))
+    on = text.replace("analysis = false", "analysis = true")
+    assert "a_priori: required when errcon.analysis = true" in refusal(on)
 
 
 def test_a_priori_exactly_one_of_sigma_and_rss():

@@ -12,12 +12,15 @@ class FracasError(Exception):
 
     ``problems``: every problem found, one line each (``source: field = value: expected``);
     ``str(exc)`` stays the first of them plus " (and N more errors)".  An error raised with
-    a message only has ``problems == [message]``.
+    a message only has ``problems == [message]``.  A message is always one line: line breaks
+    (a library's message quoted in it, e.g. the HDF5 library's) become spaces.
     """
 
     exit_code = 2
 
     def __init__(self, *args, problems: list[str] | None = None):
+        if args and isinstance(args[0], str) and ("\n" in args[0] or "\r" in args[0]):
+            args = (" ".join(args[0].split()), *args[1:])  # one line, whatever a library said
         super().__init__(*args)
         if problems:
             self.problems = list(problems)

@@ -4,7 +4,8 @@ The summary is a rich table: initial and final state (position, velocity, their
 magnitudes, mass) relative to the primary, mass used, duration, integration steps,
 Encke rectifications and the termination status.  The plot is a PNG drawn with
 matplotlib's Agg canvas (no pyplot, no global backend change): the x-y projection of the
-path about each primary, and radius and mass against time.
+path about each primary (the conics between the stored samples, a few revolutions of a
+spiral), and radius, osculating a, e, i and mass against time (:func:`trajectory_figure`).
 """
 
 from __future__ import annotations
@@ -14,11 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
-from fracas.constants import AU_KM, DAY_S
+from fracas.constants import AU_KM, BODIES, DAY_S, OBLIQUITY_J2000_RAD
 from fracas.io.trajectory_file import TrajectoryData
+from fracas.report._conic import dense_path, osculating_aei
 from fracas.status import RunStatus, status_text
 
-__all__ = ["print_summary", "summary_table", "plot_trajectory"]
+__all__ = ["print_summary", "summary_table", "plot_trajectory", "trajectory_figure"]
 
 _STATUS_STYLE = {
     RunStatus.OK: "green",
@@ -96,32 +98,105 @@ def print_summary(data: TrajectoryData, path: str | Path | None = None, console=
         console.print(f"written: {path}", markup=False, highlight=False, soft_wrap=True)
 
 
-def plot_trajectory(data: TrajectoryData, png: str | Path, dpi: int = 120) -> Path:
-    """Write a PNG: x-y projection (per primary) and |r|, mass against time. Returns the path."""
+def _mu_of(name: str) -> float | None:
+    body = BODIES.get(str(name))
+    return body.mu_km3_s2 if body is not None else None
+
+
+def _pole(name: str) -> tuple[np.ndarray | None, str]:
+    """The pole the inclination is measured from, and its name: the ecliptic's about the
+    Sun (heliocentric inclinations are ecliptic ones), the ICRF/EME2000 z axis otherwise."""
+    if str(name) == "sun":
+        eps = OBLIQUITY_J2000_RAD
+        return np.array([0.0, -math.sin(eps), math.cos(eps)]), "ecliptic"
+    return None, "ICRF equator"
+
+
+def _revolutions(r: np.ndarray) -> np.ndarray:
+    """Cumulative revolutions (angle swept / 2 pi) along a dense path (n, 3)."""
+    if len(r) < 2:
+        return np.zeros(len(r))
+    a, b = r[:-1], r[1:]
+    ang = np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.einsum("ij,ij->i", a, b))
+    return np.concatenate([[0.0], np.cumsum(ang)]) / (2.0 * np.pi)
+
+
+def _per_revolution(revs: np.ndarray, t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean time and mean of ``y`` over each whole revolution (the orbit average an analyst
+    reads through the short-period oscillation)."""
+    k = np.floor(revs).astype(np.int64)
+    whole = k < int(revs[-1]) if revs.size else np.zeros(0, bool)
+    k, t, y = k[whole], t[whole], y[whole]
+    n = np.bincount(k)
+    keep = n > 0
+    with np.errstate(invalid="ignore"):
+        return (np.bincount(k, t)[keep] / n[keep]), (np.bincount(k, np.nan_to_num(y))[keep] / n[keep])
+
+
+#: above this many revolutions about one primary the x-y view shows a few, coloured by time
+MAX_REVOLUTIONS_DRAWN = 20
+_SHOWN_REVOLUTIONS = 7
+
+
+def trajectory_figure(data: TrajectoryData):
+    """The trajectory plot as a matplotlib :class:`~matplotlib.figure.Figure` (Agg canvas).
+
+    Left: the x-y projection (ICRF) drawn through the samples with the conics between them
+    (:func:`fracas.report._conic.dense_path`); a path of more than
+    :data:`MAX_REVOLUTIONS_DRAWN` revolutions (a spiral) shows a few evenly spaced
+    revolutions, first and last included, coloured by time.  Right, against time: radius
+    with the osculating semi-major axis, eccentricity, inclination (to the ecliptic about
+    the Sun, to the ICRF equator otherwise) and mass."""
+    from matplotlib import colormaps
     from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
     from matplotlib.figure import Figure
 
     ok = _valid(data)
-    t_day = np.asarray(data.t_s, dtype=np.float64)[ok] / DAY_S
+    t_s = np.asarray(data.t_s, dtype=np.float64)[ok]
     r = np.asarray(data.r_km, dtype=np.float64)[ok]
+    v = np.asarray(data.v_km_s, dtype=np.float64)[ok]
     m = np.asarray(data.mass_kg, dtype=np.float64)[ok]
     prim = (
         np.asarray(data.primary, dtype=object)[ok]
         if len(data.primary) == len(ok)
         else np.array([data.centre] * ok.sum(), dtype=object)
     )
+    t_s, r, v, m, prim = dense_path(t_s, r, v, m, prim, _mu_of)
+    t_day = t_s / DAY_S
     rmag = np.linalg.norm(r, axis=-1) if r.size else np.zeros(0)
     big = rmag.size and float(np.nanmax(rmag)) > 0.05 * AU_KM
     scale, unit = (AU_KM, "AU") if big else (1.0, "km")
+    names = list(dict.fromkeys(prim.tolist()))
 
-    fig = Figure(figsize=(11, 5.5), layout="constrained")
+    fig = Figure(figsize=(12, 7.5), layout="constrained")
     FigureCanvasAgg(fig)
-    grid = fig.add_gridspec(2, 2, width_ratios=(1.1, 1.0))
+    grid = fig.add_gridspec(4, 2, width_ratios=(1.15, 1.0))
     ax = fig.add_subplot(grid[:, 0])
-    style = ".-" if r.shape[0] <= 200 else "-"
-    for name in dict.fromkeys(prim.tolist()):
+    right = [fig.add_subplot(grid[0, 1])]
+    right += [fig.add_subplot(grid[j, 1], sharex=right[0]) for j in (1, 2, 3)]
+    ax_r, ax_e, ax_i, ax_m = right
+    notes = []
+    for c, name in enumerate(names):
         sel = prim == name
-        ax.plot(r[sel, 0] / scale, r[sel, 1] / scale, style, ms=3, lw=0.8, label=f"about {name or '?'}")
+        rs, ts = r[sel], t_day[sel]
+        lab = f"about {name or '?'}"
+        revs = _revolutions(rs)
+        n_rev = int(revs[-1]) if revs.size else 0
+        if n_rev > MAX_REVOLUTIONS_DRAWN:
+            picks = np.unique(np.linspace(0, n_rev, _SHOWN_REVOLUTIONS).round().astype(int))
+            norm = Normalize(float(t_day[0]), float(t_day[-1]) if t_day[-1] != t_day[0] else float(t_day[0]) + 1.0)
+            cmap = colormaps["viridis"]
+            for j in picks:
+                w = (revs >= j) & (revs <= j + 1)
+                if w.sum() < 2:
+                    continue
+                ax.plot(rs[w, 0] / scale, rs[w, 1] / scale, "-", lw=1.0, color=cmap(norm(float(ts[w].mean()))))
+            fig.colorbar(ScalarMappable(norm, cmap), ax=ax, label="time from epoch (days)", shrink=0.8)
+            notes.append(f"{len(picks)} of {n_rev} revolutions about {name}")
+        else:
+            ax.plot(rs[:, 0] / scale, rs[:, 1] / scale, "-", lw=1.0, color=f"C{c}", label=lab)
         ax.plot([0.0], [0.0], "o", ms=6, color="k")
     if r.size:
         ax.plot(r[0, 0] / scale, r[0, 1] / scale, "g^", ms=8, label="start")
@@ -129,25 +204,60 @@ def plot_trajectory(data: TrajectoryData, png: str | Path, dpi: int = 120) -> Pa
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel(f"x ({unit}, ICRF)")
     ax.set_ylabel(f"y ({unit}, ICRF)")
-    ax.set_title("x-y projection about the primary")
+    ax.set_title("x-y projection about the primary" + (f"\n({'; '.join(notes)})" if notes else ""), fontsize=10)
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize=8)
 
-    ax1 = fig.add_subplot(grid[0, 1])
-    ax1.plot(t_day, rmag / scale, "-", lw=1)
-    ax1.set_ylabel(f"|r| ({unit})")
-    ax1.grid(True, alpha=0.3)
-    ax2 = fig.add_subplot(grid[1, 1], sharex=ax1)
-    ax2.plot(t_day, m, "-", lw=1, color="tab:orange")
-    ax2.set_ylabel("mass (kg)")
-    ax2.set_xlabel("time from epoch (days)")
-    ax2.grid(True, alpha=0.3)
+    ref = "ICRF equator"
+    for c, name in enumerate(names):
+        sel = prim == name
+        ts = t_day[sel]
+        mu = _mu_of(name)
+        suffix = f" ({name})" if len(names) > 1 else ""
+        ax_r.plot(ts, rmag[sel] / scale, "-", lw=0.6, color=f"C{c}", label=f"|r|{suffix}")
+        if mu is None:
+            continue
+        pole, ref = _pole(name)
+        a, e, inc = osculating_aei(r[sel], v[sel], mu, pole)
+        a = np.where(a < 5.0 * float(np.nanmax(rmag[sel])), a, np.nan)
+        revs = _revolutions(r[sel])
+        averaged = revs.size and revs[-1] > 3.0
+        lw, alpha = (0.5, 0.35) if averaged else (1.0, 1.0)
+        ax_r.plot(ts, a / scale, "-", lw=1.6, color=f"C{c + 1}" if len(names) == 1 else f"C{c}", label=f"a{suffix}")
+        ax_e.plot(ts, e, "-", lw=lw, alpha=alpha, color=f"C{c}", label="osculating" if averaged else None)
+        ax_i.plot(ts, np.degrees(inc), "-", lw=lw, alpha=alpha, color=f"C{c}")
+        if averaged:
+            tm, em = _per_revolution(revs, ts, e)
+            _, im = _per_revolution(revs, ts, np.degrees(inc))
+            ax_e.plot(
+                tm, em, "-", lw=1.6, color=f"C{c + 1}" if len(names) == 1 else f"C{c}", label="mean per revolution"
+            )
+            ax_i.plot(tm, im, "-", lw=1.6, color=f"C{c + 1}" if len(names) == 1 else f"C{c}")
+            ax_e.legend(fontsize=7, loc="best")
+    ax_r.set_ylabel(f"|r|, a ({unit})")
+    ax_r.set_title(f"radius and osculating elements (i to the {ref})", fontsize=10)
+    ax_r.legend(fontsize=7, loc="best")
+    ax_e.set_ylabel("e (1)")
+    ax_i.set_ylabel("i (deg)")
+    ax_m.plot(t_day, m, "-", lw=1, color="tab:orange")
+    ax_m.set_ylabel("mass (kg)")
+    ax_m.set_xlabel("time from epoch (days)")
     if m.size and math.isclose(float(m.min()), float(m.max())):
-        ax2.set_ylim(float(m[0]) - 1.0, float(m[0]) + 1.0)
+        ax_m.set_ylim(float(m[0]) - 1.0, float(m[0]) + 1.0)
+    for a_ in right:
+        a_.grid(True, alpha=0.3)
+        a_.ticklabel_format(axis="y", useOffset=False)
+    for a_ in right[:-1]:
+        a_.tick_params(labelbottom=False)
     fig.suptitle(data.title or "trajectory")
+    return fig
 
+
+def plot_trajectory(data: TrajectoryData, png: str | Path, dpi: int = 120) -> Path:
+    """Write :func:`trajectory_figure` as a PNG at ``png``; returns the path."""
     from fracas.io.atomic import savefig_atomic
 
+    fig = trajectory_figure(data)
     out = Path(png)
     out.parent.mkdir(parents=True, exist_ok=True)
     savefig_atomic(fig, out, dpi=dpi)  # a kill mid-write never leaves a partial PNG or damages the old one

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["progress_line", "summary_text", "plot_tom", "PROGRESS_HEADER"]
+__all__ = ["progress_line", "summary_text", "plot_tom", "convergence_figure", "grid_figure", "PROGRESS_HEADER"]
 
 PROGRESS_HEADER = (
     f"{'iter':>4} {'mode':<4} {'final mass kg':>14} {'E_rms':>10} {'angle rad':>10} {'step':>7} {'traj':>5}"
@@ -73,7 +73,9 @@ def summary_text(res: dict, width: int = 80) -> str:
     k = len(res["iteration"])
     n_traj = int(res["n_trajectories"][-1]) if k else 0
     t = {key[7:]: float(v) for key, v in a.items() if key.startswith("timing_")}
-    lines.append(f"{k} iterations, {n_traj} trajectories in the search"[:width])
+    n_it = len(set(np.asarray(res["iteration"]).tolist()))
+    steps = f"{k} iterations" if n_it == k else f"{k} search records in {n_it} iterations"
+    lines.append(f"{steps}, {n_traj} trajectories in the search"[:width])
     if "core_propagations" in t:
         lines.append(
             f"the core flew {int(t['core_propagations'])} trajectories and "
@@ -91,57 +93,106 @@ def summary_text(res: dict, width: int = 80) -> str:
     return "\n".join(lines)
 
 
-def plot_tom(res: dict, path: str | Path) -> list[Path]:
-    """Convergence plot (final mass and E_rms per iteration) at ``path``; with a GRID, one
-    contour plot of E per control pair at ``<stem>_grid.png``.  Returns the paths written."""
+_MODE_MARKER = {"T": "o", "O": "s", "T+O": "^"}
+
+
+def convergence_figure(res: dict):
+    """Final mass, E_rms and the gradient angle per search record, or None without records.
+
+    Every record is its own point: an iteration whose first step is refused is retried in
+    the same iteration (two records with one iteration number, e.g. ``3 T+O`` then ``3 T``),
+    so the x axis counts records and the tick labels give the iteration and its mode."""
+    k = len(res["iteration"])
+    if not k:
+        return None
+    plt = _plt()
+    x = np.arange(1, k + 1)
+    it = np.asarray(res["iteration"], dtype=int)
+    modes = [str(m) for m in res.get("submode", [""] * k)]
+    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7.5, 6.2))
+    ax1.plot(x, res["performance_kg"], "-", color="C0", lw=1)
+    ax2.semilogy(x, np.maximum(res["error_rms"], 1e-16), "-", color="C0", lw=1, label="E_rms (targets / tolerance)")
+    ang = np.asarray(res["angle_rad"], dtype=float)
+    if np.any(np.isfinite(ang)):
+        ax2.semilogy(
+            x, np.where(np.isfinite(ang), np.maximum(ang, 1e-16), np.nan), "--", color="C1", lw=1, label="angle (rad)"
+        )
+    for mode in dict.fromkeys(modes):
+        sel = np.array([m == mode for m in modes])
+        mk = _MODE_MARKER.get(mode, "D")
+        ax1.plot(x[sel], np.asarray(res["performance_kg"])[sel], mk, color="C0", ms=4, label=f"{mode or '?'} step")
+        ax2.semilogy(x[sel], np.maximum(np.asarray(res["error_rms"])[sel], 1e-16), mk, color="C0", ms=4)
+        if np.any(np.isfinite(ang)):
+            ax2.semilogy(
+                x[sel], np.where(np.isfinite(ang[sel]), np.maximum(ang[sel], 1e-16), np.nan), mk, color="C1", ms=4
+            )
+    ax1.set_ylabel("final mass (kg)")
+    ax1.grid(alpha=0.3)
+    ax1.legend(fontsize=8, title="mode", title_fontsize=8)
+    ax1.ticklabel_format(axis="y", useOffset=False)
+    ax2.axhline(1.0, color="k", lw=0.6, ls=":")
+    n_it = len(set(it.tolist()))
+    if k <= 24:
+        ax2.set_xticks(x, [f"{i}\n{m}" for i, m in zip(it, modes)], fontsize=8)
+        ax2.set_xlabel(f"search record (iteration and mode): {k} records in {n_it} iterations")
+    else:
+        ax2.set_xlabel(f"search record ({k} records in {n_it} iterations)")
+    ax2.legend(fontsize=8)
+    ax2.grid(alpha=0.3, which="both")
+    a = res["attrs"]
+    verdict = "converged" if int(a.get("converged", 0)) else "not converged"
+    fig.suptitle(f"TOM: {a.get('title', '')} ({verdict})", fontsize="medium", wrap=True)
+    fig.tight_layout()
+    return fig
+
+
+def grid_figure(res: dict):
+    """One contour plot of log10 E per control pair of the GRID, or None without a GRID."""
+    grid = res.get("grid")
+    if grid is None or not grid.get("pairs"):
+        return None
+    plt = _plt()
+    pairs = sorted(grid["pairs"])
+    ncol = min(3, len(pairs))
+    nrow = (len(pairs) + ncol - 1) // ncol
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.4 * ncol, 3.8 * nrow), squeeze=False)
+    gam = grid["gammas"]
+    names = res["control_names"]
+    for ax, (a_i, b_i) in zip(axes.ravel(), pairs):
+        table = np.log10(np.maximum(grid["pairs"][(a_i, b_i)], 1e-12))
+        cs = ax.contourf(gam, gam, table.T, levels=20)
+        fig.colorbar(cs, ax=ax, label="log10 E (1)")
+        ax.set_xlabel(f"{names[a_i]} (increments)")
+        ax.set_ylabel(f"{names[b_i]} (increments)")
+    for ax in axes.ravel()[len(pairs) :]:
+        ax.set_visible(False)
+    fig.tight_layout()
+    return fig
+
+
+def _plt():
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    return plt
+
+
+def plot_tom(res: dict, path: str | Path) -> list[Path]:
+    """Convergence plot (:func:`convergence_figure`) at ``path``; with a GRID, one contour
+    plot of E per control pair (:func:`grid_figure`) at ``<stem>_grid.png``.  Returns the
+    paths written."""
     from fracas.io.atomic import savefig_atomic
 
+    plt = _plt()
     out = []
     path = Path(path)
-    if len(res["iteration"]):
-        fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
-        it = res["iteration"]
-        ax1.plot(it, res["performance_kg"], "o-", ms=3)
-        ax1.set_ylabel("final mass (kg)")
-        ax1.grid(alpha=0.3)
-        ax2.semilogy(it, np.maximum(res["error_rms"], 1e-16), "o-", ms=3, label="E_rms (targets / tolerance)")
-        ang = res["angle_rad"]
-        if np.any(np.isfinite(ang)):
-            ax2.semilogy(
-                it, np.where(np.isfinite(ang), np.maximum(ang, 1e-16), np.nan), "s--", ms=3, label="angle (rad)"
-            )
-        ax2.axhline(1.0, color="k", lw=0.6, ls=":")
-        ax2.set_xlabel("iteration")
-        ax2.legend(fontsize=8)
-        ax2.grid(alpha=0.3, which="both")
-        a = res["attrs"]
-        fig.suptitle(f"TOM: {a.get('title', '')}  ({'converged' if int(a.get('converged', 0)) else 'not converged'})")
-        fig.tight_layout()
-        out.append(savefig_atomic(fig, path, dpi=110))
-        plt.close(fig)
-    grid = res.get("grid")
-    if grid is not None and grid.get("pairs"):
-        pairs = sorted(grid["pairs"])
-        ncol = min(3, len(pairs))
-        nrow = (len(pairs) + ncol - 1) // ncol
-        fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 3.6 * nrow), squeeze=False)
-        gam = grid["gammas"]
-        names = res["control_names"]
-        for ax, (a_i, b_i) in zip(axes.ravel(), pairs):
-            table = np.log10(np.maximum(grid["pairs"][(a_i, b_i)], 1e-12))
-            cs = ax.contourf(gam, gam, table.T, levels=20)
-            fig.colorbar(cs, ax=ax, label="log10 E")
-            ax.set_xlabel(f"{names[a_i]} (increments)")
-            ax.set_ylabel(f"{names[b_i]} (increments)")
-        for ax in axes.ravel()[len(pairs) :]:
-            ax.set_visible(False)
-        fig.tight_layout()
-        gpath = path.with_name(path.stem + "_grid.png")
-        out.append(savefig_atomic(fig, gpath, dpi=110))
-        plt.close(fig)
+    for fig, p in ((convergence_figure(res), path), (grid_figure(res), path.with_name(path.stem + "_grid.png"))):
+        if fig is None:
+            continue
+        try:
+            out.append(savefig_atomic(fig, p, dpi=110))
+        finally:
+            plt.close(fig)
     return out

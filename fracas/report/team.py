@@ -38,6 +38,8 @@ __all__ = [
     "print_team",
     "plot_team",
     "plot_all",
+    "team_figure",
+    "team_figures",
     "covariance_table",
     "summary_dict",
     "quiet_line",
@@ -184,13 +186,14 @@ def summary_dict(r: dict) -> dict:
     return out
 
 
-def quiet_line(r: dict, velocity_unit: str = "mm/s") -> str:
-    """The one-line summary (``--quiet``): events, measurements used, final assumed RSS, file."""
+def quiet_line(r: dict, velocity_unit: str = "mm/s", file_label: str = "written") -> str:
+    """The one-line summary (``--quiet``): events, measurements used, final assumed RSS, file
+    (``file_label``: "written" after a run, the file's kind when a report reads it)."""
     s = summary_dict(r)
     v = s["assumed"]["velocity_rss_km_s"] * _vfactor(velocity_unit)
     line = (
         f"{s['events']} events, {s['measurements_used']} measurements; final assumed RSS "
-        f"{s['assumed']['position_rss_km']:.4g} km, {v:.4g} {velocity_unit}; written: {r['path']}"
+        f"{s['assumed']['position_rss_km']:.4g} km, {v:.4g} {velocity_unit}; {file_label}: {r['path']}"
     )
     return line
 
@@ -235,6 +238,7 @@ def print_team(
     velocity_unit: str = "mm/s",
     width: int | None = None,
     max_log_rows: int = 16,
+    file_label: str = "written",
 ) -> None:
     """The FRACAS-style printout of a results file ``r`` (:func:`load`).
 
@@ -419,11 +423,12 @@ def print_team(
     code = int(at.get("status", 0))
     if code:
         con.print(f"[red]status {code}:[/red] {escape(str(at.get('status_text', status_text(code))))}")
-    con.print(f"written: {r['path']}", markup=False, highlight=False, soft_wrap=True)
+    con.print(f"{file_label}: {r['path']}", markup=False, highlight=False, overflow="ignore")
 
 
-def plot_team(r: dict, png: str | Path) -> Path:
-    """Position and velocity RSS 1σ and parameter 1σ (relative to a priori) against time.
+def team_figure(r: dict, velocity_unit: str = "mm/s"):
+    """Position and velocity RSS 1σ and parameter 1σ (relative to a priori) against time, a
+    matplotlib figure; velocities in ``velocity_unit`` (the printout's).
 
     With guidance events in the file (``r["guidance"]``), vertical lines mark them; with a
     control covariance (``r["control"]``), its RSS 1σ (the actual dispersion about the
@@ -434,6 +439,7 @@ def plot_team(r: dict, png: str | Path) -> Path:
 
     import matplotlib.pyplot as plt
 
+    vf = _vfactor(velocity_unit)
     nx = int(r["attrs"].get("n_state", 7))
     t = r["times_s"] / DAY_S
     fig, ax = plt.subplots(3, 1, figsize=(8, 9), sharex=True)
@@ -442,17 +448,17 @@ def plot_team(r: dict, png: str | Path) -> Path:
             continue
         P = r[which]["P_plus"]
         pos = np.sqrt(np.clip(np.einsum("kii->k", P[:, :3, :3]), 0, None))
-        vel = np.sqrt(np.clip(np.einsum("kii->k", P[:, 3:6, 3:6]), 0, None)) * 1e6
+        vel = np.sqrt(np.clip(np.einsum("kii->k", P[:, 3:6, 3:6]), 0, None)) * vf
         ax[0].semilogy(t, pos, style, label=which)
         ax[1].semilogy(t, vel, style, label=which)
     if r.get("control") is not None:
         P = np.asarray(r["control"]["P_plus"])
         pos = np.sqrt(np.clip(np.einsum("kii->k", P[:, :3, :3]), 0, None))
-        vel = np.sqrt(np.clip(np.einsum("kii->k", P[:, 3:6, 3:6]), 0, None)) * 1e6
+        vel = np.sqrt(np.clip(np.einsum("kii->k", P[:, 3:6, 3:6]), 0, None)) * vf
         ax[0].semilogy(t, pos, ":", label="control (actual dispersion)")
         ax[1].semilogy(t, vel, ":", label="control (actual dispersion)")
     ax[0].set_ylabel("position RSS 1σ (km)")
-    ax[1].set_ylabel("velocity RSS 1σ (mm/s)")
+    ax[1].set_ylabel(f"velocity RSS 1σ ({velocity_unit})")
     A = r["assumed"]
     for i, lab in enumerate(r["labels"]):
         prior = A["a_priori_sigma"][i]
@@ -467,32 +473,39 @@ def plot_team(r: dict, png: str | Path) -> Path:
         a.legend(fontsize=8)
     fig.suptitle(f"TEAM knowledge: {r['attrs']['title']}")
     fig.tight_layout()
-    from fracas.io.atomic import savefig_atomic
-
-    png = Path(png)
-    png.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        savefig_atomic(fig, png, dpi=110, format="png")  # atomic, with the user's normal permissions
-    finally:
-        plt.close(fig)
-    return png
+    return fig
 
 
-def plot_all(r: dict, png: str | Path) -> list[Path]:
+def plot_team(r: dict, png: str | Path, velocity_unit: str = "mm/s") -> Path:
+    """Write :func:`team_figure` as a PNG at ``png`` (atomically); returns the path."""
+    return save_figure(team_figure(r, velocity_unit), png)
+
+
+def plot_all(r: dict, png: str | Path, velocity_unit: str = "mm/s", dv_unit: str = "m/s") -> list[Path]:
     """Every plot of a results file: the knowledge history at ``png`` (:func:`plot_team`)
     and, where they apply, ``<stem>_bplane.png`` (guidance events targeting B·T and B·R),
     ``<stem>_correlation.png`` (an eigenvector event), ``<stem>_budget.png`` (an error
     budget) and ``<stem>_dv.png`` (guidance events) beside it; the paths written, in that
-    order, each atomically."""
+    order, each atomically.  Velocities in ``velocity_unit`` and ΔV in ``dv_unit``, the
+    printout's (:func:`print_team`)."""
     png = Path(png)
-    out = [plot_team(r, png)]
-    for suffix, make in (
-        ("bplane", bplane_figure),
-        ("correlation", correlation_figure),
-        ("budget", budget_figure),
-        ("dv", dv_figure),
-    ):
-        fig = make(r)
-        if fig is not None:
-            out.append(save_figure(fig, png.with_name(f"{png.stem}_{suffix}.png")))
+    out = [plot_team(r, png, velocity_unit)]
+    for suffix, fig in team_figures(r, velocity_unit, dv_unit, knowledge=False)[1:]:
+        out.append(save_figure(fig, png.with_name(f"{png.stem}_{suffix}.png")))
     return out
+
+
+def team_figures(r: dict, velocity_unit: str = "mm/s", dv_unit: str = "m/s", knowledge: bool = True) -> list:
+    """(suffix, figure) of every plot :func:`plot_all` writes ("" for the knowledge
+    history, first), built and not saved; the knowledge history is built only if
+    ``knowledge`` (else its entry is ("", None))."""
+    figs = [("", team_figure(r, velocity_unit) if knowledge else None)]
+    for suffix, fig in (
+        ("bplane", bplane_figure(r)),
+        ("correlation", correlation_figure(r)),
+        ("budget", budget_figure(r, velocity_unit, dv_unit)),
+        ("dv", dv_figure(r, dv_unit)),
+    ):
+        if fig is not None:
+            figs.append((suffix, fig))
+    return figs

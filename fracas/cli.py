@@ -512,17 +512,10 @@ def report(
     """Print the report of a results FILE (a TEAM results file or a trajectory file)."""
     debug = debug or bool((ctx.obj or {}).get("debug"))
     with _errors(debug):
-        import h5py
-
         from fracas.errors import ResultsFileError
+        from fracas.io.hdf5 import read_kind
 
-        try:
-            with h5py.File(file, "r") as f:
-                kind = f.attrs.get("file_kind", "")
-        except FileNotFoundError:
-            raise ResultsFileError(f"{file}: no such results file") from None
-        except OSError as exc:
-            raise ResultsFileError(f"{file}: not an HDF5 results file ({exc})") from None
+        kind = read_kind(file, ResultsFileError, "results file")  # integrity checked before decoding
         if plot is not None:
             from fracas.io.atomic import check_output_path
 

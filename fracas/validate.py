@@ -129,8 +129,15 @@ def _output_problem(path: Path, src: str, field: str, rel: str) -> str | None:
 
 
 def _h5_attrs(path: Path, group: str | None = None) -> dict | str:
-    """The attributes of an HDF5 file (or one of its groups), or why they cannot be read."""
-    import h5py  # noqa: PLC0415 (only when a deck names a file to read)
+    """The attributes of an HDF5 file (or one of its groups), or why they cannot be read (the
+    file's integrity is checked first, :func:`fracas.io.hdf5.file_problem`: a damaged file
+    never reaches the HDF5 library, whose decoder can loop on some damage)."""
+    from fracas.io.hdf5 import file_problem, one_line  # noqa: PLC0415 (only when a deck names a file to read)
+
+    why = file_problem(path)
+    if why is not None:
+        return why
+    import h5py  # noqa: PLC0415
 
     try:
         with h5py.File(path, "r") as f:
@@ -138,8 +145,8 @@ def _h5_attrs(path: Path, group: str | None = None) -> dict | str:
             if node is None:
                 return {}
             return {k: (v.decode() if isinstance(v, bytes) else v) for k, v in node.attrs.items()}
-    except OSError:
-        return "not an HDF5 file"
+    except (OSError, KeyError, ValueError, RuntimeError) as exc:
+        return f"unreadable HDF5 file ({one_line(exc)})"
 
 
 def _input_problems(path: Path, src: str, field: str, rel: str, kind: str, thash: str | None) -> list[str]:

@@ -154,18 +154,14 @@ class _Track:
 
 
 def file_kind(path: str | os.PathLike) -> str:
-    """ "team" for a TEAM results file, "trajectory" for a trajectory file; else ResultsFileError."""
-    import h5py
+    """ "team" for a TEAM results file, "trajectory" for a trajectory file; else ResultsFileError
+    (one line; the file's integrity is checked before it is decoded, :func:`fracas.io.hdf5.read_kind`)."""
+    from fracas.io.hdf5 import read_kind
 
     p = Path(path)
     if not p.exists():
         raise ResultsFileError(f"{p}: no such file")
-    try:
-        with h5py.File(p, "r") as f:
-            kind = f.attrs.get("file_kind", f.attrs.get("format", ""))
-            kind = kind.decode() if isinstance(kind, bytes) else str(kind)
-    except OSError as exc:
-        raise ResultsFileError(f"{p}: not an HDF5 file ({exc})") from None
+    kind = read_kind(p, ResultsFileError, "TEAM results file or trajectory file")
     if kind == "fracas-team-results":
         return "team"
     if kind == "fracas-trajectory":

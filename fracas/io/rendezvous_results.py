@@ -39,7 +39,17 @@ import h5py
 import numpy as np
 
 from fracas.errors import ResultsFileError
-from fracas.io.hdf5 import Checked, atomic_h5, read_provenance, write, write_provenance, write_strings
+from fracas.io.hdf5 import (
+    Checked,
+    atomic_h5,
+    attr_int,
+    attr_text,
+    open_h5,
+    read_provenance,
+    write,
+    write_provenance,
+    write_strings,
+)
 from fracas.products import RendezvousProduct
 
 __all__ = ["RENDEZVOUS_SCHEMA", "write_rendezvous_results", "read_rendezvous_results", "FILE_KIND"]
@@ -114,22 +124,31 @@ def write_rendezvous_results(path: str | os.PathLike, product: RendezvousProduct
     return p
 
 
-def read_rendezvous_results(path: str | os.PathLike) -> RendezvousProduct:
+def read_rendezvous_results(path: str | os.PathLike, *, verify: bool = True) -> RendezvousProduct:
     """Read a rendezvous results file; ResultsFileError (one line, naming the file and the
-    dataset) when it is missing, not HDF5, another kind or incomplete."""
+    dataset) when it is missing, not HDF5, damaged (integrity header), another kind, of
+    another schema_version or incomplete.  ``verify=False`` skips the checksums only."""
     src = str(path)
-    try:
-        f = h5py.File(path, "r")
-    except FileNotFoundError:
-        raise ResultsFileError(f"{src}: no such results file") from None
-    except OSError as exc:
-        raise ResultsFileError(f"{src}: not an HDF5 results file ({exc})") from None
-    with f:
-        kind = f.attrs.get("file_kind", "")
-        kind = kind.decode() if isinstance(kind, bytes) else str(kind)
+    if not os.path.exists(path):
+        raise ResultsFileError(f"{src}: no such results file")
+    with open_h5(path, ResultsFileError, "rendezvous results file", checksum=verify) as f:
+        kind = attr_text(f, "file_kind")
         if kind != FILE_KIND:
-            raise ResultsFileError(f"{src}: file_kind = {kind!r}: expected {FILE_KIND!r}")
-        c = Checked(f, src, ResultsFileError)
+            raise ResultsFileError(
+                f"{src}: not a fracas rendezvous results file (file_kind = {f.attrs.get('file_kind')!r}, "
+                f"expected {FILE_KIND!r})"
+            )
+        raw = f.attrs.get("schema_version")
+        version = attr_int(
+            f,
+            "schema_version",
+            ResultsFileError(f"{src}: attribute schema_version is {type(raw).__name__} ({raw!r}), expected an integer"),
+        )
+        if version is None or not 1 <= version <= RENDEZVOUS_SCHEMA:
+            raise ResultsFileError(
+                f"{src}: rendezvous results file schema_version = {version}, this fracas reads 1 to {RENDEZVOUS_SCHEMA}"
+            )
+        c = Checked(f, src, ResultsFileError, verify=verify)
         if not isinstance(f.get("rendezvous"), h5py.Group):
             raise c.fail("rendezvous", "missing, expected the rendezvous group (incomplete file?)")
         a = f["rendezvous"].attrs

@@ -51,9 +51,11 @@ from fracas.io.hdf5 import (
     attr_text,
     digest_array,
     dtype_name,
+    one_line,
     provenance,
     read_provenance,
     set_attr,
+    verify_file,
     write,
     write_provenance,
     write_strings,
@@ -258,23 +260,14 @@ def _attr_str(obj: h5py.HLObject, key: str, default: str = "") -> str:
     return default if val is None else val
 
 
-def _open(path: str | os.PathLike) -> tuple[Path, h5py.File]:
+def _open(path: str | os.PathLike, verify: bool = True) -> tuple[Path, h5py.File]:
     """Open and check kind and schema (STMRDR's record-0 checks)."""
     src = Path(path)
-    if not src.exists():
-        raise StmFileError(f"{src}: no such STM file")
-    if src.is_dir():
-        raise StmFileError(f"{src}: is a directory, expected an STM file (HDF5)")
-    try:
-        ok = h5py.is_hdf5(src)
-    except OSError as exc:
-        raise StmFileError(f"{src}: cannot read: {exc}") from None
-    if not ok:
-        raise StmFileError(f"{src}: not an HDF5 file, expected a fracas STM file (fracas stm ...)")
+    verify_file(src, StmFileError, "STM file", checksum=verify)  # integrity header (or a bounded probe) before h5py
     try:
         f = h5py.File(src, "r")
     except OSError as exc:
-        raise StmFileError(f"{src}: unreadable HDF5 file (truncated or damaged?): {exc}") from None
+        raise StmFileError(f"{src}: unreadable HDF5 file (truncated or damaged?): {one_line(exc)}") from None
     try:
         if "file_kind" in f.attrs and attr_text(f, "file_kind") is None:
             raise StmFileError(
@@ -435,19 +428,24 @@ def read_stm_file(
     ``epoch_et_s``: the study's epoch (TDB s past J2000), refused unless within 1e-6 s of the
     file's; ``verify``: check each dataset's SHA-256 checksum (False skips only that).
     Refuses with a one-line StmFileError naming the file and the dataset: missing file, not
-    HDF5, not a fracas STM file, another schema_version, a dataset of the wrong dtype or
-    shape, non-finite or decreasing times, non-finite states or matrices, a singular step
-    matrix, an unknown primary, a checksum mismatch, an unknown label (lists the file's), a
-    time not on the file (names the nearest), another epoch.
+    HDF5, a file changed after fracas wrote it (its integrity header, checked before h5py
+    opens it: :func:`fracas.io.hdf5.verify_file`; ``verify=False`` decodes such a file in a
+    time-bounded child process first instead), not a fracas STM file, another
+    schema_version, a dataset of the wrong dtype or shape, non-finite or decreasing times,
+    non-finite states or matrices, a singular step matrix, an unknown primary, a checksum
+    mismatch, an unknown label (lists the file's), a time not on the file (names the
+    nearest), another epoch.
     """
-    src, f = _open(path)
+    src, f = _open(path, verify)
     try:
         with f:
             data = _read_checked(src, f, labels, verify)
     except StmFileError:
         raise
-    except (OSError, KeyError, ValueError, IndexError, TypeError) as exc:
-        raise StmFileError(f"{src}: unreadable or incomplete STM file: {exc}") from None
+    except KeyError as exc:
+        raise StmFileError(f"{src}: incomplete STM file: {one_line(exc)} is missing") from None
+    except (OSError, ValueError, IndexError, TypeError, RuntimeError, AttributeError) as exc:
+        raise StmFileError(f"{src}: unreadable or incomplete STM file: {type(exc).__name__}: {one_line(exc)}") from None
     if epoch_et_s is not None and not abs(float(epoch_et_s) - data.epoch_et_s) <= TIME_TOL_S:
         raise StmFileError(
             f"{src}: stm/epoch_et_s = {data.epoch_et_s!r} s, expected the study's epoch {float(epoch_et_s)!r} s "

@@ -17,12 +17,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import h5py
 import numpy as np
 
 from fracas.errors import ResultsFileError
 from fracas.io.atomic import atomic_path
-from fracas.io.hdf5 import atomic_h5, attr_strs, read_str, set_attr, write, write_strings
+from fracas.io.hdf5 import atomic_h5, attr_int, attr_strs, one_line, open_h5, read_str, set_attr, write, write_strings
 
 __all__ = ["SweepTable", "write_sweep_table", "read_sweep_table", "csv_path", "KIND", "VERSION"]
 
@@ -130,14 +129,20 @@ def _write_csv(path: Path, rows, inputs, outputs, units) -> None:
 
 def read_sweep_table(path: str | os.PathLike) -> SweepTable:
     """Read a table written by :func:`write_sweep_table`; a one-line ResultsFileError if it
-    is missing, unreadable or not a sweep table."""
+    is missing, damaged (integrity header, :func:`fracas.io.hdf5.verify_file`), unreadable,
+    not a sweep table or incomplete."""
     p = Path(path)
     try:
-        with h5py.File(p, "r") as f:
+        with open_h5(p, ResultsFileError, "sweep table") as f:
             kind = f.attrs.get("kind")
             kind = kind.decode() if isinstance(kind, bytes) else kind
             if kind != KIND:
-                raise ResultsFileError(f"{p}: not a fracas sweep table (kind = {kind!r})")
+                raise ResultsFileError(f"{p}: not a fracas sweep table (kind = {kind!r}, expected {KIND!r})")
+            version = attr_int(f, "version")
+            if version is None or not 1 <= version <= VERSION:
+                raise ResultsFileError(
+                    f"{p}: sweep table version = {f.attrs.get('version')!r}, this fracas reads 1 to {VERSION}"
+                )
             ins, outs = attr_strs(f, "input_columns"), attr_strs(f, "output_columns")
             units: dict[str, str] = {}
             inputs: dict[str, np.ndarray] = {}
@@ -167,7 +172,5 @@ def read_sweep_table(path: str | os.PathLike) -> SweepTable:
                 units={k: (v.decode() if isinstance(v, bytes) else str(v)) for k, v in units.items()},
                 attrs=attrs,
             )
-    except FileNotFoundError:
-        raise ResultsFileError(f"{p}: no such sweep table") from None
     except (OSError, KeyError) as exc:
-        raise ResultsFileError(f"{p}: cannot read the sweep table ({type(exc).__name__}: {exc})") from None
+        raise ResultsFileError(f"{p}: cannot read the sweep table ({type(exc).__name__}: {one_line(exc)})") from None

@@ -13,7 +13,17 @@ import h5py
 import numpy as np
 
 from fracas.errors import DeckError, ResultsFileError
-from fracas.io.hdf5 import Checked, atomic_h5, attr_int, attr_text, write, write_provenance, write_strings
+from fracas.io.hdf5 import (
+    Checked,
+    atomic_h5,
+    attr_int,
+    attr_text,
+    one_line,
+    open_h5,
+    write,
+    write_provenance,
+    write_strings,
+)
 from fracas.products import CovarianceHistory, GuidanceEvent, TeamProduct
 from fracas.status import status_text
 
@@ -21,6 +31,19 @@ __all__ = ["write_team_results", "read_team_results", "write_punch", "read_punch
 
 RESULTS_SCHEMA = 2  # 2: every dataset carries data_sha256; 1 (no checksums) is still read
 PUNCH_SCHEMA = 2
+# groups and measurement fields every results file has had (schema 1 included) and the report reads
+_TEAM_GROUPS = ("team", "team/labels", "team/measurements", "team/assumed", "team/assumed/eigenvector_events")
+_MEASUREMENT_FIELDS = (
+    "index",
+    "tracking",
+    "type",
+    "stations",
+    "value",
+    "elevation_deg",
+    "used",
+    "sigma",
+    "innovation_sigma",
+)
 
 
 def _write_history(h: h5py.Group, c: CovarianceHistory) -> None:
@@ -237,9 +260,8 @@ def _history(c: Checked, base: str, n: int, m: int, nx: int) -> dict[str, Any]:
         "process_noise": (n, nx, nx),
         "a_priori_sigma": (m,),
     }
-    for k, shape in shapes.items():
-        if f"{base}/{k}" in c.f:
-            out[k] = c.num(f"{base}/{k}", shape)  # NaN allowed: a run that lost its covariance
+    for k, shape in shapes.items():  # every one is read by the report: a missing one is refused here
+        out[k] = c.num(f"{base}/{k}", shape)  # NaN allowed: a run that lost its covariance
     if f"{base}/event_status" in c.f:
         out["event_status"] = c.num(f"{base}/event_status", (n,), integer=True)
     eg = f"{base}/eigenvector_events"
@@ -279,12 +301,8 @@ def read_team_results(path: str | os.PathLike, *, verify: bool = True) -> dict[s
     checksum.  A missing file, another kind of file or a damaged one: one-line
     ResultsFileError naming the file and the dataset."""
     p = Path(path)
-    if not p.exists():
-        raise ResultsFileError(f"{p}: no such results file")
-    if p.is_dir():
-        raise ResultsFileError(f"{p}: is a directory, expected a TEAM results file (HDF5)")
     try:
-        with h5py.File(p, "r") as f:
+        with open_h5(p, ResultsFileError, "TEAM results file", checksum=verify) as f:
             kind = attr_text(f, "file_kind")
             if kind != "fracas-team-results":
                 raise ResultsFileError(
@@ -293,8 +311,9 @@ def read_team_results(path: str | os.PathLike, *, verify: bool = True) -> dict[s
                 )
             version = _version(f, p, RESULTS_SCHEMA, ResultsFileError, "results file")
             c = Checked(f, p, ResultsFileError, verify=verify, require_checksum=version >= 2)
-            if not isinstance(f.get("team"), h5py.Group):
-                raise c.fail("team", "missing, expected a group")
+            for group in _TEAM_GROUPS:
+                if not isinstance(f.get(group), h5py.Group):
+                    raise c.fail(group, "missing, expected a group (incomplete file?)")
             g = f["team"]
             times = c.num("team/times_s", (None,), finite=True)
             n = times.shape[0]
@@ -326,7 +345,7 @@ def read_team_results(path: str | os.PathLike, *, verify: bool = True) -> dict[s
             mb = "team/measurements"
             k = c.num(f"{mb}/index", (None,), integer=True).shape[0]
             meas: dict[str, Any] = {}
-            for name in g["measurements"]:
+            for name in dict.fromkeys([*_MEASUREMENT_FIELDS, *g["measurements"]]):  # the written ones first
                 full = f"{mb}/{name}"
                 if name in ("type", "stations"):
                     meas[name] = c.strs(full, k)
@@ -385,8 +404,10 @@ def read_team_results(path: str | os.PathLike, *, verify: bool = True) -> dict[s
         return out
     except ResultsFileError:
         raise
-    except (OSError, KeyError, ValueError, TypeError) as exc:
-        raise ResultsFileError(f"{p}: unreadable or incomplete TEAM results file: {exc}") from None
+    except KeyError as exc:
+        raise ResultsFileError(f"{p}: incomplete TEAM results file: {one_line(exc)} is missing") from None
+    except (OSError, ValueError, TypeError) as exc:
+        raise ResultsFileError(f"{p}: unreadable or incomplete TEAM results file: {one_line(exc)}") from None
 
 
 def write_punch(path: str | os.PathLike, res: TeamProduct, indices: list[int] | None = None) -> None:
@@ -431,15 +452,16 @@ def read_punch(path: str | os.PathLike, source: str = "<deck>", *, verify: bool 
     file or damaged."""
     p = Path(path)
     head = f'{source}: a_priori.from_punch = "{path}"'
-    if not p.exists():
-        raise DeckError(f"{head}: no such file")
 
     class _PunchError(DeckError):
         def __init__(self, msg: str):
             super().__init__(f"{source}: a_priori.from_punch: {msg}")
 
+    def _refuse(msg: str) -> DeckError:  # verify_file's "<path>: why" after the deck's field
+        return DeckError(f"{head}: {msg.removeprefix(f'{p}: ')}")
+
     try:
-        with h5py.File(p, "r") as f:
+        with open_h5(p, _refuse, "punch file", checksum=verify) as f:
             if attr_text(f, "file_kind") != "fracas-punch":
                 raise DeckError(f"{head}: not a fracas punch file")
             version = _version(f, p, PUNCH_SCHEMA, _PunchError, "punch file")
@@ -473,4 +495,4 @@ def read_punch(path: str | os.PathLike, source: str = "<deck>", *, verify: bool 
     except DeckError:
         raise
     except (OSError, KeyError, ValueError, TypeError) as exc:
-        raise DeckError(f"{head}: cannot read ({exc})") from None
+        raise DeckError(f"{head}: cannot read ({one_line(exc)})") from None

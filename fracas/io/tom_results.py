@@ -28,7 +28,17 @@ import h5py
 import numpy as np
 
 from fracas.errors import ResultsFileError
-from fracas.io.hdf5 import Checked, atomic_h5, attr_int, attr_text, write, write_provenance, write_strings
+from fracas.io.hdf5 import (
+    Checked,
+    atomic_h5,
+    attr_int,
+    attr_text,
+    one_line,
+    open_h5,
+    write,
+    write_provenance,
+    write_strings,
+)
 from fracas.products import TomProduct
 
 __all__ = ["write_tom_results", "read_tom_results", "TOM_SCHEMA"]
@@ -103,19 +113,17 @@ def read_tom_results(path: str | os.PathLike, *, verify: bool = True) -> dict[st
     """Everything a report needs from a TOM results file, as a dict; one-line
     ResultsFileError naming the file and the dataset for a missing or damaged file."""
     p = Path(path)
-    if not p.exists():
-        raise ResultsFileError(f"{p}: no such results file")
-    if p.is_dir():
-        raise ResultsFileError(f"{p}: is a directory, expected a TOM results file (HDF5)")
     try:
-        with h5py.File(p, "r") as f:
+        with open_h5(p, ResultsFileError, "TOM results file", checksum=verify) as f:
             if attr_text(f, "file_kind") != _KIND:
                 raise ResultsFileError(
                     f"{p}: not a fracas TOM results file (file_kind = {f.attrs.get('file_kind')!r}, expected {_KIND!r})"
                 )
             version = attr_int(f, "schema_version")
-            if version is None or version > TOM_SCHEMA:
-                raise ResultsFileError(f"{p}: schema_version = {version!r}, expected 1..{TOM_SCHEMA}")
+            if version is None or not 1 <= version <= TOM_SCHEMA:
+                raise ResultsFileError(
+                    f"{p}: schema_version = {f.attrs.get('schema_version')!r}, this fracas reads 1 to {TOM_SCHEMA}"
+                )
             c = Checked(f, p, ResultsFileError, verify=verify)
             if not isinstance(f.get("tom"), h5py.Group):
                 raise c.fail("tom", "missing, expected a group")
@@ -170,4 +178,4 @@ def read_tom_results(path: str | os.PathLike, *, verify: bool = True) -> dict[st
                 out["grid"] = {"single": c.num("tom/grid/single", (m, j)), "gammas": gammas, "pairs": pairs}
             return out
     except OSError as exc:
-        raise ResultsFileError(f"{p}: cannot read as HDF5 ({exc}), expected a TOM results file") from None
+        raise ResultsFileError(f"{p}: cannot read as HDF5 ({one_line(exc)}), expected a TOM results file") from None

@@ -30,6 +30,8 @@ from fracas.io.hdf5 import (
     attr_int,
     attr_strs,
     attr_text,
+    one_line,
+    open_h5,
     read_provenance,
     set_attr,
     write,
@@ -161,10 +163,8 @@ def read_trajectory_file(path: str | os.PathLike, *, verify: bool = True) -> Tra
     src = Path(path)
     if not src.exists():
         raise StmFileError(f"{src}: no such file")
-    if src.is_dir():
-        raise StmFileError(f"{src}: is a directory, expected a fracas trajectory file (HDF5)")
     try:
-        with h5py.File(src, "r") as f:
+        with open_h5(src, StmFileError, "fracas trajectory file", checksum=verify) as f:
             fmt = attr_text(f, "format") or ""
             if fmt != FORMAT or "trajectory" not in f:
                 raise StmFileError(
@@ -234,4 +234,4 @@ def read_trajectory_file(path: str | os.PathLike, *, verify: bool = True) -> Tra
     except StmFileError:
         raise
     except (OSError, KeyError, ValueError, TypeError) as exc:
-        raise StmFileError(f"{src}: unreadable or incomplete trajectory file: {exc}") from None
+        raise StmFileError(f"{src}: unreadable or incomplete trajectory file: {one_line(exc)}") from None

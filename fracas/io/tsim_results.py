@@ -77,6 +77,8 @@ from fracas.io.hdf5 import (
     attr_int,
     attr_strs,
     attr_text,
+    one_line,
+    open_h5,
     read_provenance,
     set_attr,
     write,
@@ -256,13 +258,6 @@ def _open_checked(p: Path, f: h5py.File, kind: str, schema: int, what: str, veri
     return Checked(f, p, ResultsFileError, verify=verify)
 
 
-def _check_path(p: Path, what: str) -> None:
-    if not p.exists():
-        raise ResultsFileError(f"{p}: no such {what}")
-    if p.is_dir():
-        raise ResultsFileError(f"{p}: is a directory, expected a {what} (HDF5)")
-
-
 def _group(c: Checked, name: str) -> h5py.Group:
     if name not in c.f or not isinstance(c.f[name], h5py.Group):
         raise c.fail(name, "missing, expected a group (incomplete file?)")
@@ -426,9 +421,8 @@ def read_tsim_results(path: str | os.PathLike, *, verify: bool = True) -> TsimPr
     """The :class:`TsimProduct` stored in a TSIM results file; a one-line ResultsFileError
     naming the file and the dataset for a missing or damaged file."""
     p = Path(path)
-    _check_path(p, "TSIM results file")
     try:
-        with h5py.File(p, "r") as f:
+        with open_h5(p, ResultsFileError, "TSIM results file", checksum=verify) as f:
             c = _open_checked(p, f, _KIND, TSIM_SCHEMA, "TSIM results file", verify)
             g = _group(c, "tsim")
             attrs = {}
@@ -477,7 +471,7 @@ def read_tsim_results(path: str | os.PathLike, *, verify: bool = True) -> TsimPr
                 provenance=prov,
             )
     except OSError as exc:
-        raise ResultsFileError(f"{p}: cannot read as HDF5 ({exc}), expected a TSIM results file") from None
+        raise ResultsFileError(f"{p}: cannot read as HDF5 ({one_line(exc)}), expected a TSIM results file") from None
 
 
 def tsim_statistics(path: str | os.PathLike, *, verify: bool = True) -> tuple[int, dict]:
@@ -485,27 +479,25 @@ def tsim_statistics(path: str | os.PathLike, *, verify: bool = True) -> tuple[in
     (the number of successful missions they cover -- ok + near + a_priori of its counts --,
     name -> (count, mean, covariance)).  See :func:`tsim_settings` for the run they came from."""
     p = Path(path)
-    _check_path(p, "TSIM results file")
     try:
-        with h5py.File(p, "r") as f:
+        with open_h5(p, ResultsFileError, "TSIM results file", checksum=verify) as f:
             c = _open_checked(p, f, _KIND, TSIM_SCHEMA, "TSIM results file", verify)
             counts = _counts(c)
             ok = sum(int(counts.get(k, 0)) for k in ("ok", "near", "a_priori"))
             return ok, _statistics(c)
     except OSError as exc:
-        raise ResultsFileError(f"{p}: cannot read as HDF5 ({exc}), expected a TSIM results file") from None
+        raise ResultsFileError(f"{p}: cannot read as HDF5 ({one_line(exc)}), expected a TSIM results file") from None
 
 
 def tsim_settings(path: str | os.PathLike, *, verify: bool = True) -> dict:
     """The settings of an earlier TSIM run (seed, first_mission, missions, ...) from its results file."""
     p = Path(path)
-    _check_path(p, "TSIM results file")
     try:
-        with h5py.File(p, "r") as f:
+        with open_h5(p, ResultsFileError, "TSIM results file", checksum=verify) as f:
             c = _open_checked(p, f, _KIND, TSIM_SCHEMA, "TSIM results file", verify)
             return _json(c, "tsim/settings", dict)
     except OSError as exc:
-        raise ResultsFileError(f"{p}: cannot read as HDF5 ({exc}), expected a TSIM results file") from None
+        raise ResultsFileError(f"{p}: cannot read as HDF5 ({one_line(exc)}), expected a TSIM results file") from None
 
 
 # --------------------------------------------------------------------------- checkpoint
@@ -537,10 +529,8 @@ def read_tsim_checkpoint(
     p = Path(path)
     if not p.exists():
         return {}
-    if p.is_dir():
-        raise ResultsFileError(f"{p}: is a directory, expected a TSIM checkpoint file (HDF5)")
     try:
-        with h5py.File(p, "r") as f:
+        with open_h5(p, ResultsFileError, "TSIM checkpoint file", checksum=verify) as f:
             c = _open_checked(p, f, _CKPT_KIND, CHECKPOINT_SCHEMA, "TSIM checkpoint file", verify)
             key = attr_text(f, "plan_key")
             if key is None:
@@ -563,4 +553,4 @@ def read_tsim_checkpoint(
                 out[int(idx)] = arrays
             return dict(sorted(out.items()))
     except OSError as exc:
-        raise ResultsFileError(f"{p}: cannot read as HDF5 ({exc}), expected a TSIM checkpoint file") from None
+        raise ResultsFileError(f"{p}: cannot read as HDF5 ({one_line(exc)}), expected a TSIM checkpoint file") from None

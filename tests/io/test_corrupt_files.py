@@ -34,6 +34,7 @@ from fracas.products import (
     Prediction,
     TeamProduct,
 )
+from tests.io.damage import edited, unsealed
 from tests.io.test_stm_file import DECK_SHORT
 from tests.io.test_trajectory_file import _data as trajectory_data
 
@@ -101,21 +102,21 @@ def test_good_stm_file_reads_with_and_without_verify(stm):
 
 def test_string_schema_version(stm, tmp_path):
     bad = _copy(stm, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         f.attrs["schema_version"] = "2"
     _stm_refused(bad, r"schema_version is str \('2'\), expected an integer")
 
 
 def test_version_1_file_is_refused_with_the_command_that_rebuilds_it(stm, tmp_path):
     bad = _copy(stm, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         f.attrs["schema_version"] = 1
     _stm_refused(bad, r"schema_version = 1, this fracas reads 2: regenerate with fracas stm build")
 
 
 def test_non_string_file_kind(stm, tmp_path):
     bad = _copy(stm, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         f.attrs["file_kind"] = 7
     _stm_refused(bad, r"file_kind is int64, expected the string 'fracas-stm'")
 
@@ -123,7 +124,7 @@ def test_non_string_file_kind(stm, tmp_path):
 @pytest.mark.parametrize("verify", [True, False])
 def test_string_times(stm, tmp_path, verify):
     bad = _copy(stm, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         t = f["stm/times_s"][()]
         _replace(f, "stm/times_s", np.array([repr(x) for x in t], dtype=object))
     _stm_refused(bad, r"stm/times_s: dtype strings, expected float64", verify=verify)
@@ -131,7 +132,7 @@ def test_string_times(stm, tmp_path, verify):
 
 def test_integer_labels(stm, tmp_path):
     bad = _copy(stm, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         _replace(f, "parameters/labels", np.arange(2))
     _stm_refused(bad, r"parameters/labels: dtype int64, expected UTF-8 strings")
 
@@ -139,7 +140,7 @@ def test_integer_labels(stm, tmp_path):
 @pytest.mark.parametrize("verify", [True, False])
 def test_swapped_step_datasets(stm, tmp_path, verify):
     bad = _copy(stm, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         f.move("stm/stm_step", "stm/tmp")
         f.move("stm/par_step", "stm/stm_step")
         f.move("stm/tmp", "stm/par_step")
@@ -148,7 +149,7 @@ def test_swapped_step_datasets(stm, tmp_path, verify):
 
 def test_unknown_primary(stm, tmp_path):
     bad = _copy(stm, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         n = f["stm/primary"].shape[0]
         del f["stm/primary"]
         write_strings(f["stm"], "primary", ["vulcan"] * n)  # checksum matches: a writer's bug
@@ -158,14 +159,14 @@ def test_unknown_primary(stm, tmp_path):
 @pytest.mark.parametrize("verify", [True, False])
 def test_stm_step_cast_to_int64(stm, tmp_path, verify):
     bad = _copy(stm, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         _replace(f, "stm/stm_step", f["stm/stm_step"][()].astype(np.int64), refresh=True)
     _stm_refused(bad, r"stm/stm_step: dtype int64, expected float64", verify=verify)
 
 
 def test_par_step_scaled_is_caught_by_the_checksum(stm, tmp_path):
     bad = _copy(stm, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         f["stm/par_step"][...] = f["stm/par_step"][()] * 1e6
     _stm_refused(bad, r"stm/par_step: SHA-256 checksum mismatch \(column 0\)")
     _stm_refused(bad, r"stm/par_step: SHA-256 checksum mismatch \(column 1\)", labels=["j2[earth]"])
@@ -173,26 +174,39 @@ def test_par_step_scaled_is_caught_by_the_checksum(stm, tmp_path):
     np.testing.assert_allclose(scaled.par_step, read_stm_file(stm).par_step * 1e6, rtol=1e-15)
 
 
-def test_one_flipped_bit_in_stm_step(stm, tmp_path):
-    bad = _copy(stm, tmp_path)
-    with h5py.File(bad, "r") as f:
+def _flip_stm_step_bit(path: Path) -> None:
+    with h5py.File(path, "r") as f:
         ds = f["stm/stm_step"]
         offset = ds.id.get_offset()  # contiguous storage: the raw bytes in the file
         assert offset is not None and ds.chunks is None
-    raw = bytearray(bad.read_bytes())
+    raw = bytearray(path.read_bytes())
     pos = offset + 8 * (3 * 49 + 10)  # stm_step[3, 1, 3], lowest mantissa bit
     raw[pos] ^= 0x01
-    bad.write_bytes(bytes(raw))
-    _stm_refused(bad, r"stm/stm_step: SHA-256 checksum mismatch")
-    loose = read_stm_file(bad, verify=False)
+    path.write_bytes(bytes(raw))
+
+
+def test_one_flipped_bit_in_stm_step(stm, tmp_path):
+    """One flipped mantissa bit: the integrity header refuses the file before h5py opens it;
+    in a file without the header (an earlier fracas) the dataset's own SHA-256 names
+    stm/stm_step; verify=False decodes either (after the bounded probe) with the one
+    changed element."""
+    bad = _copy(stm, tmp_path)
+    _flip_stm_step_bit(bad)
+    _stm_refused(bad, r"damaged file: checksum mismatch \(expected SHA-256 [0-9a-f]{16}\.\.\., got")
     good = read_stm_file(stm)
+    assert np.count_nonzero(read_stm_file(bad, verify=False).stm_step != good.stm_step) == 1
+    old = tmp_path / "old.h5"
+    unsealed(stm, old)
+    _flip_stm_step_bit(old)
+    _stm_refused(old, r"stm/stm_step: SHA-256 checksum mismatch")
+    loose = read_stm_file(old, verify=False)
     assert np.count_nonzero(loose.stm_step != good.stm_step) == 1
 
 
 @pytest.mark.parametrize("verify", [True, False])
 def test_nan_in_states(stm, tmp_path, verify):
     bad = _copy(stm, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         x = f["stm/states"][()]
         x[3, 0] = np.nan
         _replace(f, "stm/states", x, refresh=True)
@@ -201,7 +215,7 @@ def test_nan_in_states(stm, tmp_path, verify):
 
 def test_non_monotonic_times(stm, tmp_path):
     bad = _copy(stm, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         t = f["stm/times_s"][()]
         t[[4, 5]] = t[[5, 4]]
         _replace(f, "stm/times_s", t, refresh=True)
@@ -210,7 +224,7 @@ def test_non_monotonic_times(stm, tmp_path):
 
 def test_singular_step_matrix(stm, tmp_path):
     bad = _copy(stm, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         p = f["stm/stm_step"][()]
         p[2] = 0.0
         _replace(f, "stm/stm_step", p, refresh=True)
@@ -219,7 +233,7 @@ def test_singular_step_matrix(stm, tmp_path):
 
 def test_first_step_not_identity(stm, tmp_path):
     bad = _copy(stm, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         p = f["stm/stm_step"][()]
         p[0] *= 2.0
         _replace(f, "stm/stm_step", p, refresh=True)
@@ -228,7 +242,7 @@ def test_first_step_not_identity(stm, tmp_path):
 
 def test_missing_checksum(stm, tmp_path):
     bad = _copy(stm, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         del f["stm/states"].attrs[CHECKSUM_ATTR]
     _stm_refused(bad, r"stm/states: no data_sha256 attribute")
     read_stm_file(bad, verify=False)
@@ -237,7 +251,12 @@ def test_missing_checksum(stm, tmp_path):
 def test_truncated_file(stm, tmp_path):
     bad = tmp_path / "bad.h5"
     bad.write_bytes(stm.read_bytes()[: stm.stat().st_size // 2])
-    _stm_refused(bad, r"unreadable HDF5 file \(truncated or damaged\?\)|not an HDF5 file|unreadable")
+    n = stm.stat().st_size
+    _stm_refused(bad, rf"damaged file: {n // 2} bytes, its integrity header says {n} \(truncated after fracas")
+    old = tmp_path / "old.h5"
+    unsealed(stm, old)
+    old.write_bytes(old.read_bytes()[: old.stat().st_size // 2])
+    _stm_refused(old, r"unreadable HDF5 file \(damaged or truncated\?\)")
 
 
 def test_epoch_checked_to_a_microsecond(stm):
@@ -337,14 +356,14 @@ def test_good_results_and_punch_read(results):
 
 def test_results_string_times(results, tmp_path):
     bad = _copy(results[0], tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         _replace(f, "team/times_s", np.array(["0", "1", "2", "3", "4"], dtype=object))
     _refused(ResultsFileError, lambda: read_team_results(bad), bad, r"team/times_s: dtype strings, expected float64")
 
 
 def test_results_scaled_sigma_is_caught_by_the_checksum(results, tmp_path):
     bad = _copy(results[0], tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         f["team/assumed/sigma"][...] = f["team/assumed/sigma"][()] * 1e3
     _refused(ResultsFileError, lambda: read_team_results(bad), bad, r"team/assumed/sigma: SHA-256 checksum mismatch")
     read_team_results(bad, verify=False)
@@ -352,7 +371,7 @@ def test_results_scaled_sigma_is_caught_by_the_checksum(results, tmp_path):
 
 def test_results_inconsistent_shapes_and_missing_datasets(results, tmp_path):
     bad = _copy(results[0], tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         _replace(f, "team/true/P_plus", f["team/true/P_plus"][()][:, :8, :8], refresh=True)
     _refused(
         ResultsFileError,
@@ -361,43 +380,43 @@ def test_results_inconsistent_shapes_and_missing_datasets(results, tmp_path):
         r"team/true/P_plus: shape \(5, 8, 8\), expected \(5, 9, 9\)",
     )
     gone = _copy(results[0], tmp_path, "gone.h5")
-    with h5py.File(gone, "r+") as f:
+    with edited(gone) as f:
         del f["team/labels/units"]
     _refused(ResultsFileError, lambda: read_team_results(gone), gone, r"team/labels/units: missing")
 
 
 def test_results_schema_version_string_and_schema_1_without_checksums(results, tmp_path):
     bad = _copy(results[0], tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         f.attrs["schema_version"] = "2"
     _refused(ResultsFileError, lambda: read_team_results(bad), bad, r"schema_version is str")
     old = _copy(results[0], tmp_path, "old.h5")
-    with h5py.File(old, "r+") as f:  # a schema-1 file: no checksums, still read
+    with edited(old) as f:  # a schema-1 file: no checksums, still read
         f.attrs["schema_version"] = 1
         f.visititems(lambda _n, o: o.attrs.__delitem__(CHECKSUM_ATTR) if CHECKSUM_ATTR in o.attrs else None)
     assert read_team_results(old)["labels"] == read_team_results(results[0])["labels"]
-    with h5py.File(old, "r+") as f:
+    with edited(old) as f:
         f.attrs["schema_version"] = 2  # claims checksums but has none
     _refused(ResultsFileError, lambda: read_team_results(old), old, r"no data_sha256 attribute")
 
 
 def test_punch_damage_is_a_deck_error_naming_the_dataset(results, tmp_path):
     bad = _copy(results[1], tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         f["punch_000/assumed"][0, 0] = 1e9
     _refused(DeckError, lambda: read_punch(bad, "study.toml"), bad, r"^study.toml: ", r"punch_000/assumed: SHA-256")
     asym = _copy(results[1], tmp_path, "asym.h5")
-    with h5py.File(asym, "r+") as f:
+    with edited(asym) as f:
         a = f["punch_000/assumed"][()]
         a[0, 1] += 1.0
         _replace(f, "punch_000/assumed", a, refresh=True)
     _refused(DeckError, lambda: read_punch(asym), asym, r"punch_000/assumed: not symmetric")
     small = _copy(results[1], tmp_path, "small.h5")
-    with h5py.File(small, "r+") as f:
+    with edited(small) as f:
         _replace(f, "punch_000/assumed", f["punch_000/assumed"][()][:8, :8], refresh=True)
     _refused(DeckError, lambda: read_punch(small, verify=False), small, r"shape \(8, 8\), expected \(9, 9\)")
     ints = _copy(results[1], tmp_path, "ints.h5")
-    with h5py.File(ints, "r+") as f:
+    with edited(ints) as f:
         _replace(f, "punch_000/time_s", np.int64(3))
     _refused(DeckError, lambda: read_punch(ints), ints, r"punch_000/time_s: dtype int64, expected float64")
 
@@ -416,18 +435,18 @@ def _traj_refused(path, *patterns, **kw):
 
 def test_trajectory_string_times(trajectory, tmp_path):
     bad = _copy(trajectory, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         _replace(f, "trajectory/t_s", np.array(["0"] * 5, dtype=object))
     _traj_refused(bad, r"trajectory/t_s: dtype strings, expected float64", verify=False)
 
 
 def test_trajectory_scaled_positions_and_flipped_sensitivities(trajectory, tmp_path):
     bad = _copy(trajectory, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         f["trajectory/r_km"][...] = f["trajectory/r_km"][()] * 1e3
         f["sensitivities/stm"][0, 0, 0] = -f["sensitivities/stm"][0, 0, 0]
     _traj_refused(bad, r"sensitivities/stm: SHA-256 checksum mismatch")
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         f["sensitivities/stm"][0, 0, 0] = -f["sensitivities/stm"][0, 0, 0]
     _traj_refused(bad, r"trajectory/r_km: SHA-256 checksum mismatch")
     read_trajectory_file(bad, verify=False)
@@ -435,10 +454,10 @@ def test_trajectory_scaled_positions_and_flipped_sensitivities(trajectory, tmp_p
 
 def test_trajectory_inconsistent_shapes(trajectory, tmp_path):
     bad = _copy(trajectory, tmp_path)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         _replace(f, "trajectory/v_km_s", f["trajectory/v_km_s"][()][:4], refresh=True)
     _traj_refused(bad, r"trajectory/v_km_s: shape \(4, 3\), expected \(5, 3\)")
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         _replace(f, "trajectory/v_km_s", np.zeros((5, 3)), refresh=True)
         _replace(f, "sensitivities/par_step", np.zeros((5, 7, 3)), refresh=True)
     _traj_refused(bad, r"sensitivities/par_step: shape \(5, 7, 3\), expected \(5, 7, 2\)")

@@ -13,6 +13,7 @@ from fracas.errors import ResultsFileError
 from fracas.io.rendezvous_results import read_rendezvous_results
 from fracas.pipeline import run_rendezvous
 from fracas.report.rendezvous import plot_rendezvous, summary_text
+from tests.io.damage import edited
 
 SMALL = "tests/data/rendezvous_small.toml"
 
@@ -124,13 +125,13 @@ def test_damaged_or_incomplete_file_is_refused_naming_the_dataset(written, tmp_p
     _, path = written
     bad = tmp_path / "edited.h5"
     shutil.copy(path, bad)
-    with h5py.File(bad, "r+") as f:
+    with edited(bad) as f:
         f["rendezvous/P_true"][0, 0, 0, 0] += 1.0
     with pytest.raises(ResultsFileError, match=r"edited\.h5: rendezvous/P_true: SHA-256 checksum mismatch"):
         read_rendezvous_results(bad)
     gone = tmp_path / "gone.h5"
     shutil.copy(path, gone)
-    with h5py.File(gone, "r+") as f:
+    with edited(gone) as f:
         del f["rendezvous/maneuvers/cov_true"]
     with pytest.raises(ResultsFileError, match=r"rendezvous/maneuvers/cov_true: missing"):
         read_rendezvous_results(gone)

@@ -41,6 +41,7 @@ from fracas.io.stm_file import (
     write_stm_file,
 )
 from fracas.products import chain
+from tests.io.damage import edited
 
 ROOT = Path(__file__).resolve().parents[2]
 DAY = 86400.0
@@ -387,13 +388,13 @@ def test_refusals_name_the_file_and_the_problem(tmp_path):
 
     schema = tmp_path / "schema.h5"
     write_stm_file(schema, _data(4, 2))
-    with h5py.File(schema, "r+") as f:
+    with edited(schema) as f:
         f.attrs["schema_version"] = 99
     _refuses(schema, rf"schema_version = 99, this fracas reads {SCHEMA_VERSION}: regenerate with fracas stm build")
 
     broken = tmp_path / "broken.h5"
     write_stm_file(broken, _data(4, 2))
-    with h5py.File(broken, "r+") as f:
+    with edited(broken) as f:
         del f["stm/stm_step"]
     _refuses(broken, r"stm/stm_step: missing, expected a dataset")
     with pytest.raises(StmFileError, match=re.escape(str(tmp_path / "nope.h5"))):

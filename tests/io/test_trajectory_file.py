@@ -197,7 +197,7 @@ def test_read_errors(tmp_path):
         read_trajectory_file(other)
     junk = tmp_path / "junk.h5"
     junk.write_bytes(b"not hdf5 at all")
-    with pytest.raises(StmFileError, match="unreadable or incomplete"):
+    with pytest.raises(StmFileError, match=r"not an HDF5 file \(no HDF5 signature; damaged\?\)"):
         read_trajectory_file(junk)
 
 

@@ -16,6 +16,7 @@ from fracas.io.tsim_results import (
     write_tsim_results,
 )
 from fracas.products import TsimManeuver, TsimProduct
+from tests.io.damage import edited
 
 
 def synthetic_product(n: int = 200, seed: int = 7) -> TsimProduct:
@@ -257,7 +258,7 @@ def test_other_kind(tmp_path):
 def test_dataset_deleted(written, tmp_path, dataset):
     p = tmp_path / "damaged.h5"
     p.write_bytes(written.read_bytes())
-    with h5py.File(p, "a") as f:
+    with edited(p, "a") as f:
         del f[dataset]
     with pytest.raises(ResultsFileError) as exc:
         read_tsim_results(p)
@@ -267,14 +268,14 @@ def test_dataset_deleted(written, tmp_path, dataset):
 def test_edited_and_bad_json(written, tmp_path):
     p = tmp_path / "edited.h5"
     p.write_bytes(written.read_bytes())
-    with h5py.File(p, "a") as f:
+    with edited(p, "a") as f:
         f["tsim/missions/final_mass_kg"][0] = 1.0
     with pytest.raises(ResultsFileError) as exc:
         read_tsim_results(p)
     _one_line(exc, p, "tsim/missions/final_mass_kg", "checksum")
     q = tmp_path / "json.h5"
     q.write_bytes(written.read_bytes())
-    with h5py.File(q, "a") as f:
+    with edited(q, "a") as f:
         del f["tsim/settings"]
         f.create_dataset("tsim/settings", data="{not json", dtype=h5py.string_dtype())
     with pytest.raises(ResultsFileError) as exc:
@@ -285,7 +286,7 @@ def test_edited_and_bad_json(written, tmp_path):
 def test_wrong_shape(written, tmp_path):
     p = tmp_path / "shape.h5"
     p.write_bytes(written.read_bytes())
-    with h5py.File(p, "a") as f:
+    with edited(p, "a") as f:
         del f["tsim/missions/target_error"]
         f["tsim/missions/target_error"] = np.zeros((200, 2))
     with pytest.raises(ResultsFileError) as exc:
@@ -327,7 +328,7 @@ def test_checkpoint_other_run_and_damage(tmp_path):
     with pytest.raises(ResultsFileError) as exc:
         read_tsim_checkpoint(p, "xyz")
     _one_line(exc, p, "different run")
-    with h5py.File(p, "a") as f:
+    with edited(p, "a") as f:
         del f["block_1/dv_km_s"]
         f["block_1/dv_km_s"] = np.zeros((8, 2))
     with pytest.raises(ResultsFileError) as exc:

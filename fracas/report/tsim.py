@@ -3,7 +3,10 @@ plots, from a :class:`fracas.products.TsimProduct` (:func:`fracas.io.tsim_result
 
 Only the successful missions (status 0 ok or 1 near success) enter the tables computed from
 the per-mission table and the plots; the final target errors use the run's merged
-``statistics["target_error"]`` when present (a-priori missions included)."""
+``statistics["target_error"]`` when present (a-priori missions included).
+
+Units: |ΔV| in m/s; target errors in the file's units except velocities, in mm/s (the
+TEAM printout's), in the summary and the plots alike."""
 
 from __future__ import annotations
 
@@ -15,9 +18,23 @@ import numpy as np
 from fracas.products import TsimProduct
 from fracas.report.guidance import ellipse_points
 
-__all__ = ["summary_text", "plot_tsim", "successful"]
+__all__ = ["summary_text", "plot_tsim", "tsim_figures", "successful"]
 
-_MS = 1e3  # m/s per km/s
+_MS = 1e3  # m/s per km/s (ΔV in m/s, as in the TEAM printout)
+#: target-error units shown: a velocity in mm/s (the TEAM printout's default), the rest as stored
+_SHOWN = {"km/s": (1e6, "mm/s")}
+
+
+def _shown(unit: str) -> tuple[float, str]:
+    """(factor, unit shown) of a target error stored in ``unit``."""
+    return _SHOWN.get(str(unit), (1.0, str(unit)))
+
+
+def _scales(product: TsimProduct) -> tuple[np.ndarray, list[str]]:
+    pairs = [_shown(u) for u in product.final_target_units]
+    return np.array([f for f, _u in pairs], dtype=float), [u for _f, u in pairs]
+
+
 _BPLANE = {"b_dot_t": "B·T", "b_dot_r": "B·R"}
 
 
@@ -99,17 +116,16 @@ def summary_text(product: TsimProduct, width: int = 80) -> str:
             count = te.shape[0]
             mean = te.mean(axis=0) if count else np.full(len(names), np.nan)
             cov = np.atleast_2d(np.cov(te, rowvar=False)) if count > 1 else np.full((len(names),) * 2, np.nan)
-        sig = np.sqrt(np.maximum(np.diag(cov), 0.0))
-        team = np.sqrt(np.maximum(np.diag(np.asarray(product.team_target_cov, float)), 0.0))
+        f, shown = _scales(product)
+        sig = np.sqrt(np.maximum(np.diag(cov), 0.0)) * f
+        mean = mean * f
+        team = np.sqrt(np.maximum(np.diag(np.asarray(product.team_target_cov, float)), 0.0)) * f
         lines.append("")
         lines.append(f"final target errors ({count} missions):"[:width])
         lines.append(f"{'target':<20} {'unit':<8} {'TSIM mean':>10} {'TSIM sigma':>10} {'TEAM sigma':>10} {'ratio':>8}")
         for i, name in enumerate(names):
             ratio = sig[i] / team[i] if team[i] > 0 else float("nan")
-            lines.append(
-                f"{name[:20]:<20} {product.final_target_units[i][:8]:<8} {_g(mean[i])} {_g(sig[i])} "
-                f"{_g(team[i])} {_g(ratio, 8)}"
-            )
+            lines.append(f"{name[:20]:<20} {shown[i][:8]:<8} {_g(mean[i])} {_g(sig[i])} {_g(team[i])} {_g(ratio, 8)}")
 
     if product.consistency:
         lines.append("")
@@ -137,28 +153,32 @@ def _empty(ax, text: str) -> None:
     ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes)
 
 
-def plot_tsim(product: TsimProduct, path: str | Path) -> list[Path]:
-    """Three PNG files: the target-plane scatter at ``path`` (first two final target
-    components, TEAM's 1σ and 3σ ellipses, the sample 1σ ellipse dashed), the ΔV histograms
-    at ``<stem>_dv.png`` and the target-error histograms at ``<stem>_errors.png``.
-    Returns the paths written."""
+def _wrapped(text: str, width_in: float, fontsize: float = 10.0) -> str:
+    chars = max(20, int(width_in * 72.0 / (0.55 * fontsize)))
+    return "\n".join(textwrap.wrap(text, chars))
+
+
+def tsim_figures(product: TsimProduct) -> list:
+    """The three TSIM figures (matplotlib, not saved): the target-plane scatter (first two
+    final target components, TEAM's 1σ and 3σ ellipses, the sample 1σ ellipse dashed), the
+    ΔV histograms (m/s) and the target-error histograms (velocities in mm/s)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from fracas.io.atomic import savefig_atomic
-
-    path = Path(path)
-    out: list[Path] = []
+    figs = []
     ok = successful(product)
-    names, units = product.final_target_names, product.final_target_units
-    te = _target_errors(product, ok)
+    names = product.final_target_names
+    f, units = _scales(product)
+    te = _target_errors(product, ok) * f[None, :] if len(names) else _target_errors(product, ok)
     team_cov = np.asarray(product.team_target_cov, float)
+    if team_cov.size and len(names):
+        team_cov = team_cov * np.outer(f, f)
     title = product.title or Path(product.source).name
 
     # (a) target plane
-    fig, ax = plt.subplots(figsize=(6.5, 6))
+    fig, ax = plt.subplots(figsize=(6.5, 6.3), layout="constrained")
     if len(names) >= 2 and te.shape[0]:
         ax.plot(te[:, 0], te[:, 1], ".", ms=3, alpha=0.5, label=f"TSIM ({te.shape[0]} missions)")
         c2 = team_cov[:2, :2]
@@ -180,43 +200,44 @@ def plot_tsim(product: TsimProduct, path: str | Path) -> list[Path]:
     else:
         _empty(ax, "no successful missions" if len(names) >= 2 else "fewer than two final targets")
     plane = "B-plane" if list(names[:2]) == ["b_dot_t", "b_dot_r"] else "target plane"
-    ax.set_title(f"TSIM {plane}: {title}"[:80], fontsize=10)
-    fig.tight_layout()
-    out.append(savefig_atomic(fig, path, dpi=110))
-    plt.close(fig)
+    ax.set_title(_wrapped(f"TSIM {plane}: {title}", 6.0), fontsize=10)
+    figs.append(fig)
 
     # (b) ΔV histograms
     nj = max(len(product.maneuvers), 1)
     ncol = min(3, nj)
     nrow = (nj + ncol - 1) // ncol
-    fig, axes = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 3.6 * nrow), squeeze=False)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.8 * ncol, 3.6 * nrow + 1.0), squeeze=False, layout="constrained")
+    handles = None
     for j, (ax, m) in enumerate(zip(axes.ravel(), product.maneuvers)):
         x = _dv(product, ok, j)
         if x.size:
-            ax.hist(x, bins=min(50, max(10, x.size // 10)), color="C0", alpha=0.6)
+            ax.hist(x, bins=min(50, max(10, x.size // 10)), color="C0", alpha=0.6, label="TSIM missions")
             ax.axvline(m.team_dv_mean_km_s * _MS, color="C3", lw=1.5, label="TEAM mean (exact Hoffman-Young stand-in)")
             ax.axvline(m.team_dv_99_km_s * _MS, color="C3", lw=1.5, ls="--", label="TEAM 99 %")
             ax.axvline(_mean(x), color="k", lw=1.2, label="TSIM mean")
             ax.axvline(_pct(x, 99), color="k", lw=1.2, ls="--", label="TSIM 99th percentile")
-            ax.legend(fontsize=6)
+            handles = handles or ax.get_legend_handles_labels()
         else:
             _empty(ax, "no successful missions")
         ax.set_title(f"{m.name} ({m.type}, {m.law})", fontsize=9)
         ax.set_xlabel("|ΔV| (m/s)")
+        ax.set_ylabel("missions (count)")
         ax.grid(alpha=0.3)
     for ax in axes.ravel()[len(product.maneuvers) :]:
         ax.set_visible(len(product.maneuvers) == 0)
         if not product.maneuvers:
             _empty(ax, "no maneuvers")
-    fig.tight_layout()
-    out.append(savefig_atomic(fig, path.with_name(path.stem + "_dv.png"), dpi=110))
-    plt.close(fig)
+    if handles:
+        fig.legend(*handles, loc="outside lower center", ncol=3, fontsize=7)
+    fig.suptitle(_wrapped(f"TSIM ΔV per maneuver: {title}", 4.8 * ncol, 11), fontsize="medium")
+    figs.append(fig)
 
     # (c) target-error histograms
     nm = max(len(names), 1)
     ncol = min(3, nm)
     nrow = (nm + ncol - 1) // ncol
-    fig, axes = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 3.6 * nrow), squeeze=False)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.8 * ncol, 3.6 * nrow + 0.5), squeeze=False, layout="constrained")
     sig = np.sqrt(np.maximum(np.diag(team_cov), 0.0)) if team_cov.size else np.zeros(0)
     for i, (ax, name) in enumerate(zip(axes.ravel(), names)):
         x = te[:, i] if te.shape[0] else np.zeros(0)
@@ -231,13 +252,31 @@ def plot_tsim(product: TsimProduct, path: str | Path) -> list[Path]:
         else:
             _empty(ax, "no successful missions")
         ax.set_xlabel(_label(name, units[i]))
-        ax.set_ylabel("density")
+        ax.set_ylabel(f"density (1/{units[i]})")
         ax.grid(alpha=0.3)
     for ax in axes.ravel()[len(names) :]:
         ax.set_visible(len(names) == 0)
         if not names:
             _empty(ax, "no final targets")
-    fig.tight_layout()
-    out.append(savefig_atomic(fig, path.with_name(path.stem + "_errors.png"), dpi=110))
-    plt.close(fig)
+    fig.suptitle(_wrapped(f"TSIM final target errors: {title}", 4.8 * ncol, 11), fontsize="medium")
+    figs.append(fig)
+    return figs
+
+
+def plot_tsim(product: TsimProduct, path: str | Path) -> list[Path]:
+    """Three PNG files (:func:`tsim_figures`): the target-plane scatter at ``path``, the ΔV
+    histograms at ``<stem>_dv.png`` and the target-error histograms at
+    ``<stem>_errors.png``.  Returns the paths written."""
+    import matplotlib.pyplot as plt
+
+    from fracas.io.atomic import savefig_atomic
+
+    path = Path(path)
+    out: list[Path] = []
+    names = (path, path.with_name(path.stem + "_dv.png"), path.with_name(path.stem + "_errors.png"))
+    for fig, p in zip(tsim_figures(product), names):
+        try:
+            out.append(savefig_atomic(fig, p, dpi=110))
+        finally:
+            plt.close(fig)
     return out

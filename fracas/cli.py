@@ -613,11 +613,15 @@ def sweep(
         _run_sweep(deck, vary, workers, scheduler, resume, output)
 
 
+#: exit status of a sweep whose table is written but some studies failed
+SWEEP_FAILED_EXIT = 3
+
+
 def _run_sweep(deck: Path, vary, workers, scheduler, resume: bool, output: Path | None) -> None:
     from fracas.sweep import sweep_main
 
     with _progress(True) as stage:
-        table, summary = sweep_main(
+        table, summary, failed = sweep_main(
             deck,
             list(vary),
             workers,
@@ -628,6 +632,9 @@ def _run_sweep(deck: Path, vary, workers, scheduler, resume: bool, output: Path 
         )
     click.echo(summary)
     click.echo(f"written: {table}")
+    if failed:  # the table is written; the exit status says not every study ran
+        click.echo(f"fracas: error: sweep: {failed} stud{'ies' if failed > 1 else 'y'} failed", err=True)
+        sys.exit(SWEEP_FAILED_EXIT)
 
 
 @main.command()

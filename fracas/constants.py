@@ -25,6 +25,13 @@ SOLAR_PRESSURE_1AU_N_M2 = SOLAR_FLUX_1AU_W_M2 / (SPEED_OF_LIGHT_KM_S * 1e3)
 OBLIQUITY_J2000_RAD = math.radians(84381.406 / 3600.0)  # IAU 2006 mean obliquity at J2000
 EARTH_ROTATION_RAD_S = 7.292115146706979e-5  # rad/s, IERS mean sidereal rate
 
+# --- the span of the DE421 ephemeris served (fracas.dynamics.ephemeris.coverage_et): the
+# de421 package's data begin at JD 2414992.5 (1899-12-04; the published span starts
+# 1899-07-29) and the published span ends at JD 2471184.5 (2053-10-09), TDB.  Decks whose
+# propagation needs body positions must lie inside it (checked when a deck is validated).
+DE421_START_JD = 2_414_992.5  # 1899-12-04T00:00:00 TDB
+DE421_END_JD = 2_471_184.5  # 2053-10-09T00:00:00 TDB
+
 # --- the LEO reference case of the trajectory-core issue (EGM96-era values) ---------
 MU_EARTH_EGM96_KM3_S2 = 398_600.4418
 J2_EARTH = 1.08262668e-3

@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import re
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -24,15 +25,18 @@ from fracas import pipeline
 from fracas.config.modes import deck_mode
 from fracas.config.sweep import (
     SweepDeck,
-    check_field_path,
     guidance_output,
     is_numeric_field,
     load_sweep_deck,
+    output_problems,
     output_unit,
     parse_field_path,
+    study_label,
+    sweep_problems,
+    varied_deck,
 )
 from fracas.config.team import TeamDeck, load_team_deck
-from fracas.config.trajectory import read_deck_text
+from fracas.config.trajectory import cut, deck_error, read_deck_text
 from fracas.errors import DeckError, FracasError
 from fracas.io.atomic import check_output_path
 
@@ -59,25 +63,6 @@ Progress = Callable[[int, int], None]
 
 
 # ----------------------------------------------------------------------------- varying a deck
-def _set(data: Any, parts: tuple, value: Any, field: str) -> Any:
-    """``data`` (a dump) with the element at ``parts`` set to ``value`` (copies along the path)."""
-    if not parts:
-        return value
-    head, rest = parts[0], parts[1:]
-    if isinstance(head, int):
-        if not isinstance(data, list) or not -len(data) <= head < len(data):
-            n = len(data) if isinstance(data, list) else 0
-            raise DeckError(f"{field}: index [{head}] is out of range (the study has {n} entries)")
-        out = list(data)
-        out[head] = _set(data[head], rest, value, field)
-        return out
-    out = dict(data) if isinstance(data, dict) else {}
-    out[head] = (
-        _set(out.get(head) if isinstance(out.get(head), (dict, list)) else {}, rest, value, field) if rest else value
-    )
-    return out
-
-
 def vary(deck: TeamDeck, field: str, value: Any) -> TeamDeck:
     """``deck`` with ``field`` (a dotted path, list entries by index: ``tracking[0].sigma``)
     set to ``value``, validated again (every validator runs); the base deck's
@@ -87,35 +72,9 @@ def vary(deck: TeamDeck, field: str, value: Any) -> TeamDeck:
 
 
 def vary_many(deck: TeamDeck, values: dict[str, Any]) -> TeamDeck:
-    """:func:`vary` for several fields at once (validated once, after all are set)."""
-    from pydantic import ValidationError
-
-    from fracas.config.trajectory import deck_error, validation_problems
-
-    data = deck.model_dump(mode="python", exclude_unset=True)
-    for field, value in values.items():
-        try:
-            parts = check_field_path(field)
-        except ValueError as exc:
-            raise DeckError(f"{deck.source_path or '<deck>'}: vary {field}: {exc}") from None
-        if isinstance(value, np.generic):
-            value = value.item()
-        data = _set(data, parts, value, f"{deck.source_path or '<deck>'}: vary {field}")
-    src = f"{deck.source_path or '<deck>'} (varied {', '.join(f'{k} = {v!r}' for k, v in values.items())})"
-    try:
-        new = TeamDeck.model_validate(data)
-    except ValidationError as exc:
-        raise deck_error(validation_problems(exc, src, TeamDeck, data)) from None
-    new._source_path = deck._source_path
-    new._source_text = deck._source_text
-    return new
-
-
-def _get(deck: TeamDeck, parts: tuple) -> Any:
-    cur: Any = deck.model_dump(mode="python")
-    for p in parts:
-        cur = cur[p]
-    return cur
+    """:func:`vary` for several fields at once (validated once, after all are set;
+    :func:`fracas.config.sweep.varied_deck`)."""
+    return varied_deck(deck, values)
 
 
 # ----------------------------------------------------------------------------- keys, units, outputs
@@ -212,24 +171,10 @@ def guidance_outputs(events, names: list[str]) -> tuple[dict[str, float], dict[s
 def check_outputs(cfg: SweepDeck, base: TeamDeck) -> None:
     """Refuse (one-line DeckError naming the field) a guidance output the study cannot give:
     an event it does not have, a target not among the event's, the propellant of an
-    impulsive event."""
-    events = {g.name: g for g in (base.guidance or [])}
-    for k, name in enumerate(cfg.sweep.outputs):
-        g = guidance_output(name)
-        if g is None:
-            continue
-        event, what, target = g
-        where = f"{cfg.source_path or '<deck>'}: sweep.outputs[{k}] = {name!r}"
-        e = events.get(event)
-        if e is None:
-            have = ", ".join(events) or "none"
-            raise DeckError(f"{where}: the study {base.source_path} has no guidance event {event!r} (it has: {have})")
-        if target is not None and target not in e.targets:
-            raise DeckError(
-                f"{where}: guidance event {event!r} has no target {target!r} (its targets: {', '.join(e.targets)})"
-            )
-        if what == "propellant_sigma_kg" and e.type not in ("primary", "vernier"):
-            raise DeckError(f"{where}: only for low-thrust guidance (primary, vernier); {event!r} is {e.type}")
+    impulsive event (:func:`fracas.config.sweep.output_problems`)."""
+    problems = output_problems(cfg, base)
+    if problems:
+        raise deck_error(problems)
 
 
 def outputs_from(sig_a, sig_t, labels: list[str], units: list[str], names: list[str]):
@@ -524,24 +469,16 @@ def run_sweep(
     about one chunk per worker; other studies (and every study with ``keep_results``, which
     needs each study's whole product) run one by one (:func:`run_one`).
     """
-    from fracas.io.sweep_table import read_sweep_table, write_sweep_table
+    from fracas.io.sweep_table import write_sweep_table
 
     t0 = time.perf_counter()
     sw = cfg.sweep
     base = base if base is not None else load_team_deck(cfg.resolve(sw.study))
-    if not base.errcon.analysis:
-        raise DeckError(f"{base.source_path}: errcon.analysis = false: a sweep needs the analysis of each study")
+    problems = sweep_problems(cfg, base)  # every study against the schema, before any work
+    if problems:
+        raise deck_error(problems)
     fields = cfg.fields
-    for k, f in enumerate(fields):  # every path must exist in the base study (list indices included)
-        try:
-            _get(base, parse_field_path(f))
-        except (KeyError, IndexError, TypeError):
-            raise DeckError(
-                f"{cfg.source_path or '<deck>'}: sweep.vary[{k}].field = {f!r}: not in the study {base.source_path} "
-                "(a list index beyond its entries, or a table the study does not have)"
-            ) from None
     outputs = list(sw.outputs)
-    check_outputs(cfg, base)
     out = check_output_path(table if table is not None else _table_path(cfg), "sweep table")
     plot = check_output_path(cfg.resolve(cfg.output.plot), "plot") if cfg.output.plot else None
     bh = base_hash(base)
@@ -551,9 +488,9 @@ def run_sweep(
     units.update({n: u for n in outputs if (u := output_unit(n)) is not None})
     rows: dict[int, dict[str, Any]] = {}
     if resume and out.exists():
-        old = read_sweep_table(out)
-        by_key = {r["key"]: r for r in old.rows() if r["status"] == "ok"}
-        units.update({k: v for k, v in old.units.items() if k in outputs})
+        old_rows, old_units = resume_table(out, bh, fields, outputs)
+        by_key = {r["key"]: r for r in old_rows if r["status"] == "ok"}
+        units.update({k: v for k, v in old_units.items() if k in outputs})
         for i, k in enumerate(keys):
             if k in by_key:
                 rows[i] = dict(by_key[k], index=i)
@@ -605,6 +542,81 @@ def run_sweep(
 
         plot_sweep(out, plot)
     return SweepResult(ordered, todo, skipped, out, time.perf_counter() - t0, fields, outputs, units)
+
+
+_KEY = re.compile(r"^[0-9a-f]{16}$")
+
+
+def resume_table(
+    path: Path, base_hash: str, fields: tuple[str, ...], outputs: list[str]
+) -> tuple[list[dict[str, Any]], dict[str, str]]:
+    """(rows, units) of the sweep table at ``path`` to resume from, read through the checked
+    reader (:class:`fracas.io.hdf5.Checked`: the file's integrity header when it has one,
+    then dtype, shape and the SHA-256 of every dataset); a one-line ResultsFileError naming
+    the table and what is wrong: damaged, not a sweep table, written for another study
+    (its ``base_hash``), with other columns, or rows that are not a sweep's (a status other
+    than ok/failed, a malformed key, a repeated index)."""
+    import h5py
+
+    from fracas.errors import ResultsFileError
+    from fracas.io import hdf5
+    from fracas.io.sweep_table import KIND, VERSION
+
+    src = str(path)
+    again = "; rerun with --no-resume (or another -o) to start a new table"
+    try:  # the file's integrity header checked before h5py decodes anything (fracas.io.hdf5.open_h5)
+        with hdf5.open_h5(path, ResultsFileError, "sweep table") as f:
+            kind = hdf5.attr_text(f, "kind")
+            if kind != KIND:
+                raise ResultsFileError(f"{src}: kind = {kind!r}, expected {KIND!r} (not a sweep table){again}")
+            version = hdf5.attr_int(f, "version")
+            if version is None or not 1 <= version <= VERSION:
+                raise ResultsFileError(f"{src}: version = {f.attrs.get('version')!r}, expected 1 to {VERSION}{again}")
+            got = hdf5.attr_text(f, "base_hash")
+            if got != base_hash:
+                raise ResultsFileError(
+                    f"{src}: base_hash = {str(got)[:12]}...: written for another study or sweep deck (this "
+                    f"sweep's {base_hash[:12]}...){again}"
+                )
+            ins, outs = hdf5.attr_strs(f, "input_columns"), hdf5.attr_strs(f, "output_columns")
+            if ins != list(fields) or outs != list(outputs):
+                raise ResultsFileError(
+                    f"{src}: columns {ins} -> {outs}, expected this sweep's {list(fields)} -> {outputs}{again}"
+                )
+            c = hdf5.Checked(f, src, ResultsFileError)
+            index = c.num("index", (None,), integer=True)
+            n = int(index.shape[0])
+            key, status, error = c.strs("key", n), c.strs("status", n), c.strs("error", n)
+            wall = c.num("wall_s", (n,))
+            cols: dict[str, Any] = {}
+            units: dict[str, str] = {}
+            for name in ins:
+                ds = c.dataset(f"inputs/{name}")
+                cols[name] = c.strs(ds.name, n) if h5py.check_string_dtype(ds.dtype) else c.num(ds.name, (n,))
+            for name in outs:
+                cols[name] = c.num(f"outputs/{name}", (n,))
+                units[name] = hdf5.attr_text(f[f"outputs/{name}"], "units") or "none"
+    except ResultsFileError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - whatever a damaged file makes h5py or numpy raise
+        why = f"{type(exc).__name__}: {cut(' '.join(str(exc).split()), 80)}"
+        raise ResultsFileError(f"{src}: unreadable sweep table ({why}){again}") from None
+    bad = next((k for k, s in enumerate(status) if s not in ("ok", "failed")), None)
+    if bad is None:
+        bad = next((k for k, s in enumerate(key) if not _KEY.match(s)), None)
+    if bad is not None or len(set(index.tolist())) != n:
+        row = bad if bad is not None else n - 1
+        raise ResultsFileError(
+            f"{src}: row {row}: status {status[row]!r}, key {key[row]!r} or a repeated index: expected a "
+            f"sweep's rows (ok/failed, 16 hex digits, distinct indices){again}"
+        )
+    rows = []
+    for k in range(n):
+        row: dict[str, Any] = {"index": int(index[k]), "key": key[k]}
+        row.update({name: _plain(col[k]) for name, col in cols.items()})
+        row.update(status=status[k], error=error[k], wall_s=float(wall[k]))
+        rows.append(row)
+    return rows, units
 
 
 def _groups(studies: list[tuple], fields: tuple[str, ...]) -> dict[int, str]:
@@ -828,17 +840,44 @@ def _deck_for(deck_path: str | Path, specs: list[str]) -> SweepDeck:
     return cfg
 
 
+#: the width of the summary's lines (a terminal's 80 columns)
+WIDTH = 80
+#: at most this many failed studies are listed in the summary (every one is in the table)
+MAX_LISTED_FAILURES = 10
+
+
+def _wrap(text: str, indent: str = "", more: str = "    ") -> list[str]:
+    """``text`` as lines of at most :data:`WIDTH` columns (a word longer than a line, such as
+    a long path, stays whole on its own line, so that it can be copied)."""
+    import textwrap
+
+    return textwrap.wrap(
+        text,
+        WIDTH,
+        initial_indent=indent,
+        subsequent_indent=indent + more,
+        break_on_hyphens=False,
+        break_long_words=False,
+    ) or [indent]
+
+
 def summary_text(res: SweepResult) -> str:
-    """A few lines: how many studies ran, skipped and failed, the table, each failure."""
+    """A few lines of at most 80 columns: how many studies ran, skipped and failed, the
+    table, each failure (at most :data:`MAX_LISTED_FAILURES`, then a count)."""
     n_ok = sum(r["status"] == "ok" for r in res.rows)
-    lines = [
+    lines = _wrap(
         f"sweep: {len(res.rows)} studies ({len(res.ran)} run, {len(res.skipped)} already in the table), "
-        f"{n_ok} ok, {len(res.failed)} failed, {res.wall_s:.1f} s",
-        f"table: {res.table} (and {Path(res.table).with_suffix('.csv')})",
-    ]
-    for r in res.failed:
-        vals = ", ".join(f"{f} = {r[f]!r}" for f in res.fields)
-        lines.append(f"  study {r['index']} ({vals}): {r['error']}")
+        f"{n_ok} ok, {len(res.failed)} failed, {res.wall_s:.1f} s"
+    )
+    lines += _wrap(f"table: {res.table} (and {Path(res.table).with_suffix('.csv')})")
+    for r in res.failed[:MAX_LISTED_FAILURES]:
+        label = study_label(r["index"], tuple(res.fields), tuple(r[f] for f in res.fields))
+        lines += _wrap(f"{label}: {r['error']}", indent="  ")
+    extra = len(res.failed) - MAX_LISTED_FAILURES
+    if extra > 0:
+        lines += _wrap(
+            f"and {extra} more failed stud{'ies' if extra > 1 else 'y'}: their errors are in the table", "  "
+        )
     return "\n".join(lines)
 
 
@@ -850,10 +889,12 @@ def sweep_main(
     resume: bool = True,
     out: str | Path | None = None,
     progress: Progress | None = None,
-) -> tuple[Path, str]:
+) -> tuple[Path, str, int]:
     """``fracas sweep DECK [--vary FIELD=VALUES ...]``: everything; returns (table path,
-    summary text).  ``out``: the table path (default the deck's ``[output] table``, else
-    ``out/<deck stem>.h5``; for a TEAM deck ``out/<stem>_sweep.h5`` next to it)."""
+    summary text, number of failed studies).  Every study is validated before any work
+    (:func:`fracas.config.sweep.sweep_problems`: a one-line DeckError).  ``out``: the table
+    path (default the deck's ``[output] table``, else ``out/<deck stem>.h5``; for a TEAM deck
+    ``out/<stem>_sweep.h5`` next to it)."""
     cfg = _deck_for(deck_path, list(vary))
     res = run_sweep(cfg, workers=workers, scheduler=scheduler, resume=resume, progress=progress, table=out)
-    return Path(res.table), summary_text(res)
+    return Path(res.table), summary_text(res), len(res.failed)

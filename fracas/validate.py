@@ -28,7 +28,7 @@ from pathlib import Path
 from fracas.build.trajectory import model_bodies
 from fracas.config.limits import team_size_problems
 from fracas.config.modes import deck_mode, parse_any
-from fracas.config.team import TeamDeck
+from fracas.config.team import TeamDeck, load_team_deck
 from fracas.config.trajectory import (
     BACKWARD_TEAM_PROBLEM,
     TrajectoryDeck,
@@ -263,6 +263,50 @@ def _team_checks(deck: TeamDeck) -> list[str]:
     return [p for p in out if p]
 
 
+def _sweep_problems(deck) -> list[str]:
+    """A sweep deck: its study deck (every check of a TEAM deck), then what the sweep refuses
+    before any work (:func:`fracas.config.sweep.sweep_problems`: every generated study
+    against TeamDeck's schema), then the checks of a TEAM deck that depend on the swept values
+    (the trajectory's span, sizes, files) on one study of each set of structural values
+    (studies that differ only in sigmas and noise levels share them)."""
+    from fracas.config.sweep import is_numeric_field, study_label, sweep_problems, varied_deck
+
+    src = deck.source_path or "<deck>"
+    study = deck.resolve(deck.sweep.study)
+    if not study.is_file():
+        return [f'{src}: sweep.study = "{cut(deck.sweep.study)}": no such TEAM deck ({cut(str(study))})']
+    mode, base_problems = check_path(study)
+    if mode != "team":
+        return base_problems or [
+            f'{src}: sweep.study = "{cut(deck.sweep.study)}": is a {mode} deck, expected a TEAM deck'
+        ]
+    try:
+        base = load_team_deck(study)
+    except FracasError as exc:
+        return base_problems or list(exc.problems)
+    out = list(base_problems)
+    problems = sweep_problems(deck, base)
+    if problems:
+        return out + problems
+    fields = deck.fields
+    structural = [k for k, f in enumerate(fields) if not is_numeric_field(f)]
+    if not structural:
+        return out
+    seen: set[str] = set(base_problems)
+    groups: set[str] = set()
+    for i, values in enumerate(deck.studies()):
+        key = repr([values[k] for k in structural])
+        if key in groups:
+            continue
+        groups.add(key)
+        head = f"{src}: {study_label(i, fields, values)}: "
+        for line in _team_problems(varied_deck(base, dict(zip(fields, values)))):
+            if line not in seen:
+                seen.add(line)
+                out.append(head + line)
+    return out
+
+
 def check_path(path: str | Path) -> tuple[str | None, list[str]]:
     """(the deck's mode or None if unreadable, every problem one line each)."""
     src = str(path)
@@ -295,10 +339,7 @@ def check_path(path: str | Path) -> tuple[str | None, list[str]]:
 
         return mode, rendezvous_problems(deck)
     if mode == "sweep":
-        study = deck.resolve(deck.sweep.study)
-        if not study.is_file():
-            return mode, [f'{src}: sweep.study = "{cut(deck.sweep.study)}": no such TEAM deck ({cut(str(study))})']
-        return mode, check_path(study)[1]
+        return mode, _sweep_problems(deck)
     return mode, _trajectory_problems(deck)
 
 

@@ -15,7 +15,7 @@ from fracas.config.sweep import SweepDeck, parse_sweep_deck
 from fracas.config.team import load_team_deck
 from fracas.errors import DeckError
 from fracas.io.sweep_table import csv_path, read_sweep_table, write_sweep_table
-from fracas.sweep import parse_vary, run_sweep, sweep_main, vary
+from fracas.sweep import base_hash, parse_vary, run_sweep, sweep_main, vary
 
 DATA = Path(__file__).parent / "data"
 FIELD = "thrust_noise.proportionality.sigma"
@@ -338,24 +338,41 @@ def test_resume_runs_only_the_missing_studies(serial, study_dir, monkeypatch):
     assert calls == []
 
 
-def test_a_failed_study_is_recorded_and_the_others_complete(study_dir):
-    cfg = make_deck(study_dir, [0.01, 2.0, 0.02], table="fail.h5", name="fail.toml")
-    res = run_sweep(cfg, workers=0)
+def test_a_failed_study_is_recorded_and_the_others_complete(study_dir, monkeypatch):
+    """A study that fails while it runs (here a NumericalError from its TEAM run; values the
+    schema refuses never get this far) is a failed row with its one-line error and NaN
+    outputs; the others complete."""
+    from fracas.errors import NumericalError
+
+    real = pipeline.run_team
+
+    def flaky(cfg, **kw):
+        if cfg.thrust_noise.proportionality.sigma == 0.03:
+            raise NumericalError("team: the covariance lost positive-definiteness at t = 1.5 d")
+        return real(cfg, **kw)
+
+    monkeypatch.setattr(pipeline, "run_team", flaky)
+    cfg = make_deck(study_dir, [0.01, 0.03, 0.02], table="fail.h5", name="fail.toml")
+    res = run_sweep(cfg, workers=0, batch=False)
     assert [r["status"] for r in res.rows] == ["ok", "failed", "ok"]
     bad = res.rows[1]
-    assert "thrust_noise.proportionality.sigma = 2.0: must be <= 1" in bad["error"] and "\n" not in bad["error"]
+    assert "lost positive-definiteness" in bad["error"] and "\n" not in bad["error"]
     assert all(np.isnan(bad[o]) for o in OUTPUTS)
     t = read_sweep_table(res.table)
     assert t.status == ["ok", "failed", "ok"] and t.error[1] == bad["error"]
 
 
 def test_sweep_main_on_a_team_deck_with_vary(study_dir, tmp_path):
+    """A TEAM deck swept with --vary: a value the TEAM schema refuses (2.0 > 1) is refused
+    before any study runs, naming the study (index and value) and the field; no table."""
     out = tmp_path / "cli" / "table.h5"
-    path, text = sweep_main(
-        study_dir / "team_small.toml", [f"{FIELD}=0.01,2.0"], workers=0, scheduler=None, resume=True, out=out
-    )
-    assert path == out and out.exists() and csv_path(out).exists()
-    assert "2 studies" in text and "1 ok, 1 failed" in text and "must be <= 1" in text
+    t0 = time.perf_counter()
+    with pytest.raises(DeckError) as exc:
+        sweep_main(study_dir / "team_small.toml", [f"{FIELD}=0.01,2.0"], workers=0, scheduler=None, out=out)
+    assert time.perf_counter() - t0 < 5.0
+    msg = str(exc.value)
+    assert "\n" not in msg and f"study 1 ({FIELD} = 2.0): {FIELD} = 2.0: must be <= 1" in msg, msg
+    assert not out.exists()
 
 
 def test_plot_of_two_fields(study_dir, tmp_path):
@@ -503,3 +520,318 @@ def test_guidance_sweep_equals_run_team_one_by_one(study_dir, tmp_path):
     ):
         with pytest.raises(DeckError, match=needle):
             parse_sweep_deck(text.replace(f"outputs = {GUIDANCE_OUTPUTS!r}", f"outputs = [{name!r}]"), str(p))
+
+
+# ----------------------------------------------------------------------------- every study validated first
+#: (vary tables, combine, the studies the TEAM schema refuses): values of every kind of
+#: field a sweep can vary that TeamDeck's schema refuses (negative sigmas and times, a
+#: fraction above 1, a filter type that does not exist), alone, in grids and in zips
+BAD_SWEEPS = {
+    "negative_proportionality": ([(FIELD, [0.01, -0.01, 0.02])], "grid", [1]),
+    "proportionality_above_1": ([(FIELD, [2.0, 0.01])], "grid", [0]),
+    "negative_tau": (["thrust_noise.proportionality.tau_days", [-1.0, 2.0]], "grid", [0]),
+    "negative_tracking_sigma": ([("tracking[0].sigma", [1.0, -1.0])], "grid", [1]),
+    "negative_mass_sigma": ([("a_priori.mass_sigma_kg", [0.5, -0.5])], "grid", [1]),
+    "negative_parameter_sigma": ([("parameter[0].sigma", [-0.01])], "grid", [0]),
+    "unknown_filter_type": ([("filter.type", ["kalman_schmidt", "nonsense"])], "grid", [1]),
+    "grid_of_two": ([(FIELD, [0.01, -0.01]), ("tracking[0].sigma", [1.0, 2.0])], "grid", [2, 3]),
+    "zip_of_two": ([(FIELD, [0.01, 0.02]), ("tracking[0].sigma", [1.0, -2.0])], "zip", [1]),
+}
+BAD_SWEEPS["negative_tau"] = ([("thrust_noise.proportionality.tau_days", [-1.0, 2.0])], "grid", [0])
+
+
+def _bad_sweep(d: Path, case: str) -> Path:
+    varies, combine, _ = BAD_SWEEPS[case]
+    text = f'mode = "sweep"\n[sweep]\nstudy = "team_small.toml"\ncombine = "{combine}"\n'
+    for field, values in varies:
+        text += f'[[sweep.vary]]\nfield = "{field}"\nvalues = {values!r}\n'
+    text += f'[output]\ntable = "{case}.h5"\n'
+    path = d / f"{case}.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Every way a sweep starts work (an STM build, a study run, a batched group, a
+    reference, a Dask cluster) fails the test if it is called."""
+    import fracas.sweep as sweep_mod
+
+    def forbidden(*_a, **_k):
+        raise AssertionError("a study was started before every study was validated")
+
+    for name in ("run_team", "build_stm", "load_team", "reference_from_stm"):
+        monkeypatch.setattr(pipeline, name, forbidden)
+    for name in ("run_one", "run_group", "start_cluster", "_run_dask"):
+        monkeypatch.setattr(sweep_mod, name, forbidden)
+
+
+@pytest.mark.parametrize("case", sorted(BAD_SWEEPS))
+def test_every_study_is_validated_before_any_work(case, study_dir, no_work):
+    """Against TeamDeck's schema applied to each generated study: run_sweep, sweep_main and
+    fracas validate refuse the sweep before any work (nothing is run or compiled: the runners
+    fail if called; under 5 s, the 3 minutes of compilation this took before), with one line
+    per refused study naming the sweep deck, the study's index and swept values, and the
+    field; the table is not written."""
+    from fracas.config.sweep import load_sweep_deck
+    from fracas.validate import validate_path
+
+    path = _bad_sweep(study_dir, case)
+    varies, _, bad = BAD_SWEEPS[case]
+    cfg = load_sweep_deck(path)
+    t0 = time.perf_counter()
+    with pytest.raises(DeckError) as exc:
+        run_sweep(cfg, workers=0)
+    assert time.perf_counter() - t0 < 5.0
+    with pytest.raises(DeckError) as exc2:
+        sweep_main(path, workers=0)
+    assert str(exc2.value) == str(exc.value)
+    problems = validate_path(path)
+    assert problems == exc.value.problems
+    studies = cfg.studies()
+    assert len(problems) == len(bad)
+    for line, i in zip(problems, bad):
+        vals = ", ".join(f"{f} = {v!r}" for f, v in zip(cfg.fields, studies[i]))
+        assert "\n" not in line and line.startswith(f"{path}: study {i} ({vals}): "), line
+        assert any(line.split("): ", 1)[1].startswith(f) for f, _ in varies), line
+    assert not (study_dir / f"{case}.h5").exists()
+
+
+def test_many_refused_studies_are_counted(study_dir, no_work):
+    """Against MAX_LISTED_STUDIES: a sweep whose 40 studies are all refused names the first
+    five, then one line counting the others."""
+    from fracas.config.sweep import MAX_LISTED_STUDIES, load_sweep_deck, sweep_problems
+
+    path = study_dir / "many_bad.toml"
+    path.write_text(
+        f'mode = "sweep"\n[sweep]\nstudy = "team_small.toml"\n[[sweep.vary]]\nfield = "{FIELD}"\n'
+        "start = -1.0\nstop = -0.1\nnum = 40\n"
+    )
+    cfg = load_sweep_deck(path)
+    problems = sweep_problems(cfg, load_team_deck(study_dir / "team_small.toml"))
+    assert len(problems) == MAX_LISTED_STUDIES + 1
+    assert problems[-1] == f"{path}: and 35 more studies that the study's schema refuses"
+
+
+@pytest.mark.parametrize("command", ["sweep", "run", "validate"])
+def test_refused_sweep_on_the_command_line(command, study_dir, no_work):
+    """fracas sweep / run / validate on a sweep deck with a refused study: exit 2, the
+    study's one-line error on stderr, no traceback, before any work."""
+    from click.testing import CliRunner
+
+    from fracas.cli import main
+
+    path = _bad_sweep(study_dir, "negative_proportionality")
+    args = [command, str(path)] + (["--workers", "0"] if command == "sweep" else [])
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 2, r.output
+    err = r.stderr.strip().splitlines()
+    assert err and all(line.startswith("fracas: error: ") for line in err), r.stderr
+    assert f"study 1 ({FIELD} = -0.01): {FIELD} = -0.01: must be >= 0" in err[0]
+    assert "Traceback" not in r.output
+
+
+def test_failed_studies_exit_non_zero_in_80_columns(study_dir, monkeypatch):
+    """A sweep whose studies fail while running (a stand-in runner: nothing is compiled)
+    writes its table, prints a summary whose every line fits 80 columns (long errors and
+    paths wrapped between words, at most MAX_LISTED_FAILURES listed, then a count), says how many failed
+    and exits with SWEEP_FAILED_EXIT (3), not 0."""
+    from click.testing import CliRunner
+
+    import fracas.sweep as sweep_mod
+    from fracas.cli import SWEEP_FAILED_EXIT, main
+
+    long_error = f"{study_dir / 'team_small.toml'}: " + "the reference stopped early at t = 1.25 d " * 8
+
+    def fake_one(base, index, fields, values, outputs, key, stm=None, results=None):
+        row = {"index": index, "key": key, **dict(zip(fields, values)), **dict.fromkeys(outputs, float("nan"))}
+        ok = index % 7 == 0
+        row.update(status="ok" if ok else "failed", error="" if ok else long_error, units={}, wall_s=0.0)
+        return row
+
+    def fake_group(base, items, fields, outputs, gkey, stm=None, pad_to=1, max_batch=None):
+        return [fake_one(base, i, fields, v, outputs, k) for i, v, k in items]
+
+    monkeypatch.setattr(sweep_mod, "run_one", fake_one)
+    monkeypatch.setattr(sweep_mod, "run_group", fake_group)
+    out = study_dir / "wrapped" / "table.h5"
+    r = CliRunner().invoke(
+        main,
+        ["sweep", str(study_dir / "team_small.toml"), "--vary", f"{FIELD}=0.001:0.01:14", "--workers", "0"]
+        + ["-o", str(out)],
+    )
+    assert r.exit_code == SWEEP_FAILED_EXIT == 3, r.output
+    lines = r.stdout.splitlines()
+    assert all(len(line) <= 80 for line in lines), max(lines, key=len)
+    assert "12 failed" in lines[0] and "and 2 more failed studies" in r.stdout
+    assert r.stderr.strip() == "fracas: error: sweep: 12 studies failed"
+    assert read_sweep_table(out).status.count("failed") == 12
+
+
+# ----------------------------------------------------------------------------- resuming from a damaged table
+def _fake_one(base, index, fields, values, outputs, key, stm=None, results=None):
+    """A stand-in for a study's run (nothing compiled): outputs from the swept values."""
+    x = float(values[0])
+    row = {"index": index, "key": key, **dict(zip(fields, values))}
+    row.update({o: x * (j + 1) for j, o in enumerate(outputs)})
+    row.update(status="ok", error="", units=dict.fromkeys(outputs, "km"), wall_s=0.01)
+    return row
+
+
+def _fake_group(base, items, fields, outputs, gkey, stm=None, pad_to=1, max_batch=None):
+    return [_fake_one(base, i, fields, v, outputs, k) for i, v, k in items]
+
+
+@pytest.fixture
+def resumable(study_dir, monkeypatch):
+    """A sweep deck and its complete table (written by a stand-in runner), and the rows."""
+    import fracas.sweep as sweep_mod
+
+    monkeypatch.setattr(sweep_mod, "run_one", _fake_one)
+    monkeypatch.setattr(sweep_mod, "run_group", _fake_group)
+    cfg = make_deck(study_dir, VALUES, table="resumable.h5", name="resumable.toml")
+    res = run_sweep(cfg, workers=0, resume=False)
+    assert [r["status"] for r in res.rows] == ["ok"] * 4
+    return cfg, Path(res.table), read_sweep_table(res.table).rows()
+
+
+def _edit_h5(path: Path, how) -> None:
+    import h5py
+
+    with h5py.File(path, "r+") as f:
+        how(f)
+
+
+def _rewrite(name: str, value):
+    """Replace dataset ``name``'s data (its attributes, checksum included, kept)."""
+
+    def how(f):
+        ds = f[name]
+        saved = dict(ds.attrs)
+        data = ds.asstr()[()] if ds.dtype.kind == "O" else ds[()]
+        new = value(data)
+        del f[name]
+        kw = {"dtype": ds.dtype} if ds.dtype.kind == "O" and not isinstance(new, np.ndarray) else {}
+        nd = f.create_dataset(name, data=new, **kw)
+        for k, v in saved.items():
+            nd.attrs[k] = v
+
+    return how
+
+
+def _set_attr(key, value):
+    def how(f):
+        f.attrs[key] = value
+
+    return how
+
+
+DATASETS = ["index", "key", "status", "error", "wall_s", f"inputs/{FIELD}", *(f"outputs/{o}" for o in OUTPUTS)]
+
+
+def _changed(data):
+    """The same dataset with one value changed (a string edited, a number moved)."""
+    if isinstance(data, np.ndarray) and data.dtype.kind in "fiu":
+        out = data.copy()
+        out[0] = out[0] * 3 + 1
+        return out
+    vals = [str(x) for x in np.atleast_1d(data)]
+    vals[0] = "ok" if vals[0] != "ok" else "failed"
+    return np.array(vals, dtype=object)
+
+
+#: damage -> how: each dataset edited (checksum kept: the data no longer matches it),
+#: deleted, cut short, made another dtype; the table's attributes (kind, base_hash, columns)
+DAMAGE = {f"edited:{d}": _rewrite(d, _changed) for d in DATASETS}
+
+
+def _delete(name: str):
+    return lambda f: f.__delitem__(name)
+
+
+DAMAGE.update({f"deleted:{d}": _delete(d) for d in DATASETS})
+DAMAGE.update({f"short:{d}": _rewrite(d, lambda x: x[:-1]) for d in DATASETS})
+DAMAGE.update(
+    {
+        "float_index": _rewrite("index", lambda x: x.astype(np.float64)),
+        "text_output": _rewrite(f"outputs/{OUTPUTS[0]}", lambda x: np.array([str(v) for v in x], dtype=object)),
+        "kind": _set_attr("kind", "fracas tsim results"),
+        "base_hash_of_another_study": _set_attr("base_hash", "0" * 64),
+        "input_columns": _set_attr("input_columns", np.array(["tracking[0].sigma"], dtype=object)),
+        "output_columns": _set_attr("output_columns", np.array(OUTPUTS[:2], dtype=object)),
+        "version_text": _set_attr("version", "one"),
+    }
+)
+
+
+@pytest.mark.parametrize("damage", sorted(DAMAGE))
+def test_resume_refuses_a_damaged_table(damage, resumable, no_work):
+    """Against the table as written (every dataset's SHA-256 and the file's integrity header,
+    fracas.io.hdf5): each dataset edited, deleted, cut short or of another dtype, and a
+    table of another kind, study or columns, is refused on resume in one line naming the
+    table, within 5 s and before any study runs (the runners fail if called) -- never
+    resumed from silently (it was), never a TypeError/IndexError."""
+    from fracas.errors import ResultsFileError
+
+    cfg, table, _ = resumable
+    _edit_h5(table, DAMAGE[damage])
+    t0 = time.perf_counter()
+    with pytest.raises(ResultsFileError) as exc:
+        run_sweep(cfg, workers=0)
+    assert time.perf_counter() - t0 < 5.0
+    msg = str(exc.value)
+    assert "\n" not in msg and msg.startswith(f"{table}: "), msg
+
+
+def test_resume_from_blocks_zeroed_or_bits_flipped(resumable, no_work, tmp_path):
+    """Against the rows as written: a table with any 4 KiB block zeroed, or a bit flipped in
+    any 512-byte stretch, is either refused in one ResultsFileError line within 5 s or read
+    back with exactly the rows written (damage to bytes no value lives in); never other values."""
+    import shutil
+
+    from fracas.errors import ResultsFileError
+    from fracas.sweep import resume_table
+
+    cfg, table, rows = resumable
+    bh = base_hash(load_team_deck(cfg.resolve(cfg.sweep.study)))
+    good = table.read_bytes()
+    variants = []
+    for off in range(0, len(good), 4096):
+        variants.append(good[:off] + bytes(min(4096, len(good) - off)) + good[off + 4096 :])
+    for off in range(0, len(good), 512):
+        b = bytearray(good)
+        b[off + 7 if off + 7 < len(b) else off] ^= 0x10
+        variants.append(bytes(b))
+    refused = 0
+    for k, data in enumerate(variants):
+        copy = tmp_path / f"damaged_{k}.h5"
+        copy.write_bytes(data)
+        t0 = time.perf_counter()
+        try:
+            got, _ = resume_table(copy, bh, cfg.fields, list(cfg.sweep.outputs))
+        except ResultsFileError as exc:
+            refused += 1
+            assert "\n" not in str(exc) and str(exc).startswith(f"{copy}: ")
+        else:
+            assert [{k2: r[k2] for k2 in r if k2 != "wall_s"} for r in got] == [
+                {k2: r[k2] for k2 in r if k2 != "wall_s"} for r in rows
+            ], f"damaged copy {k} resumed with other values"
+        assert time.perf_counter() - t0 < 5.0
+    assert refused > 0
+    shutil.copy(table, tmp_path / "intact.h5")
+    assert resume_table(tmp_path / "intact.h5", bh, cfg.fields, list(cfg.sweep.outputs))[0] == rows
+
+
+def test_resume_of_a_damaged_table_on_the_command_line(resumable, no_work):
+    """fracas sweep on a sweep deck whose table was edited after it was written: exit 2, one
+    line naming the table, no traceback, no study run; --no-resume starts over."""
+    from click.testing import CliRunner
+
+    from fracas.cli import main
+
+    cfg, table, _ = resumable
+    _edit_h5(table, DAMAGE[f"edited:outputs/{OUTPUTS[0]}"])
+    r = CliRunner().invoke(main, ["sweep", str(cfg.source_path), "--workers", "0"])
+    assert r.exit_code == 2 and "Traceback" not in r.output, r.output
+    err = r.stderr.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"fracas: error: {table}: "), r.stderr

@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from fracas import constants
-from fracas.config.trajectory import TrajectoryDeck
+from fracas.config.trajectory import TrajectoryDeck, deck_bodies
 from fracas.dynamics.model import (
     FRAME_INERTIAL,
     FRAME_VELOCITY,
@@ -51,25 +51,9 @@ def _src(deck: TrajectoryDeck) -> str:
 
 
 def model_bodies(deck: TrajectoryDeck) -> tuple[str, ...]:
-    """Bodies whose GM/position the propagation needs, in catalogue order.
-
-    The centre; third bodies; conic bodies; the stop body; the Sun when solar power drives
-    thrust arcs or SRP is on; with change_primary_at_soi, the parents of all of these (the
-    primary a spacecraft leaving a sphere of influence falls back to).
-    """
-    need = {deck.initial_state.centre, *deck.forces.third_bodies, *deck.forces.conic_bodies}
-    if deck.stop.body:
-        need.add(deck.stop.body)
-    solar = deck.propulsion is not None and deck.propulsion.power_source == "solar"
-    if deck.forces.srp or (solar and deck.thrust_arc):
-        need.add("sun")
-    if deck.forces.change_primary_at_soi:
-        for name in list(need):
-            parent = constants.BODIES[name].parent
-            while parent is not None:
-                need.add(parent)
-                parent = constants.BODIES[parent].parent
-    return tuple(b for b in constants.BODIES if b in need)
+    """Bodies whose GM/position the propagation needs, in catalogue order
+    (:func:`fracas.config.trajectory.deck_bodies`, which validation uses too)."""
+    return deck_bodies(deck)
 
 
 def output_times_s(deck: TrajectoryDeck) -> np.ndarray:

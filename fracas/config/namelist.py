@@ -47,6 +47,7 @@ import contextlib
 import io
 import math
 import re
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -596,23 +597,77 @@ def _read_text(text_or_path: str | Path, source: str | None) -> tuple[str, str]:
     return str(text_or_path), source or "<namelist>"
 
 
+def _dropped_value(message: str) -> str:
+    """The problem behind f90nml's "Value X is not assigned to any variable" warning: more
+    values than the indices written take (``IATT(2) = 2, 2``: f90nml keeps the first only),
+    naming the variable as written when the parser's frame shows it."""
+    import sys
+
+    m = re.search(r"Value (.*) is not assigned to any variable", message)
+    value = m.group(1) if m else "?"
+    name, group, bounds = None, None, None
+    frame = sys._getframe(1)
+    while frame is not None:
+        if frame.f_code.co_name == "_parse_variable" and name is None:
+            name = frame.f_locals.get("v_name")
+            bounds = frame.f_locals.get("v_idx_bounds")
+        if "g_name" in frame.f_locals and group is None:
+            group = frame.f_locals.get("g_name")
+        frame = frame.f_back
+    if name is None:
+        return f"value {cut(value, 40)} is not assigned to any variable: expected one value per index written"
+    where = f"${str(group or '?').upper()}.{str(name).upper()}"
+    if bounds:
+        where += "(" + ",".join(_bound_text(b) for b in bounds) + ")"
+        low = [b[0] for b in bounds if isinstance(b, (tuple, list)) and b and b[0] is not None]
+        if low and min(low) < 1:
+            return f"{where}: index {min(low)}: {_BELOW_ONE}"
+    return (
+        f"{where} = ..., {cut(value, 40)}: more values than the indices written (the extra ones would be "
+        f"dropped); expected one value per index, or a range {str(name).upper()}(k:m) = ..."
+    )
+
+
+_BELOW_ONE = "expected indices from 1 (FRACAS arrays start at 1; nothing below 1 is read)"
+
+
+def _bound_text(b: Any) -> str:
+    try:
+        lo, hi, step = b
+    except (TypeError, ValueError):
+        return str(b)
+    if hi is None or (lo is not None and hi == lo + 1 and step in (None, 1)):
+        return str(lo)
+    return f"{'' if lo is None else lo}:{hi - 1}" + ("" if step in (None, 1) else f":{step}")
+
+
 def _parse(text: str, src: str) -> list[tuple[str, int, dict]]:
     """[(GROUP, occurrence, {NAME: value})] in deck order, by f90nml."""
     parser = f90nml.Parser()
     parser.global_start_index = 1
+    dropped: list[str] = []
     try:
-        with contextlib.redirect_stdout(io.StringIO()):  # f90nml's tokenizer prints on some bad text
+        with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():  # the tokenizer prints
+            warnings.showwarning = lambda message, *_a, **_k: dropped.append(_dropped_value(str(message)))
+            warnings.simplefilter("always")
             nml = parser.reads(text)
     except Exception as exc:  # f90nml raises ValueError, AssertionError, IndexError ... on bad text
         why = str(exc).strip() or type(exc).__name__
         raise DeckError(
             f"{src}: not a readable namelist deck ({cut(why, 80)}); expected &GROUP ... / or $GROUP ... $END"
         ) from None
+    if dropped:
+        raise DeckError(f"{src}: {dropped[0]}")
     out = []
     seen: dict[str, int] = {}
     for name, body in nml.items():  # a repeated group comes once per occurrence (or as a list)
         for b in body if isinstance(body, list) else [body]:
             group = name.upper()
+            for var, first in getattr(b, "start_index", {}).items():
+                if any(i is not None and i < 1 for i in first):
+                    idx = ",".join("1" if i is None else str(i) for i in first)
+                    low = min(i for i in first if i is not None)
+                    raise DeckError(f"{src}: ${group}.{var.upper()}({idx}): index {low}: {_BELOW_ONE}")
             occ = seen.get(group, 0)
             seen[group] = occ + 1
             out.append((group, occ, {k.upper(): v for k, v in b.items()}))
@@ -780,7 +835,11 @@ def _fill(tgt: _Target, part: str, prefix: tuple, f: NmlField, value: Any, src: 
             if f.kind == "strs" and len(items) == 1 and isinstance(items[0], str) and " " in items[0].strip():
                 items = items[0].split()  # hand-parsed: a blank-separated list in one string
             if any(x is None for x in _trim(items)):
-                raise DeckError(f"{_where(src, group, f.name)}: has an empty element; expected {len(items)} values")
+                j = _trim(items).index(None) + 1
+                raise DeckError(
+                    f"{_where(src, group, f.name, j)}: not given; expected a value at every index from 1 to "
+                    f"{len(_trim(items))} (the highest index written)"
+                )
             conv = [_scalar(f, x, f"{_where(src, group, f.name)}({j + 1})") for j, x in enumerate(_trim(items))]
             _set(root, prefix + f.path, conv)
         else:

@@ -37,7 +37,18 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, Field, model_validator
 
 from fracas.config.team import TeamDeck
-from fracas.config.trajectory import FieldProblem, SourcedDeck, _Section, _strip, parse_sourced, read_deck_text
+from fracas.config.trajectory import (
+    FieldProblem,
+    SourcedDeck,
+    _Section,
+    _strip,
+    cut,
+    deck_error,
+    parse_sourced,
+    read_deck_text,
+    validation_problems,
+)
+from fracas.errors import DeckError
 
 __all__ = [
     "SweepDeck",
@@ -54,6 +65,10 @@ __all__ = [
     "DEFAULT_OUTPUTS",
     "NUMERIC_FIELDS",
     "is_numeric_field",
+    "varied_deck",
+    "output_problems",
+    "sweep_problems",
+    "study_label",
 ]
 
 #: output name -> unit
@@ -321,3 +336,134 @@ def parse_sweep_deck(text: str, source: str = "<deck>") -> SweepDeck:
 def load_sweep_deck(path: str | Path) -> SweepDeck:
     """Read and validate a sweep deck; every failure is a one-line DeckError."""
     return parse_sweep_deck(read_deck_text(path), str(path))
+
+
+# ----------------------------------------------------------------------------- the studies of a sweep
+#: at most this many failing studies are named one by one (then a count)
+MAX_LISTED_STUDIES = 5
+
+
+def _set(data: Any, parts: tuple, value: Any, field: str) -> Any:
+    """``data`` (a dump) with the element at ``parts`` set to ``value`` (copies along the path)."""
+    if not parts:
+        return value
+    head, rest = parts[0], parts[1:]
+    if isinstance(head, int):
+        if not isinstance(data, list) or not -len(data) <= head < len(data):
+            n = len(data) if isinstance(data, list) else 0
+            raise DeckError(f"{field}: index [{head}] is out of range (the study has {n} entries)")
+        out = list(data)
+        out[head] = _set(data[head], rest, value, field)
+        return out
+    out = dict(data) if isinstance(data, dict) else {}
+    out[head] = (
+        _set(out.get(head) if isinstance(out.get(head), (dict, list)) else {}, rest, value, field) if rest else value
+    )
+    return out
+
+
+def varied_deck(deck: TeamDeck, values: dict[str, Any], source: str | None = None) -> TeamDeck:
+    """``deck`` with each field of ``values`` (a dotted path, list entries by index) set to
+    its value, validated again by TeamDeck's schema (every validator runs); the base deck's
+    ``source_path``/``source_text`` are kept so relative paths resolve as before.  A refused
+    value is a DeckError carrying every problem, one line each, prefixed with ``source``
+    (default: the deck's path and the varied values)."""
+    from pydantic import ValidationError
+
+    data = deck.model_dump(mode="python", exclude_unset=True)
+    for field, value in values.items():
+        try:
+            parts = check_field_path(field)
+        except ValueError as exc:
+            raise DeckError(f"{deck.source_path or '<deck>'}: vary {field}: {exc}") from None
+        if hasattr(value, "item") and not isinstance(value, (list, dict, str)):
+            value = value.item()  # a numpy scalar
+        data = _set(data, parts, value, f"{deck.source_path or '<deck>'}: vary {field}")
+    if source is None:
+        source = f"{deck.source_path or '<deck>'} (varied {', '.join(f'{k} = {v!r}' for k, v in values.items())})"
+    try:
+        new = TeamDeck.model_validate(data)
+    except ValidationError as exc:
+        raise deck_error(validation_problems(exc, source, TeamDeck, data)) from None
+    new._source_path = deck._source_path
+    new._source_text = deck._source_text
+    return new
+
+
+def study_label(index: int, fields: tuple[str, ...], values: tuple) -> str:
+    """``study 3 (thrust_noise.proportionality.sigma = -0.01)``: a study by index and swept values."""
+    shown = ", ".join(f"{f} = {cut(repr(v), 40)}" for f, v in zip(fields, values))
+    return f"study {index} ({shown})"
+
+
+def output_problems(cfg: SweepDeck, base: TeamDeck) -> list[str]:
+    """A guidance output the study cannot give (one line each, naming ``sweep.outputs[k]``):
+    an event it does not have, a target not among the event's, the propellant of an
+    impulsive event."""
+    events = {g.name: g for g in (base.guidance or [])}
+    out: list[str] = []
+    for k, name in enumerate(cfg.sweep.outputs):
+        g = guidance_output(name)
+        if g is None:
+            continue
+        event, what, target = g
+        where = f"{cfg.source_path or '<deck>'}: sweep.outputs[{k}] = {name!r}"
+        e = events.get(event)
+        if e is None:
+            have = ", ".join(events) or "none"
+            out.append(f"{where}: the study {base.source_path} has no guidance event {event!r} (it has: {have})")
+        elif target is not None and target not in e.targets:
+            out.append(
+                f"{where}: guidance event {event!r} has no target {target!r} (its targets: {', '.join(e.targets)})"
+            )
+        elif what == "propellant_sigma_kg" and e.type not in ("primary", "vernier"):
+            out.append(f"{where}: only for low-thrust guidance (primary, vernier); {event!r} is {e.type}")
+    return out
+
+
+def _field_in(base: TeamDeck, parts: tuple) -> bool:
+    cur: Any = base.model_dump(mode="python")
+    try:
+        for p in parts:
+            cur = cur[p]
+    except (KeyError, IndexError, TypeError):
+        return False
+    return True
+
+
+def sweep_problems(cfg: SweepDeck, base: TeamDeck) -> list[str]:
+    """Everything a sweep would refuse, before any work (one line each; [] if none): a study
+    without analysis, a varied field the base study does not have (a list index beyond its
+    entries), a guidance output it cannot give, and every generated study validated by
+    TeamDeck's schema, as the run will build it.  A failing study is named by the sweep
+    deck, its index and swept values, then the field and what was expected; at most
+    :data:`MAX_LISTED_STUDIES` failing studies are named, then a count of the others."""
+    src = cfg.source_path or "<deck>"
+    out: list[str] = []
+    if not base.errcon.analysis:
+        out.append(f"{base.source_path}: errcon.analysis = false: a sweep needs the analysis of each study")
+    fields = cfg.fields
+    missing = False
+    for k, f in enumerate(fields):
+        if not _field_in(base, parse_field_path(f)):
+            missing = True
+            out.append(
+                f"{src}: sweep.vary[{k}].field = {f!r}: not in the study {base.source_path} "
+                "(a list index beyond its entries, or a table the study does not have)"
+            )
+    out += output_problems(cfg, base)
+    if missing:
+        return out
+    failing = 0
+    for i, values in enumerate(cfg.studies()):
+        try:
+            varied_deck(base, dict(zip(fields, values)), source="")
+        except DeckError as exc:
+            failing += 1
+            if failing <= MAX_LISTED_STUDIES:
+                head = f"{src}: {study_label(i, fields, values)}"
+                out += [head + (p if p.startswith(": ") else f": {p}") for p in exc.problems]
+    if failing > MAX_LISTED_STUDIES:
+        n = failing - MAX_LISTED_STUDIES
+        out.append(f"{src}: and {n} more stud{'ies' if n > 1 else 'y'} that the study's schema refuses")
+    return out

@@ -80,7 +80,7 @@ from pydantic import (
 )
 
 from fracas.config.limits import Limits, count_text
-from fracas.constants import BODIES, DAY_S
+from fracas.constants import BODIES, DAY_S, DE421_END_JD, DE421_START_JD, J2000_JD
 from fracas.errors import ConfigError, DeckError
 from fracas.timescales import calendar_to_et, epoch_to_et, et_to_calendar
 
@@ -95,6 +95,9 @@ __all__ = [
     "MAX_NESTING",
     "BACKWARD_TEAM_PROBLEM",
     "MAX_DECK_BYTES",
+    "deck_bodies",
+    "needs_ephemeris",
+    "initial_radius_km",
 ]
 
 #: deepest nesting of arrays / inline tables a deck may use (the schema needs 3)
@@ -861,6 +864,145 @@ class TrajectoryDeck(SourcedDeck):
                 f"(limit {self.limits.max_output_times}, [limits] max_output_times); use a longer step",
             )
         return self
+
+    @model_validator(mode="after")
+    def _run_checks(self) -> TrajectoryDeck:
+        """What a propagation would refuse, checked here so that ``fracas validate`` refuses it
+        too: a start inside the central body, a span outside the ephemeris, an override of a
+        body the force model does not have."""
+        bodies = deck_bodies(self)
+        for name in self.forces.overrides:
+            if name not in bodies:
+                raise FieldProblem(
+                    ("forces", "overrides", name),
+                    _Given(name),
+                    f"is not in the force model ({', '.join(bodies)}); add it to forces.third_bodies or remove it",
+                )
+        problem = self._inside_centre()
+        if problem is not None:
+            raise problem
+        if needs_ephemeris(self):
+            problem = self._outside_ephemeris(bodies)
+            if problem is not None:
+                raise problem
+        return self
+
+    def _inside_centre(self) -> FieldProblem | None:
+        """A start below the centre's radius (constants.BODIES, or forces.overrides)."""
+        st = self.initial_state
+        centre = st.centre
+        ov = self.forces.overrides.get(centre)
+        radius = ov.radius_km if ov is not None and ov.radius_km is not None else BODIES[centre].radius_km
+        r = initial_radius_km(st)
+        if r is None or not r < radius:
+            return None
+        table = st.kind
+        loc: tuple = ("initial_state", table)
+        value: Any = None
+        if table == "cartesian":
+            loc, value = (*loc, "r_km"), st.cartesian.r_km
+        elif table == "spherical":
+            loc, value = (*loc, "r_km"), st.spherical.r_km
+        elif table == "oem":
+            loc, value = (*loc, "path"), st.oem.path
+        return FieldProblem(
+            loc,
+            value,
+            f"starts {r:.6g} km from the centre of {centre}, inside its radius {radius:g} km "
+            "(fracas.constants; forces.overrides to change it): the initial state must be outside the centre",
+        )
+
+    def _outside_ephemeris(self, bodies: tuple[str, ...]) -> FieldProblem | None:
+        """The epoch or the final time outside the DE421 span (constants.DE421_START_JD/END_JD)."""
+        lo, hi = ((jd - J2000_JD) * DAY_S for jd in (DE421_START_JD, DE421_END_JD))
+        span = f"{et_to_calendar(lo)[:10]} to {et_to_calendar(hi)[:10]} TDB"
+        why = f"the DE421 ephemeris spans {span}, and the force model needs positions of {', '.join(bodies)}"
+        t0 = self.epoch.et
+        if not lo <= t0 <= hi:
+            field = "iso" if self.epoch.iso is not None else "julian_date"
+            value = self.epoch.iso if self.epoch.iso is not None else self.epoch.julian_date
+            return FieldProblem(("epoch", field), value, f"is outside the ephemeris: {why}")
+        t1 = t0 + self.duration_days * DAY_S
+        if not lo <= t1 <= hi:
+            if self.stop.final_epoch is not None:
+                loc, value = ("stop", "final_epoch"), self.stop.final_epoch
+            else:
+                loc, value = ("stop", "duration_days"), self.stop.duration_days
+            when = et_to_calendar(t1)[:19] if math.isfinite(t1) else "never"
+            return FieldProblem(loc, value, f"ends the trajectory at {when} TDB, outside the ephemeris: {why}")
+        return None
+
+
+def deck_bodies(deck: TrajectoryDeck) -> tuple[str, ...]:
+    """Bodies whose GM/position the propagation needs, in catalogue order.
+
+    The centre; third bodies; conic bodies; the stop body; the Sun when solar power drives
+    thrust arcs or SRP is on; with change_primary_at_soi, the parents of all of these (the
+    primary a spacecraft leaving a sphere of influence falls back to).
+    """
+    need = {deck.initial_state.centre, *deck.forces.third_bodies, *deck.forces.conic_bodies}
+    if deck.stop.body:
+        need.add(deck.stop.body)
+    solar = deck.propulsion is not None and deck.propulsion.power_source == "solar"
+    if deck.forces.srp or (solar and deck.thrust_arc):
+        need.add("sun")
+    if deck.forces.change_primary_at_soi:
+        for name in list(need):
+            parent = BODIES[name].parent
+            while parent is not None:
+                need.add(parent)
+                parent = BODIES[parent].parent
+    return tuple(b for b in BODIES if b in need)
+
+
+def needs_ephemeris(deck: TrajectoryDeck) -> bool:
+    """Whether the propagation reads DE421 (a body other than the Sun and the conic bodies
+    needs a position: fracas.build.trajectory builds the table then)."""
+    bodies = deck_bodies(deck)
+    return len(bodies) > 1 and any(b != "sun" and b not in deck.forces.conic_bodies for b in bodies)
+
+
+def _eccentric_radius(a: float, e: float, m: float) -> float | None:
+    """|r| on the conic (a, e) at mean anomaly ``m`` (rad), by Newton on Kepler's equation;
+    None if it does not converge."""
+    if e < 1.0:
+        m = math.remainder(m, 2.0 * math.pi)
+        ecc = m + e * math.sin(m) if e < 0.8 else math.copysign(math.pi, m) if m else 0.0
+        for _ in range(100):
+            step = (ecc - e * math.sin(ecc) - m) / (1.0 - e * math.cos(ecc))
+            ecc -= step
+            if abs(step) < 1e-14:
+                return a * (1.0 - e * math.cos(ecc))
+        return None
+    h = math.asinh(m / e)
+    for _ in range(200):
+        f = e * math.sinh(h) - h - m
+        step = f / (e * math.cosh(h) - 1.0)
+        h -= step
+        if not math.isfinite(h):
+            return None
+        if abs(step) < 1e-14 * max(1.0, abs(h)):
+            return a * (1.0 - e * math.cosh(h))
+    return None
+
+
+def initial_radius_km(st: InitialState) -> float | None:
+    """|r| of the initial state (km from the centre), from any form it is given in (None if it
+    cannot be computed without the core, e.g. a Kepler solve that does not converge)."""
+    if st.cartesian is not None:
+        return math.hypot(*st.cartesian.r_km)
+    if st.spherical is not None:
+        return st.spherical.r_km
+    if st.oem is not None:
+        return math.hypot(*st.oem.r_km) if st.oem.r_km else None
+    el = st.elements
+    if el.true_anomaly_deg is not None:
+        return el.a_km * (1.0 - el.e**2) / (1.0 + el.e * math.cos(math.radians(el.true_anomaly_deg)))
+    try:
+        r = _eccentric_radius(el.a_km, el.e, math.radians(el.mean_anomaly_deg))
+    except (OverflowError, ZeroDivisionError, ValueError):
+        return None
+    return r if r is not None and math.isfinite(r) else None
 
 
 def _span_text(dur: float) -> str:

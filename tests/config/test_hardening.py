@@ -320,3 +320,215 @@ def test_build_case_checks_sizes_first(tmp_path):
     deck = load_any(p)
     with pytest.raises(DeckError, match=r"stm\.grid_hours = 1e-09: gives 9\.6e\+11 STM times"):
         trajectory_problem(deck, str(p))
+
+
+# ----------------------------------------------------------------------------- what a run would refuse
+def deck_text(
+    centre: str,
+    state: str,
+    *,
+    epoch: str = 'iso = "2030-01-01T00:00:00"',
+    stop: str = "duration_days = 1.0",
+    forces: str = "",
+) -> str:
+    return (
+        f'[epoch]\n{epoch}\n[initial_state]\ncentre = "{centre}"\n{state}\n'
+        f"[spacecraft]\nmass_kg = 1000.0\n[forces]\n{forces}\n[stop]\n{stop}\n"
+    )
+
+
+#: (centre, initial-state table, |r| of the start in km, the radius it is checked against):
+#: every form an initial state can take, about several central bodies, elliptic and
+#: hyperbolic, mean and true anomaly, and a radius set by forces.overrides
+STARTS = {
+    "cartesian_earth": (
+        "earth",
+        "[initial_state.cartesian]\nr_km = [3000.0, 0.0, 0.0]\nv_km_s = [0.0, 7.5, 0.0]",
+        3000.0,
+        6378.137,
+    ),
+    "cartesian_3d_mars": (
+        "mars",
+        "[initial_state.cartesian]\nr_km = [1000.0, 2000.0, -2000.0]\nv_km_s = [0, 3, 0]",
+        3000.0,
+        3396.19,
+    ),
+    "spherical_moon": (
+        "moon",
+        "[initial_state.spherical]\nr_km = 1500.0\nlat_deg = 10.0\nlon_deg = 0.0\n"
+        "v_km_s = 1.0\ngamma_deg = 0.0\nsigma_deg = 90.0",
+        1500.0,
+        1737.4,
+    ),
+    "elements_true_anomaly": (
+        "earth",
+        "[initial_state.elements]\na_km = 7000.0\ne = 0.2\ni_deg = 30.0\ntrue_anomaly_deg = 0.0",
+        5600.0,
+        6378.137,
+    ),
+    "elements_mean_anomaly": (
+        "earth",
+        "[initial_state.elements]\na_km = 7000.0\ne = 0.2\ni_deg = 30.0\nmean_anomaly_deg = 10.0",
+        None,
+        6378.137,
+    ),
+    "elements_high_e_mean_anomaly": (
+        "sun",
+        "[initial_state.elements]\na_km = 1.0e7\ne = 0.95\ni_deg = 0.0\nmean_anomaly_deg = 0.1",
+        None,
+        695700.0,
+    ),
+    "hyperbola_mean_anomaly": (
+        "moon",
+        "[initial_state.elements]\na_km = -2000.0\ne = 1.5\ni_deg = 10.0\nmean_anomaly_deg = 5.0",
+        None,
+        1737.4,
+    ),
+    "hyperbola_true_anomaly": (
+        "jupiter",
+        "[initial_state.elements]\na_km = -50000.0\ne = 2.0\ni_deg = 0.0\ntrue_anomaly_deg = 20.0",
+        None,
+        71492.0,
+    ),
+    "override_radius": (
+        "earth",
+        "[initial_state.cartesian]\nr_km = [7000.0, 0.0, 0.0]\nv_km_s = [0.0, 7.5, 0.0]",
+        7000.0,
+        7100.0,
+    ),
+}
+
+
+def _start(case: str, radius_km: float | None = None) -> str:
+    """The deck of ``case``; ``radius_km``: the centre's radius set by forces.overrides."""
+    centre, state, _, radius = STARTS[case]
+    if case == "override_radius" and radius_km is None:
+        radius_km = radius
+    forces = f"[forces.overrides.{centre}]\nradius_km = {radius_km}" if radius_km is not None else ""
+    return deck_text(centre, state, forces=forces)
+
+
+def _core_radius(deck) -> float:
+    """|r| of the start as the propagation converts it (fracas.build.trajectory, JAX)."""
+    import numpy as np
+
+    from fracas.build.trajectory import _initial_state
+    from fracas.constants import BODIES
+
+    r, _ = _initial_state(deck, BODIES[deck.initial_state.centre].mu_km3_s2)
+    return float(np.linalg.norm(r))
+
+
+@pytest.mark.parametrize("case", sorted(STARTS))
+def test_a_start_inside_the_centre_is_refused(case):
+    """Against the propagation's own conversion of the initial state (cartesian, spherical,
+    elements by true or mean anomaly, ellipse or hyperbola, any centre) and the body radius of
+    fracas.constants (or forces.overrides): a start inside the centre is one line naming
+    initial_state and the radius; with the radius overridden below the start, the deck is
+    accepted and validation's |r| equals the core's to 1e-12."""
+    from fracas.config.trajectory import initial_radius_km
+
+    centre, _, r_given, radius = STARTS[case]
+    msg = str(refusal(_start(case)))
+    assert msg.startswith(f"{SRC}: initial_state.") and f"inside its radius {radius:g} km" in msg, msg
+    assert f"from the centre of {centre}" in msg
+    deck = parse_deck(_start(case, radius_km=1.0), SRC)
+    r = initial_radius_km(deck.initial_state)
+    assert r == pytest.approx(_core_radius(deck), rel=1e-12) and r < radius
+    if r_given is not None:
+        assert r == pytest.approx(r_given, rel=1e-12)
+
+
+def test_a_start_on_or_just_outside_the_surface_is_accepted():
+    """Against constants.BODIES["earth"].radius_km: |r| equal to the radius, or 1 m above, is
+    a valid start (only a start strictly inside is refused)."""
+    for r in (6378.137, 6378.138):
+        state = f"[initial_state.cartesian]\nr_km = [0.0, {r}, 0.0]\nv_km_s = [7.9, 0.0, 0.0]"
+        assert parse_deck(deck_text("earth", state), SRC).initial_state.cartesian.r_km[1] == r
+
+
+def test_an_override_of_a_body_outside_the_model_is_refused():
+    """Against fracas.build.trajectory (which refused it only when building): an override of a
+    body the force model does not have is one line naming forces.overrides.<body>."""
+    state = "[initial_state.cartesian]\nr_km = [7000.0, 0.0, 0.0]\nv_km_s = [0.0, 7.5, 0.0]"
+    msg = str(refusal(deck_text("earth", state, forces="[forces.overrides.mars]\nmu_km3_s2 = 1.0")))
+    assert msg.startswith(f'{SRC}: forces.overrides.mars = mars: is not in the force model (earth)'), msg
+
+
+LEO = "[initial_state.cartesian]\nr_km = [7000.0, 0.0, 0.0]\nv_km_s = [0.0, 7.5, 0.0]"
+#: (epoch, stop, forces, the field refused): decks whose span leaves DE421's, by the epoch
+#: (ISO or Julian date, before or after the span) or by the end (duration forward or
+#: backward, final_epoch), for every way the force model comes to need body positions
+SPANS = {
+    "epoch_after": ('iso = "2060-01-01T00:00:00"', "duration_days = 1.0", 'third_bodies = ["moon"]', "epoch.iso"),
+    "epoch_before_jd": (
+        "julian_date = 2400000.5",
+        "duration_days = 1.0",
+        'third_bodies = ["sun"]',
+        "epoch.julian_date",
+    ),
+    "end_by_duration": (
+        'iso = "2053-10-01T00:00:00"',
+        "duration_days = 30.0",
+        'third_bodies = ["moon"]',
+        "stop.duration_days",
+    ),
+    "end_backward": (
+        'iso = "1899-12-10T00:00:00"',
+        "duration_days = -30.0",
+        'third_bodies = ["moon"]',
+        "stop.duration_days",
+    ),
+    "end_by_final_epoch": (
+        'iso = "2050-01-01T00:00:00"',
+        'final_epoch = "2054-01-01T00:00:00"',
+        "srp = true",
+        "stop.final_epoch",
+    ),
+    "soi_parents": ('iso = "2070-01-01T00:00:00"', "duration_days = 1.0", "change_primary_at_soi = true", "epoch.iso"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(SPANS))
+def test_a_span_outside_the_ephemeris_is_refused(case):
+    """Against the ephemeris' own coverage (fracas.dynamics.ephemeris.coverage_et, which
+    build_ephemeris enforces when a propagation needs positions): the epoch or the end of
+    the trajectory outside it is one line naming the field and the span."""
+    epoch, stop, forces, field = SPANS[case]
+    text = deck_text("earth", LEO, epoch=epoch, stop=stop, forces=forces)
+    if "srp" in forces:
+        text = text.replace("mass_kg = 1000.0", "mass_kg = 1000.0\narea_m2 = 10.0")
+    msg = str(refusal(text))
+    assert msg.startswith(f"{SRC}: {field} = ") and "the DE421 ephemeris spans 1899-12-04 to 2053-10-09 TDB" in msg
+    # the same dates without a body position to read (two-body) are not the ephemeris' business
+    two_body = deck_text("earth", LEO, epoch=epoch, stop=stop)
+    assert parse_deck(two_body, SRC).epoch is not None
+
+
+def test_the_span_checked_is_the_ephemeris_coverage():
+    """constants.DE421_START_JD / DE421_END_JD (validation, no JAX) equal the coverage the
+    ephemeris module serves (fracas.dynamics.ephemeris.coverage_et, from the de421 data)."""
+    from fracas.constants import DAY_S, DE421_END_JD, DE421_START_JD, J2000_JD
+    from fracas.dynamics.ephemeris import coverage_et
+
+    assert coverage_et() == ((DE421_START_JD - J2000_JD) * DAY_S, (DE421_END_JD - J2000_JD) * DAY_S)
+
+
+def test_validate_and_propagate_refuse_the_same_line(tmp_path):
+    """fracas validate and fracas propagate on a deck starting 3000 km from Earth's centre:
+    both exit 2 with the same one line naming initial_state and the radius, no traceback."""
+    from click.testing import CliRunner
+
+    from fracas.cli import main
+
+    path = tmp_path / "inside.toml"
+    path.write_text(deck_text("earth", LEO.replace("7000.0", "3000.0", 1)))
+    lines = []
+    for args in (["validate", str(path)], ["propagate", str(path)]):
+        r = CliRunner().invoke(main, args)
+        assert r.exit_code == 2 and "Traceback" not in r.output, r.output
+        err = r.stderr.strip().splitlines()
+        assert len(err) == 1
+        lines.append(err[0])
+    assert lines[0] == lines[1]
+    assert "initial_state.cartesian.r_km" in lines[0] and "inside its radius 6378.14 km" in lines[0]

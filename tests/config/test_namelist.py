@@ -414,3 +414,82 @@ def test_huge_index_is_refused_in_one_line(tmp_path):
     p.write_text("$DATA\n MASS0 = 1000.0\n TON(3000000) = 1.0\n$END\n", encoding="utf-8")
     with pytest.raises(DeckError, match=rf"\$DATA\.TON\(3000000\): index 3000000: expected at most {MAX_ENTRIES}"):
         import_namelist(p, str(p))
+
+
+# ---------------------------------------------------------------- indices outside an array's range
+
+
+def _nml_value(f) -> str:
+    """A value of the right type for namelist field ``f`` (so that only the index is wrong)."""
+    if f.kind == "code":
+        return str(f.codes[0][0])
+    if f.kind in ("str", "strs", "key", "epoch"):
+        return "'EARTH'"
+    if f.kind in ("bool", "boolstr"):
+        return "T"
+    if f.kind == "int":
+        return "1"
+    return "1.0"
+
+
+def _indexed_fields():
+    """(group, field) for every namelist variable written with an index: entry arrays NAME(k)
+    (a "*" in its TOML path), 2-D arrays NAME(j,k) and vectors NAME(j) (reals / strs)."""
+    from fracas.config.namelist import namelist_fields
+
+    out = []
+    for group, fields in namelist_fields().items():
+        for f in fields:
+            if f.indexed or f.kind in ("reals", "strs"):
+                out.append((group.split()[0], f))
+    return out
+
+
+INDEXED = _indexed_fields()
+#: (how the index is written, the index the error names): an index below the first (1), a
+#: negative one, a range starting below 1 (which f90nml shifts onto 1..n), more values than
+#: the indices written (f90nml drops the extra ones) and an empty range
+BAD_INDEX = {
+    "zero": ("({j}0) = {v}, {v}, {v}", "({j}0): index 0: expected indices from 1"),
+    "zero_single": ("({j}0) = {v}", "({j}0): index 0: expected indices from 1"),
+    "negative": ("({j}-2) = {v}", "({j}-2): index -2: expected indices from 1"),
+    "range_from_zero": ("({j}0:1) = {v}, {v}", "({j}0): index 0: expected indices from 1"),
+    "more_values_than_indices": ("({j}2) = {v}, {v}", "({j}2) = ..., "),
+    "empty_range": ("({j}3:2) = {v}", "({j}3:2) = ..., "),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_INDEX))
+@pytest.mark.parametrize("group, field", INDEXED, ids=lambda x: getattr(x, "name", x))
+def test_an_index_outside_the_array_is_refused(group, field, case):
+    """Against the Fortran rule the import documents (arrays indexed from 1, one value per
+    index written; f90nml reads an index below 1 as a shift of the start and drops values
+    past the last index written): for every indexed namelist variable, such an index is one
+    DeckError line naming the file and $GROUP.NAME(index), never a value silently dropped or
+    moved."""
+    form, named = BAD_INDEX[case]
+    two_d = field.indexed and field.kind in ("reals", "strs")
+    j = "1," if two_d else ""
+    v = _nml_value(field)
+    text = f"&{group}\n {field.name}{form.format(j=j, v=v)}\n/\n"
+    with pytest.raises(DeckError) as info:
+        import_namelist(text, "old.nml")
+    msg = str(info.value)
+    assert "\n" not in msg and msg.startswith(f"old.nml: ${group}.{field.name}{named.format(j=j)}"), (text, msg)
+
+
+def test_index_zero_of_iatt_is_refused_not_dropped(tmp_path):
+    """The case found by the tester: ``IATT(0)=2,2,2`` (f90nml kept one value at a shifted
+    start) is one line naming $DATA.IATT(0); the same values written from index 1 import."""
+    base = "&DATA EPOCH='2030-01-01', CENTRE='earth', X0=7000,0,0,0,7.5,0, MASS0=1000, TFINAL=1,\n"
+    arcs = " TON=0,0.2,0.4, TOFF=0.1,0.3,0.5, POWER0=5, ETA=0.6, ISP=3000,\n"
+    with pytest.raises(DeckError, match=r"^old\.nml: \$DATA\.IATT\(0\): index 0: expected indices from 1"):
+        import_namelist(base + arcs + " IATT(0)=2,2,2 /\n", "old.nml")
+    got = import_namelist(base + arcs + " IATT(1:3)=2,2,2 /\n", "old.nml")
+    assert [a["frame"] for a in got.decks["traj"]["thrust_arc"]] == ["inertial"] * 3
+
+
+def test_a_vector_given_past_its_first_elements_names_the_missing_one():
+    """X0(7) = 1.0 leaves X0(1..6) unset: one line naming the first element not given."""
+    with pytest.raises(DeckError, match=r"^old\.nml: \$DATA\.X0\(1\): not given; expected a value at every index"):
+        import_namelist("&DATA X0(7) = 1.0 /\n", "old.nml")

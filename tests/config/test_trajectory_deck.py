@@ -407,12 +407,10 @@ def test_spherical_state():
     np.testing.assert_allclose(p.x0[:6], [7000.0, 0, 0, 0, 7.5, 0], atol=1e-12)
 
 
-def test_override_of_body_outside_model_is_config_error():
-    from fracas.build import build_propagation
-
-    deck = parse_deck(MINIMAL + "[forces.overrides.mars]\nmu_km3_s2 = 1.0\n", "d.toml")
-    with pytest.raises(ConfigError, match=r'^d\.toml: forces\.overrides\.mars: body "mars" is not in the force model'):
-        build_propagation(deck)
+def test_override_of_body_outside_model_is_refused_by_validation():
+    """Refused when the deck is read (so fracas validate refuses it), no longer only by the build."""
+    with pytest.raises(DeckError, match=r"^d\.toml: forces\.overrides\.mars = mars: is not in the force model"):
+        parse_deck(MINIMAL + "[forces.overrides.mars]\nmu_km3_s2 = 1.0\n", "d.toml")
 
 
 def test_unknown_sensitivity_label_is_config_error():

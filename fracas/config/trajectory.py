@@ -908,7 +908,7 @@ class TrajectoryDeck(SourcedDeck):
         return FieldProblem(
             loc,
             value,
-            f"starts {r:.6g} km from the centre of {centre}, inside its radius {radius:g} km "
+            f"starts {r:.6g} km from the centre of {centre}, inside its radius {radius:.10g} km "
             "(fracas.constants; forces.overrides to change it): the initial state must be outside the centre",
         )
 

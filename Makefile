@@ -26,8 +26,8 @@ demo: $(STAMP)
 	$(BIN)/fracas run namelists/mercury_approach_guidance.toml --quiet
 	$(BIN)/fracas report out/earth_mars_team.h5 --quiet
 	$(BIN)/fracas sweep namelists/earth_mars_sweep.toml --workers 0
-	$(BIN)/fracas run namelists/near_earth_spiral_tom.toml
-	$(BIN)/fracas run namelists/near_earth_spiral_team.toml --quiet
+	$(BIN)/fracas run namelists/near_earth_spiral_tom.toml -o out/near_earth_spiral_tom.h5
+	$(BIN)/fracas run namelists/near_earth_spiral_team.toml --trajectory-deck out/near_earth_spiral_tom_reference.toml --quiet
 	$(BIN)/fracas run namelists/earth_mars_tsim.toml
 	$(BIN)/fracas run namelists/apollo12_rendezvous.toml
 	$(BIN)/fracas import-namelist namelists/legacy/earth_mars_team.nml -o out/imported_earth_mars_team.toml --force

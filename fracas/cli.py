@@ -10,13 +10,94 @@ exit code 2; the traceback is shown only under ``--debug``.
 from __future__ import annotations
 
 import json
+import re
 import sys
+import textwrap
 from contextlib import contextmanager
 from pathlib import Path
 
 import click
 
 from fracas import __version__
+
+# ----------------------------------------------------------------------------- 80 columns
+# Terminal text wraps at word boundaries, never mid-word; a word longer than a line (a long
+# path) stays whole on a line of its own, so it can be copied.  (textwrap only: an error
+# must not wait for numpy or rich to import.)
+WIDTH = 80
+
+
+def _wrap(text: str, width: int = WIDTH, indent: str = "", more: str = "    ") -> list[str]:
+    """``text`` as lines of at most ``width`` columns; continuation lines indented by
+    ``indent + more``."""
+    return textwrap.wrap(
+        text,
+        width,
+        initial_indent=indent,
+        subsequent_indent=indent + more,
+        break_on_hyphens=False,
+        break_long_words=False,
+    ) or [indent.rstrip()]
+
+
+def _fill(text: str, width: int = WIDTH, indent: str = "", more: str = "    ") -> str:
+    """:func:`_wrap` joined by newlines."""
+    return "\n".join(_wrap(text, width, indent, more))
+
+
+_VALUE_COLUMN = re.compile(r"^(\s*\S.*?\s{2,})\S")
+
+
+def _fit_block(text: str, width: int = WIDTH) -> str:
+    """Every line of ``text`` that is wider than ``width`` wrapped at word boundaries, its
+    continuation lines indented under its value column (``label    value``: under
+    ``value``; else 4 spaces past the line's own indentation).  Lines that fit are kept."""
+    out = []
+    for line in text.splitlines():
+        if len(line) <= width:
+            out.append(line)
+            continue
+        lead = line[: len(line) - len(line.lstrip())]
+        m = _VALUE_COLUMN.match(line)
+        hang = " " * len(m.group(1)) if m and len(m.group(1)) <= width // 2 else lead + "    "
+        out += textwrap.wrap(
+            line.strip(),
+            width,
+            initial_indent=lead,
+            subsequent_indent=hang,
+            break_on_hyphens=False,
+            break_long_words=False,
+        )
+    return "\n".join(out)
+
+
+def _is_terminal(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
+def _stdout_is_terminal() -> bool:
+    return _is_terminal(sys.stdout)
+
+
+def _stderr_is_terminal() -> bool:
+    return _is_terminal(sys.stderr)
+
+
+def _say(text: str) -> None:
+    """A line of the printout on stdout ("written: PATH", a one-line summary): wrapped to 80
+    columns at word boundaries on a terminal; one line when piped (logs and scripts grep it)."""
+    click.echo(_fill(text) if _stdout_is_terminal() else text)
+
+
+def _error_line(text: str) -> None:
+    """An error on stderr: one line when stderr is not a terminal (logs, scripts: one line
+    per problem to grep), wrapped to 80 columns with indented continuation lines on one."""
+    if _stderr_is_terminal():
+        text = _fill(text)
+    click.echo(text, err=True)
 
 
 @contextmanager
@@ -29,7 +110,7 @@ def _errors(debug: bool):
     except FracasError as exc:
         if debug:
             raise
-        click.echo(f"fracas: error: {exc}", err=True)
+        _error_line(f"fracas: error: {exc}")
         sys.exit(exc.exit_code)
     except KeyboardInterrupt:
         click.echo("fracas: interrupted", err=True)
@@ -39,27 +120,209 @@ def _errors(debug: bool):
     except Exception as exc:  # a bug: say so briefly, the traceback is one flag away
         if debug:
             raise
-        click.echo(
-            f"fracas: internal error: {type(exc).__name__}: {exc} (rerun with --debug for the traceback)",
-            err=True,
-        )
+        _error_line(f"fracas: internal error: {type(exc).__name__}: {exc} (rerun with --debug for the traceback)")
         sys.exit(1)
 
 
-@contextmanager
-def _progress(enabled: bool):
-    """Yield a ``stage(text)`` callback driving a rich spinner on stderr when it is a terminal."""
-    if not enabled:
-        yield lambda _text: None
-        return
-    from rich.console import Console
+def _duration(seconds: float) -> str:
+    """12.3 s, 3 min 05 s, 1 h 02 min."""
+    if seconds < 60:
+        return f"{seconds:.1f} s"
+    m, s = divmod(int(round(seconds)), 60)
+    if m < 60:
+        return f"{m} min {s:02d} s"
+    h, m = divmod(m, 60)
+    return f"{h} h {m:02d} min"
 
-    console = Console(stderr=True)
-    if not console.is_terminal:
-        yield lambda _text: None
-        return
-    with console.status("starting", spinner="dots") as status:
-        yield lambda text: status.update(f"{text} ...")
+
+class _Stages:
+    """The ``stage(text)`` callback of a command, as a rich progress display on stderr.
+
+    Each call starts a new step: a spinner, what it is doing, a bar and ``done/total``
+    once a count is known (``stage.count(done, total)``), and the step's elapsed time.  A
+    step that took 2 s or more leaves a line with its duration.  While a step runs, every
+    JAX compilation shows on its own line as ``compiling <function> (first run; cached
+    afterwards)`` with its elapsed time (driven by JAX's compile log, which is captured
+    here, never printed, and switched back off afterwards).  Off when ``enabled`` is false
+    or stderr is not a terminal; ``plain`` then prints each step as one line on stderr.
+    """
+
+    LEAVE_S = 2.0
+
+    def __init__(self, enabled: bool, plain: bool = False):
+        self.progress = None
+        self.task = None
+        self.text = ""
+        self.plain = False
+        self._started = 0.0
+        self._compile = None
+        self._handler = None
+        self._saved: dict = {}
+        if not enabled:
+            return
+        from rich.console import Console
+
+        console = Console(stderr=True)
+        if not console.is_terminal:
+            self.plain = plain
+            return
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+        from rich.table import Column
+
+        class _IfCounted:
+            def render(self, task):
+                return super().render(task) if task.total is not None else ""
+
+        class _Count(_IfCounted, MofNCompleteColumn):
+            pass
+
+        class _Bar(_IfCounted, BarColumn):
+            pass
+
+        self.progress = Progress(
+            SpinnerColumn(),
+            TextColumn("{task.description}", table_column=Column(no_wrap=True, overflow="ellipsis", ratio=1)),
+            _Bar(bar_width=16),
+            _Count(),
+            TimeElapsedColumn(),
+            console=console,
+            transient=True,
+            expand=True,
+        )
+
+    # -- steps
+    def __call__(self, text: str) -> None:
+        if self.plain:
+            click.echo(text, err=True)
+            return
+        if self.progress is None:
+            return
+        self._watch_compiles()
+        if text == self.text and self.task is not None:
+            return
+        import time
+
+        self._finish_compile()
+        self._finish()
+        self.text = text
+        self._started = time.monotonic()
+        self.task = self.progress.add_task(text, total=None)
+
+    def count(self, done: int, total: int | None) -> None:
+        """The current step's count (``done`` of ``total``; None: not known yet)."""
+        if self.progress is not None and self.task is not None:
+            self.progress.update(self.task, completed=done, total=total)
+
+    def _leave(self, text: str) -> None:
+        from rich.text import Text
+
+        self.progress.console.print(Text(text, style="dim"))
+
+    def _finish(self) -> None:
+        import time
+
+        if self.task is None:
+            return
+        took = time.monotonic() - self._started
+        self.progress.remove_task(self.task)
+        self.task = None
+        if took >= self.LEAVE_S:
+            self._leave(f"{self.text} ({_duration(took)})")
+
+    # -- JAX compilations (jax_log_compiles: "Compiling jit(f) ...", "Finished XLA compilation ...")
+    def _compile_event(self, message: str) -> None:
+        import re
+        import time
+
+        if self.progress is None:
+            return
+        m = re.match(r"Compiling (\w+)\(([^)]*)\)", message)
+        if m:
+            self._finish_compile()
+            name = m.group(2) or m.group(1)
+            task = self.progress.add_task(f"  compiling {name} (first run; cached afterwards)", total=None)
+            self._compile = (task, name, time.monotonic())
+        elif message.startswith("Finished XLA compilation"):
+            self._finish_compile()
+
+    def _finish_compile(self) -> None:
+        import time
+
+        if self._compile is None or self.progress is None:
+            return
+        task, name, t0 = self._compile
+        self._compile = None
+        self.progress.remove_task(task)
+        took = time.monotonic() - t0
+        if took >= self.LEAVE_S:
+            self._leave(f"  compiled {name} ({_duration(took)}; cached for later runs)")
+
+    def _watch_compiles(self) -> None:
+        """Once JAX is imported: capture its compile log (not before: importing JAX here
+        would slow commands that never use it; an environment variable would reach Dask
+        workers, which would print the log)."""
+        if self._handler is not None or "jax" not in sys.modules:
+            return
+        import logging
+
+        import jax
+
+        stages = self
+
+        class _Handler(logging.Handler):
+            def emit(self, record):
+                try:
+                    stages._compile_event(record.getMessage())
+                except Exception:  # noqa: BLE001  (a display never breaks a run)
+                    pass
+
+        log = logging.getLogger("jax")
+        self._handler = _Handler(level=logging.WARNING)
+        self._saved = {"propagate": log.propagate, "log_compiles": bool(jax.config.jax_log_compiles)}
+        log.addHandler(self._handler)
+        log.propagate = False  # the compile log drives the display; it is not printed
+        jax.config.update("jax_log_compiles", True)
+
+    def __enter__(self):
+        if self.progress is not None:
+            self.progress.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        if self.progress is None:
+            return False
+        self._finish_compile()
+        self._finish()
+        self.progress.__exit__(*exc)
+        if self._handler is not None:
+            import logging
+
+            import jax
+
+            log = logging.getLogger("jax")
+            log.removeHandler(self._handler)
+            log.propagate = self._saved["propagate"]
+            jax.config.update("jax_log_compiles", self._saved["log_compiles"])
+            self._handler = None
+        return False
+
+
+@contextmanager
+def _progress(enabled: bool, plain: bool = False):
+    """Yield a :class:`_Stages` callback (``stage(text)``, ``stage.count(done, total)``)."""
+    with _Stages(enabled, plain) as stages:
+        yield stages
+
+
+def _plot_path(plot: Path | None, output: Path | None, named: Path | None) -> Path | None:
+    """Where a run's plot goes: ``--plot``; else, when the deck names a plot, beside ``-o``
+    (``<output stem>.png``: every output of a run goes where ``-o`` says) or, without
+    ``-o``, where the deck names it; else no plot."""
+    if plot is not None:
+        return plot
+    if not named:
+        return None
+    return Path(output).with_suffix(".png") if output is not None else Path(named)
 
 
 def _host_devices(ctx: click.Context, _param, value: int | None) -> int | None:
@@ -194,7 +457,7 @@ def stm_info(ctx: click.Context, file: Path, debug: bool) -> None:
     with _errors(debug):
         from fracas.io.stm_file import describe
 
-        click.echo(describe(file))
+        click.echo(_fit_block(describe(file)))
 
 
 def _print_options(f):
@@ -235,6 +498,16 @@ def _print_options(f):
     help="Results file to write (default: the deck's [output] results, else out/<deck stem>.h5).",
 )
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), help="Also write a PNG plot.")
+@click.option(
+    "--reference-deck",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="TOM: the optimized trajectory deck to write (default: beside -o, else the deck's [tom] reference_deck).",
+)
+@click.option(
+    "--trajectory-deck",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="TEAM: the reference trajectory deck to use instead of the one [ertraj] deck names.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON summary instead of the tables.")
 @click.option("--quiet", is_flag=True, help="Print only the one-line summary.")
 @_print_options
@@ -253,6 +526,8 @@ def run(
     stm_file: Path | None,
     output: Path | None,
     plot: Path | None,
+    reference_deck: Path | None,
+    trajectory_deck: Path | None,
     as_json: bool,
     quiet: bool,
     verbose: bool,
@@ -264,7 +539,9 @@ def run(
 ) -> None:
     """Run a DECK in the mode it names (mode = "team": a TEAM study; mode = "tom": targeting and
     optimization; mode = "tsim": a Monte Carlo with guidance; mode = "rendezvous": two-vehicle
-    navigation; a trajectory deck: a propagation)."""
+    navigation; a trajectory deck: a propagation).  Every file the run writes goes beside -o
+    when it is given (files the deck names keep their names); an STM file the deck names
+    stays where it says."""
     debug = debug or bool((ctx.obj or {}).get("debug"))
     with _errors(debug):
         from fracas.config.modes import deck_mode
@@ -272,13 +549,17 @@ def run(
         from fracas.errors import DeckError
 
         mode = deck_mode(read_deck_text(deck), str(deck))
+        if reference_deck is not None and mode != "tom":
+            raise DeckError(f'{deck}: --reference-deck is for TOM decks (mode = "tom"); this is a {mode} deck')
+        if trajectory_deck is not None and mode != "team":
+            raise DeckError(f'{deck}: --trajectory-deck is for TEAM decks (mode = "team"); this is a {mode} deck')
         if mode == "sweep":
             _run_sweep(deck, (), None, None, True, output)
             return
         if mode == "tom":
             if stm_file is not None:
                 raise DeckError(f'{deck}: --stm is for TEAM decks (mode = "team"); this is a TOM deck')
-            _run_tom(deck, output, plot, as_json, quiet)
+            _run_tom(deck, output, plot, as_json, quiet, reference_deck)
             return
         if mode == "rendezvous":
             if stm_file is not None or workers is not None or scheduler is not None:
@@ -306,12 +587,20 @@ def run(
         from fracas.pipeline import run_team
 
         cfg = load_team_deck(deck)
-        png = plot or (cfg.resolve(cfg.output.plot) if cfg.output.plot else None)
+        if trajectory_deck is not None:
+            from fracas.config.sweep import varied_deck
+
+            if not trajectory_deck.is_file():
+                raise DeckError(f"{trajectory_deck}: --trajectory-deck: no such trajectory deck")
+            cfg = varied_deck(
+                cfg, {"ertraj.deck": str(trajectory_deck.resolve())}, f"{deck} (--trajectory-deck {trajectory_deck})"
+            )
+        png = _plot_path(plot, output, cfg.output.plot and cfg.resolve(cfg.output.plot))
         verbosity = _verbosity(quiet, verbose)
-        with _progress(not as_json) as stage:
+        with _progress(not (as_json or quiet)) as stage:
             product, path, source = run_team(cfg, stm_file, output, on_stage=stage, plot=png)
             if product is None:
-                click.echo(f"reference ready ({source}); errcon.analysis = false: no analysis run")
+                _say(f"reference ready ({source}); errcon.analysis = false: no analysis run")
                 return
             _team_report(path, png, as_json, verbosity, stage, product.timing, velocity_unit, width)
 
@@ -323,54 +612,40 @@ def _run_rendezvous(deck: Path, output: Path | None, plot: Path | None, as_json:
     from fracas.report.rendezvous import plot_rendezvous, summary_text
 
     cfg = load_rendezvous_deck(deck)
-    png = plot or (cfg.resolve(cfg.output.plot) if cfg.output.plot else None)
-    with _progress(not as_json) as stage:
+    png = _plot_path(plot, output, cfg.output.plot and cfg.resolve(cfg.output.plot))
+    with _progress(not (as_json or quiet)) as stage:
         product, path = run_rendezvous(cfg, output, on_stage=stage, plot=png)
     written = plot_rendezvous(product, png) if png is not None else []
     if as_json:
         click.echo(json.dumps({"results": str(path), "roles": product.roles, "plots": [str(w) for w in written]}))
         return
     if quiet:
-        click.echo(f"{len(product.roles)} roles, {int(product.marks.sum())} marks; results: {path}")
+        _say(f"{len(product.roles)} roles, {int(product.marks.sum())} marks; results: {path}")
         return
     click.echo(summary_text(product, width=width or 80))
-    click.echo(f"results: {path}")
+    _say(f"results: {path}")
     for w in written:
-        click.echo(f"plot: {w}")
+        _say(f"plot: {w}")
 
 
 def _run_tsim(
     deck: Path, output: Path | None, plot: Path | None, as_json: bool, quiet: bool, workers, scheduler
 ) -> None:
     """``fracas run`` on a TSIM deck: stages, a progress bar over the missions, the summary."""
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
     from fracas.config.tsim import load_tsim_deck
     from fracas.montecarlo import missions_per_second, run_tsim
     from fracas.report.tsim import plot_tsim, summary_text
 
     cfg = load_tsim_deck(deck)
-    png = plot or (cfg.resolve(cfg.output.plot) if cfg.output.plot else None)
+    png = _plot_path(plot, output, cfg.output.plot and cfg.resolve(cfg.output.plot))
     if png is not None:
         from fracas.io.atomic import check_output_path
 
         check_output_path(png, "plot")
-    console = Console(stderr=True)
-    show = console.is_terminal and not as_json
-    cols = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
-    with Progress(*cols, console=console, disable=not show, transient=True) as bar:
-        task = bar.add_task("starting", total=None)
-
-        def stage(text: str) -> None:
-            bar.update(task, description=text)
-            if not show and not as_json and not quiet:
-                click.echo(text, err=True)
-
-        def progress(done: int, total: int) -> None:
-            bar.update(task, description="missions", completed=done, total=total)
-
-        product, path = run_tsim(cfg, output, workers=workers, scheduler=scheduler, on_stage=stage, progress=progress)
+    with _progress(not (as_json or quiet), plain=True) as stage:
+        product, path = run_tsim(
+            cfg, output, workers=workers, scheduler=scheduler, on_stage=stage, progress=stage.count
+        )
     written = plot_tsim(product, png) if png is not None else []
     if as_json:
         click.echo(
@@ -387,35 +662,42 @@ def _run_tsim(
         return
     if quiet:
         bad = sum(r["verdict"] not in ("consistent", "not compared") for r in product.consistency)
-        click.echo(f"{product.counts['missions']} missions, {bad} outputs flagged; results: {path}")
+        _say(f"{product.counts['missions']} missions, {bad} outputs flagged; results: {path}")
         return
     click.echo(summary_text(product))
-    click.echo(f"results: {path}  ({missions_per_second(product):.1f} missions/s)")
+    _say(f"results: {path}  ({missions_per_second(product):.1f} missions/s)")
     for w in written:
-        click.echo(f"plot: {w}")
+        _say(f"plot: {w}")
 
 
-def _run_tom(deck: Path, output: Path | None, plot: Path | None, as_json: bool, quiet: bool) -> None:
+def _run_tom(
+    deck: Path, output: Path | None, plot: Path | None, as_json: bool, quiet: bool, reference_deck: Path | None = None
+) -> None:
     """``fracas run`` on a TOM deck: a progress line per iteration, then the summary."""
     from fracas.config.tom import load_tom_deck
     from fracas.io.tom_results import read_tom_results
-    from fracas.pipeline import run_tom
+    from fracas.pipeline import run_tom, tom_outputs
     from fracas.report.tom import PROGRESS_HEADER, plot_tom, progress_line, summary_text
 
     cfg = load_tom_deck(deck)
-    png = plot or (cfg.resolve(cfg.tom.plot) if cfg.tom.plot else None)
     talk = not (as_json or quiet)
     header = [False]
 
-    def on_iteration(rec) -> None:
-        if talk:
-            if not header[0]:
-                click.echo(PROGRESS_HEADER)
-                header[0] = True
-            click.echo(progress_line(rec))
+    with _progress(talk) as stage:
 
-    with _progress(not as_json) as stage:
-        product, path, ref = run_tom(cfg, output, on_stage=stage, plot=png, on_iteration=on_iteration)
+        def on_iteration(rec) -> None:
+            stage(f"TOM iterations (at most {cfg.tom.max_iterations})")
+            stage.count(int(rec.iteration), int(cfg.tom.max_iterations))
+            if talk:
+                if not header[0]:
+                    click.echo(PROGRESS_HEADER)
+                    header[0] = True
+                click.echo(progress_line(rec))
+
+        product, path, ref = run_tom(
+            cfg, output, on_stage=stage, plot=plot, on_iteration=on_iteration, reference_deck=reference_deck
+        )
+        png = tom_outputs(cfg, output, plot, reference_deck)[2]
         res = read_tom_results(path)
         written = plot_tom(res, png) if png is not None else []
     if as_json:
@@ -435,12 +717,40 @@ def _run_tom(deck: Path, output: Path | None, plot: Path | None, as_json: bool, 
         return
     if quiet:
         verdict = "converged" if product.converged else "NOT converged"
-        click.echo(f"TOM {verdict}: final mass {product.final_mass_kg:.6f} kg; {product.stop_reason}")
+        _say(f"TOM {verdict}: final mass {product.final_mass_kg:.6f} kg; {product.stop_reason}")
     else:
         click.echo(summary_text(res))
-    click.echo(f"results: {path}")
+    _say(f"results: {path}")
     for w in written:
-        click.echo(f"plot: {w}")
+        _say(f"plot: {w}")
+
+
+def _sweep_report(file: Path, plot: Path | None, as_json: bool) -> None:
+    """``fracas report`` on a sweep table: its studies, how many ran, each failure."""
+    from fracas.io.sweep_table import csv_path, read_sweep_table
+
+    t = read_sweep_table(file)
+    ok = sum(s == "ok" for s in t.status)
+    if plot is not None:
+        from fracas.report.sweep import plot_sweep
+
+        plot_sweep(file, plot)
+    if as_json:
+        out = {"file": str(file), "studies": len(t.status), "ok": ok, "failed": len(t.status) - ok}
+        out.update({"inputs": list(t.inputs), "outputs": list(t.outputs)})
+        click.echo(json.dumps(out | ({"plot": str(plot)} if plot else {})))
+        return
+    if t.attrs.get("title"):
+        _say(str(t.attrs["title"]))
+    _say(f"sweep: {len(t.status)} studies, {ok} ok, {len(t.status) - ok} failed, {float(sum(t.wall_s)):.1f} s of work")
+    _say(f"varied: {', '.join(t.inputs) or '-'}")
+    _say(f"outputs: {', '.join(t.outputs) or '-'}")
+    for i, (s, e) in enumerate(zip(t.status, t.error)):
+        if s != "ok":
+            click.echo(_fill(f"study {int(t.index[i])}: {e}", indent="  "))
+    if plot is not None:
+        _say(f"plot: {plot}")
+    _say(f"sweep table: {file} (and {csv_path(file)})")
 
 
 def _verbosity(quiet: bool, verbose: bool) -> str:
@@ -460,8 +770,11 @@ def _team_report(
     extra_timing=None,
     velocity_unit: str = "mm/s",
     width: int | None = None,
+    written: bool = True,
 ) -> None:
     """Print (and plot) a TEAM results file: tables at a verbosity, --json, or --quiet's one line.
+    ``written``: the run wrote the file ("written: PATH"); else ``fracas report`` read it
+    ("TEAM results file: PATH").
 
     With ``png``: every plot of the file (:func:`fracas.report.team.plot_all`: ``png`` and the
     B-plane, correlation, error-budget and ΔV plots beside it where they apply), each path
@@ -482,12 +795,13 @@ def _team_report(
             out["plots"] = [str(p) for p in plots]
         click.echo(json.dumps(out))
         return
+    label = "written" if written else "TEAM results file"
     if verbosity == "quiet":
-        click.echo(quiet_line(r, velocity_unit))
+        _say(quiet_line(r, velocity_unit, label))
     else:
-        print_team(r, verbosity=verbosity, velocity_unit=velocity_unit, width=width)
+        print_team(r, verbosity=verbosity, velocity_unit=velocity_unit, width=width, file_label=label)
     for p in plots:
-        click.echo(f"plot: {p}")
+        _say(f"plot: {p}")
 
 
 @main.command()
@@ -509,7 +823,9 @@ def report(
     width: int | None,
     debug: bool,
 ) -> None:
-    """Print the report of a results FILE (a TEAM results file or a trajectory file)."""
+    """Print the report of a results FILE: a trajectory, TEAM, TOM, TSIM, sweep or rendezvous
+    results file (its kind is named on the last line, ``<kind> file: FILE``; an STM file is
+    described as by ``fracas stm info``)."""
     debug = debug or bool((ctx.obj or {}).get("debug"))
     with _errors(debug):
         from fracas.errors import ResultsFileError
@@ -521,8 +837,29 @@ def report(
 
             check_output_path(plot, "plot")
         if kind == "fracas-team-results":
-            _team_report(file, plot, as_json, _verbosity(quiet, verbose), None, None, velocity_unit, width)
+            _team_report(
+                file, plot, as_json, _verbosity(quiet, verbose), None, None, velocity_unit, width, written=False
+            )
             return
+        if kind == "fracas sweep table":
+            _sweep_report(file, plot, as_json)
+            return
+        if kind == "fracas-stm":
+            from fracas.io.stm_file import describe
+
+            if plot is not None or as_json:
+                raise ResultsFileError(f"{file}: an STM file: --plot and --json are for results files")
+            click.echo(_fit_block(describe(file)))
+            return
+        if kind == "fracas-punch":
+            raise ResultsFileError(
+                f"{file}: a TEAM punch file (knowledge covariances for a later deck's a_priori.from_punch), "
+                "not a results file"
+            )
+        if kind not in ("fracas-rendezvous-results", "fracas-tsim-results", "fracas-tom-results", "fracas-trajectory"):
+            raise ResultsFileError(
+                f"{file}: file kind {kind!r}: expected a trajectory, TEAM, TOM, TSIM, sweep or rendezvous results file"
+            )
         if kind == "fracas-rendezvous-results":
             from fracas.io.rendezvous_results import read_rendezvous_results
             from fracas.report.rendezvous import plot_rendezvous
@@ -534,7 +871,9 @@ def report(
             else:
                 click.echo(rendezvous_summary(res, width=width or 80))
             for w in plot_rendezvous(res, plot) if plot is not None else []:
-                click.echo(f"plot: {w}")
+                _say(f"plot: {w}")
+            if not as_json:
+                _say(f"rendezvous results file: {file}")
             return
         if kind == "fracas-tsim-results":
             from fracas.io.tsim_results import read_tsim_results
@@ -547,7 +886,9 @@ def report(
             else:
                 click.echo(tsim_summary(res, width=width or 80))
             for w in plot_tsim(res, plot) if plot is not None else []:
-                click.echo(f"plot: {w}")
+                _say(f"plot: {w}")
+            if not as_json:
+                _say(f"TSIM results file: {file}")
             return
         if kind == "fracas-tom-results":
             from fracas.io.tom_results import read_tom_results
@@ -559,7 +900,9 @@ def report(
             else:
                 click.echo(summary_text(res, width=width or 80))
             for w in plot_tom(res, plot) if plot is not None else []:
-                click.echo(f"plot: {w}")
+                _say(f"plot: {w}")
+            if not as_json:
+                _say(f"TOM results file: {file}")
             return
         from fracas.io.trajectory_file import read_trajectory_file
         from fracas.report.trajectory import plot_trajectory, print_summary
@@ -568,9 +911,12 @@ def report(
         if plot is not None:
             plot_trajectory(data, plot)
         if as_json:
-            click.echo(json.dumps({**data.summary_dict(), "file": str(file)}))
+            click.echo(json.dumps({**data.summary_dict(), "file": str(file), **({"plot": str(plot)} if plot else {})}))
         else:
-            print_summary(data, file, width=width)
+            print_summary(data, None, width=width or 80)
+            if plot is not None:
+                _say(f"plot: {plot}")
+            _say(f"trajectory file: {file}")
 
 
 @main.command()
@@ -621,19 +967,17 @@ def _run_sweep(deck: Path, vary, workers, scheduler, resume: bool, output: Path 
     from fracas.sweep import sweep_main
 
     with _progress(True) as stage:
-        table, summary, failed = sweep_main(
-            deck,
-            list(vary),
-            workers,
-            scheduler,
-            resume,
-            output,
-            progress=lambda done, total: stage(f"studies {done} of {total}"),
-        )
+
+        def progress(done: int, total: int) -> None:
+            stage(f"running {total} studies")
+            stage.count(done, total)
+
+        stage("preparing the sweep (the first study compiles)")
+        table, summary, failed = sweep_main(deck, list(vary), workers, scheduler, resume, output, progress=progress)
     click.echo(summary)
-    click.echo(f"written: {table}")
+    _say(f"written: {table}")
     if failed:  # the table is written; the exit status says not every study ran
-        click.echo(f"fracas: error: sweep: {failed} stud{'ies' if failed > 1 else 'y'} failed", err=True)
+        _error_line(f"fracas: error: sweep: {failed} stud{'ies' if failed > 1 else 'y'} failed")
         sys.exit(SWEEP_FAILED_EXIT)
 
 
@@ -655,9 +999,9 @@ def validate(ctx: click.Context, decks: tuple[Path, ...], debug: bool) -> None:
             if problems:
                 bad += 1
                 for line in problems:
-                    click.echo(f"fracas: error: {line}", err=True)
+                    _error_line(f"fracas: error: {line}")
             else:
-                click.echo(f"ok: {deck} ({kind})")
+                _say(f"ok: {deck} ({kind})")
         if bad:
             sys.exit(2)
 
@@ -752,7 +1096,7 @@ def export(
                 object_id=object_id,
                 originator=originator,
             )
-            click.echo(f"written: {oem_out}")
+            _say(f"written: {oem_out}")
         if entries:
             if opm_out is not None:
                 name = object_name or str(team["attrs"].get("title", "")) or "SPACECRAFT"
@@ -763,10 +1107,10 @@ def export(
                     ccsds.write_opm(
                         out, c, xml=xml, object_name=name, object_id=object_id, originator=originator, source=file.name
                     )
-                    click.echo(f"written: {out} (event #{c['index']} {c['event']})")
+                    _say(f"written: {out} (event #{c['index']} {c['event']})")
             if csv_out is not None:
                 ccsds.write_covariance_csv(csv_out, entries)
-                click.echo(f"written: {csv_out} ({len(entries)} events x {len(entries[0]['labels'])} labels)")
+                _say(f"written: {csv_out} ({len(entries)} events x {len(entries[0]['labels'])} labels)")
 
 
 @main.command("compare-oem")
@@ -809,7 +1153,7 @@ def compare_oem(ctx: click.Context, trajectory: Path, oem_file: Path, as_json: b
                 f"{et_to_calendar(d['et_s'][k], 6):<27} {d['t_s'][k] / 86400.0:>10.5f} {d['centre'][k]:<8} "
                 f"{dr[k]:>12.4e} {dv[k]:>12.4e}"
             )
-        click.echo(
+        _say(
             f"{dr.size} common epochs ({d['n_trajectory']} in the trajectory, {d['n_oem']} in the OEM"
             + (f", {d['other_centre']} with another centre" if d["other_centre"] else "")
             + f"): max |dr| {summary['max_dr_km']:.4e} km, RMS {summary['rms_dr_km']:.4e} km; "
@@ -887,7 +1231,7 @@ def import_namelist_command(
 
         _, problems = check_path(out)
         for line in problems:
-            click.echo(f"fracas: error: {line}", err=True)
+            _error_line(f"fracas: error: {line}")
         if problems:
             sys.exit(2)
         say(f"ok: {out} validates")

@@ -120,7 +120,7 @@ def _team_key(team_deck) -> str:
     return h.hexdigest()
 
 
-def _team_for(cfg: TsimDeck, say):
+def _team_for(cfg: TsimDeck, say, output_dir: Path | None = None):
     """The TEAM run TSIM stands on (guidance model ``tsim``), once per process for the same
     TEAM deck, trajectory deck and STM file (a second TSIM run on them, e.g. the other half
     of a split run, reuses it)."""
@@ -137,7 +137,7 @@ def _team_for(cfg: TsimDeck, say):
     if key in _TEAM_RUNS:
         return _TEAM_RUNS[key]
     say("running TEAM (guidance model tsim) for the knowledge and guidance matrices")
-    prod, _, _ = pipeline.run_team(team_deck, write_results=False, on_stage=say)
+    prod, _, _ = pipeline.run_team(team_deck, write_results=False, on_stage=say, output_dir=output_dir)
     if prod is None or not prod.guidance:
         raise DeckError(f"{cfg.source_path}: insim.team_deck: the TEAM run made no guidance events")
     _TEAM_RUNS[key] = (team_deck, build_case(team_deck), prod)
@@ -230,7 +230,7 @@ def run_tsim(
     earlier = []
     for f in cfg.insim.a_priori_statistics:
         earlier.append(tsim_statistics(cfg.resolve(f)))
-    team_deck, case, team = _team_for(cfg, say)
+    team_deck, case, team = _team_for(cfg, say, out.parent if output is not None else None)
     t1 = time.perf_counter()
     say("building the Monte Carlo plan (reference through the noise grid)")
     plan = build_plan(cfg, case, team)

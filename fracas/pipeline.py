@@ -41,6 +41,8 @@ __all__ = [
     "reference_from_stm",
     "stm_product",
     "default_output",
+    "beside",
+    "tom_outputs",
 ]
 
 
@@ -51,6 +53,19 @@ def _say(on_stage: Stage | None) -> Stage:
 def default_output(deck_path: str | Path | None, folder: str = "out") -> Path:
     """``out/<deck stem>.h5`` (relative to the working directory)."""
     return Path(folder) / f"{Path(deck_path or 'deck').stem}.h5"
+
+
+def beside(output: str | Path | None, named: str | Path | None, default: str | Path | None) -> Path | None:
+    """Where a run writes one of its files.  With ``output`` (-o, the run's results file):
+    in output's folder, under the name the deck gives it (``named``, already resolved
+    against the deck) or else ``default``'s name -- every file a run writes goes where -o
+    says.  Without: ``named``, else ``default``."""
+    if output is not None:
+        name = Path(named or default or "").name
+        return Path(output).parent / name if name else None
+    if named:
+        return Path(named)
+    return Path(default) if default is not None else None
 
 
 def run(deck, **kw):
@@ -251,10 +266,13 @@ def run_team(
     on_stage: Stage | None = None,
     plot: str | Path | None = None,
     write_results: bool = True,
+    output_dir: str | Path | None = None,
 ):
     """``fracas run`` on a TEAM deck (path or TeamDeck): case -> reference (STM file or in
     line) -> filter -> TeamProduct -> results file (and punch file).  Every output (results,
     punch, an STM file to build, the ``plot`` the caller will draw) is checked before any work.
+    With ``output`` (or ``output_dir``), the punch file and an STM file the deck does not name
+    go into that folder (:func:`beside`); an STM file the deck names stays where it says.
 
     ``write_results=False`` (sweeps, in-memory callers) returns the product without writing the
     results file (the path returned is then None); punch files are still written.
@@ -278,17 +296,24 @@ def run_team(
         if output is not None
         else (cfg.resolve(cfg.output.results) if cfg.output.results else default_output(cfg.source_path))
     )
+    where = Path(output) if output is not None else (Path(output_dir) / "-" if output_dir is not None else None)
+    punch = beside(where, cfg.resolve(cfg.punch.file), None) if cfg.punch is not None else None
     if ec.analysis:
         if write_results:
             check_output_path(out, "results file")
-        if cfg.punch is not None:
-            check_output_path(cfg.resolve(cfg.punch.file), "punch file")
+        if punch is not None:
+            check_output_path(punch, "punch file")
         if plot is not None:
             check_output_path(plot, "plot")
     build = stm is None and (
         ec.build_stm is True or (ec.build_stm == "if_missing" and stm_path is not None and not stm_path.exists())
     )
-    if build and stm_path is not None:
+    if build and stm_path is None:
+        stem = Path(cfg.source_path or "deck").stem
+        stm_path = (
+            where.parent / f"{stem}_stm.h5" if where is not None else default_output(cfg.source_path, "stm_files")
+        )
+    if build:
         check_output_path(stm_path, "STM file")
     t1 = time.perf_counter()
     if build:
@@ -339,8 +364,8 @@ def run_team(
         write_team_results(out, product)
     else:
         out = None
-    if cfg.punch is not None:
-        write_punch(cfg.resolve(cfg.punch.file), product)
+    if punch is not None:
+        write_punch(punch, product)
     product.timing["total_s"] = time.perf_counter() - t0
     if failed:  # the run and its file stand; the failed prediction is the user's one-line error
         k, t_to = failed[0]
@@ -353,9 +378,12 @@ def run_team(
 
 
 # ----------------------------------------------------------------------------- TOM
-def _tom_outputs(cfg, output, plot, reference_deck):
+def tom_outputs(cfg, output, plot, reference_deck):
+    """(results, reference deck, plot) of a TOM run: each given path; else, with ``output``
+    (-o), in its folder (:func:`beside`); else the deck's ``[tom]`` paths, else ``out/``."""
     stem = Path(cfg.source_path or "deck").stem
     ts = cfg.tom
+    named = lambda p: cfg.resolve(p) if p else None  # noqa: E731
     res = (
         Path(output)
         if output is not None
@@ -364,9 +392,9 @@ def _tom_outputs(cfg, output, plot, reference_deck):
     ref = (
         Path(reference_deck)
         if reference_deck is not None
-        else (cfg.resolve(ts.reference_deck) if ts.reference_deck else Path("out") / f"{stem}_reference.toml")
+        else beside(output, named(ts.reference_deck), Path("out") / f"{stem}_reference.toml")
     )
-    png = Path(plot) if plot is not None else (cfg.resolve(ts.plot) if ts.plot else None)
+    png = Path(plot) if plot is not None else (beside(output, named(ts.plot), None) if ts.plot else None)
     norm = lambda p: Path(os.path.normpath(p)) if p is not None else None  # noqa: E731
     return norm(res), norm(ref), norm(png)
 
@@ -439,7 +467,7 @@ def run_tom(
     say = _say(on_stage)
     t0 = time.perf_counter()
     cfg = load_tom_deck(deck) if isinstance(deck, (str, Path)) else deck
-    out, ref_path, png = _tom_outputs(cfg, output, plot, reference_deck)
+    out, ref_path, png = tom_outputs(cfg, output, plot, reference_deck)
     check_output_path(out, "results file")
     submode = cfg.tom.submode
     if submode != "grid":

@@ -44,5 +44,31 @@ def _num_col(t, header: str) -> None:
     t.add_column(header, justify="right", no_wrap=True)
 
 
-def _text_col(t, header: str, justify: str = "left") -> None:
-    t.add_column(header, justify=justify, overflow="fold")
+def _text_col(t, header: str, justify: str = "left", whole: bool = False) -> None:
+    """A text column; ``whole``: its cells are never wrapped (labels such as
+    ``station_radius_km[goldstone]``: the other columns wrap at word boundaries instead)."""
+    if whole:
+        t.add_column(header, justify=justify, no_wrap=True)
+    else:
+        t.add_column(header, justify=justify, overflow="fold")
+
+
+def fit_line(line: str, width: int = 80) -> str:
+    """A line as it is when it fits ``width`` columns, else wrapped at word boundaries with
+    indented continuation lines: never cut, never broken mid-word (a word longer than a
+    line, such as a long path, stays whole on a line of its own)."""
+    if len(line) <= width:
+        return line
+    import textwrap
+
+    lead = line[: len(line) - len(line.lstrip())]
+    return "\n".join(
+        textwrap.wrap(
+            line.strip(),
+            width,
+            initial_indent=lead,
+            subsequent_indent=lead + "    ",
+            break_long_words=False,
+            break_on_hyphens=False,
+        )
+    )

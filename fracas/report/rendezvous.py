@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from fracas.products import RendezvousProduct
+from fracas.report._tables import fit_line
 
 __all__ = ["rms_table", "summary_text", "plot_rendezvous", "report_times", "run_consistency"]
 
@@ -85,10 +86,10 @@ def summary_text(product: RendezvousProduct, width: int = 80) -> str:
     tt = rms_table(product)
     ta = rms_table(product, "assumed")
     lines = [
-        (product.title or Path(product.source).name)[:width],
+        (product.title or Path(product.source).name),
         f"{product.chaser_name} (chaser) and {product.target_name} (target) about the {product.centre}; "
         f"{int(np.any(product.marks, axis=1).sum())} mark times, {int(product.marks.sum())} marks, "
-        f"{len(product.reset_times_s)} resets"[:width],
+        f"{len(product.reset_times_s)} resets",
         *(
             [
                 f"references: {product.chaser_name} {product.reference_sources[0]}; "
@@ -108,7 +109,7 @@ def summary_text(product: RendezvousProduct, width: int = 80) -> str:
             tag = " R"
         for j, name in enumerate(product.maneuver_names):
             if abs(product.maneuver_time_s[j] - product.times_s[k]) < 1e-6:
-                tag = f" {name}"[:6]
+                tag = f" {name}"
         for r, role in enumerate(product.roles):
             head = f"{product.times_s[k] / 60.0:6.1f}" if r == 0 else " " * 6
             lines.append(
@@ -127,12 +128,12 @@ def summary_text(product: RendezvousProduct, width: int = 80) -> str:
             + "".join(f"{_ROLE.get(r, r):>10}{'belief':>8}" for r in product.roles),
         ]
         for j, name in enumerate(product.maneuver_names):
-            row = f"{name[:8]:<9}{product.maneuver_time_s[j] / 60.0:6.1f}"
+            row = f"{name:<8} {product.maneuver_time_s[j] / 60.0:6.1f}"
             row += _n(np.linalg.norm(product.maneuver_dv_km_s[j]) * f, 8)
             for r in range(len(product.roles)):
                 row += _n(np.sqrt(max(np.trace(product.maneuver_cov_true[r, j]), 0.0)) * f, 10)
                 row += _n(np.sqrt(max(np.trace(product.maneuver_cov_assumed[r, j]), 0.0)) * f, 8)
-            lines.append(row[:width])
+            lines.append(row)
     if product.n_runs > 0 and product.envelope_1sigma is not None:
         how = {"two_body": "flown on the conics", "linear": "linear"}.get(product.run_dynamics, "")
         lines += ["", f"Single runs: {product.n_runs} per role, {how} (seed {product.seed}); share of errors"]
@@ -149,7 +150,7 @@ def summary_text(product: RendezvousProduct, width: int = 80) -> str:
             lines.append("runs' sample RMS / TEAM RMS, worst over the marks (6 groups; bound 5 SE):")
             for role, worst, bound, verdict in rows:
                 lines.append(f"  {_ROLE.get(role, role):<8} {worst:8.3g}  (1 +- {bound:.2f})  {verdict}")
-    return "\n".join(line[:width] for line in lines)
+    return "\n".join(fit_line(line, width) for line in lines)
 
 
 def plot_rendezvous(product: RendezvousProduct, path: str | Path) -> list[Path]:

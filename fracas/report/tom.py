@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fracas.report._tables import fit_line
+
 __all__ = ["progress_line", "summary_text", "plot_tom", "convergence_figure", "grid_figure", "PROGRESS_HEADER"]
 
 PROGRESS_HEADER = (
@@ -35,13 +37,13 @@ def summary_text(res: dict, width: int = 80) -> str:
     a = res["attrs"]
     lines = []
     title = a.get("title") or Path(a.get("source", "")).name
-    lines.append(f"TOM {a.get('submode', '')} -- {title}"[:width])
+    lines.append(f"TOM {a.get('submode', '')} -- {title}")
     verdict = "CONVERGED" if int(a.get("converged", 0)) else "NOT CONVERGED"
     claim = "yes" if int(a.get("search_converged", 0)) else "no"
     met = "yes" if int(a.get("targets_met", 0)) else "no"
     lines.append(f"{verdict} (targets met on re-propagation: {met}; the search's own test: {claim})")
     lines += textwrap.wrap(f"stop: {a.get('stop_reason', '')}", width)
-    lines.append(f"optimizer {a.get('optimizer')}, sensitivities {a.get('sensitivities')}"[:width])
+    lines.append(f"optimizer {a.get('optimizer')}, sensitivities {a.get('sensitivities')}")
     lines.append("")
     lines.append(f"{'target':<20} {'desired':>14} {'achieved':>14} {'error':>11} {'tol':>9} {'unit':<5}")
     for i, name in enumerate(res["target_names"]):
@@ -75,22 +77,22 @@ def summary_text(res: dict, width: int = 80) -> str:
     t = {key[7:]: float(v) for key, v in a.items() if key.startswith("timing_")}
     n_it = len(set(np.asarray(res["iteration"]).tolist()))
     steps = f"{k} iterations" if n_it == k else f"{k} search records in {n_it} iterations"
-    lines.append(f"{steps}, {n_traj} trajectories in the search"[:width])
+    lines.append(f"{steps}, {n_traj} trajectories in the search")
     if "core_propagations" in t:
         lines.append(
             f"the core flew {int(t['core_propagations'])} trajectories and "
-            f"{int(t.get('core_sensitivity_runs', 0))} AD sensitivity runs"[:width]
+            f"{int(t.get('core_sensitivity_runs', 0))} AD sensitivity runs"
         )
     if "search_s" in t:
         lines.append(
             f"search {t['search_s']:.2f} s: sensitivities {t.get('sensitivities_s', 0):.2f} s, line search "
-            f"{t.get('line_search_s', 0):.2f} s, bookkeeping {t.get('bookkeeping_s', 0):.2f} s"[:width]
+            f"{t.get('line_search_s', 0):.2f} s, bookkeeping {t.get('bookkeeping_s', 0):.2f} s"
         )
     if "grid_s" in t:
-        lines.append(f"GRID {t['grid_s']:.2f} s ({t.get('grid_trajectories_per_s', 0):.0f} trajectories/s)"[:width])
+        lines.append(f"GRID {t['grid_s']:.2f} s ({t.get('grid_trajectories_per_s', 0):.0f} trajectories/s)")
     if a.get("reference_deck"):
         lines.append(f"reference deck: {a['reference_deck']}")
-    return "\n".join(lines)
+    return "\n".join(fit_line(line, width) for line in lines)
 
 
 _MODE_MARKER = {"T": "o", "O": "s", "T+O": "^"}

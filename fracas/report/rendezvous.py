@@ -18,7 +18,7 @@ import numpy as np
 from fracas.products import RendezvousProduct
 from fracas.report._tables import fit_line
 
-__all__ = ["rms_table", "summary_text", "plot_rendezvous", "report_times", "run_consistency"]
+__all__ = ["rms_table", "summary_text", "plot_rendezvous", "rendezvous_figure", "report_times", "run_consistency"]
 
 _GROUPS = ("chaser_r", "chaser_v", "target_r", "target_v", "relative_r", "relative_v")
 
@@ -153,16 +153,14 @@ def summary_text(product: RendezvousProduct, width: int = 80) -> str:
     return "\n".join(fit_line(line, width) for line in lines)
 
 
-def plot_rendezvous(product: RendezvousProduct, path: str | Path) -> list[Path]:
+def rendezvous_figure(product: RendezvousProduct):
     """One PNG: RMS chaser, target and relative position errors and the relative velocity
     error against time for each role (TEAM's true RMS solid, the filter's belief dashed), the
-    single runs' sample RMS as dots, resets and maneuvers marked."""
+    single runs' sample RMS as dots, resets and maneuvers marked; the figure (not saved)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from fracas.io.atomic import savefig_atomic
 
     u = product.length_unit
     f = 1.0 / product.km_per_unit
@@ -202,6 +200,17 @@ def plot_rendezvous(product: RendezvousProduct, path: str | Path) -> list[Path]:
         fontsize=9,
     )
     fig.tight_layout()
-    out = [savefig_atomic(fig, Path(path), dpi=110)]
-    plt.close(fig)
-    return out
+    return fig
+
+
+def plot_rendezvous(product: RendezvousProduct, path: str | Path) -> list[Path]:
+    """One PNG of :func:`rendezvous_figure` at ``path``; returns [path]."""
+    import matplotlib.pyplot as plt
+
+    from fracas.io.atomic import savefig_atomic
+
+    fig = rendezvous_figure(product)
+    try:
+        return [savefig_atomic(fig, Path(path), dpi=110)]
+    finally:
+        plt.close(fig)

@@ -364,6 +364,8 @@ def bplane_figure(r: dict, n: int = 361):
     if not gs:
         return None
     plt = _plt()
+    from matplotlib.ticker import MaxNLocator
+
     cols = min(len(gs), 3)
     rows = math.ceil(len(gs) / cols)
     fig, axes = plt.subplots(rows, cols, figsize=(5.4 * cols, 5.4 * rows + 0.4), squeeze=False, layout="constrained")
@@ -406,8 +408,10 @@ def bplane_figure(r: dict, n: int = 361):
             ins.set_ylim(-lim, lim)
             ins.set_aspect("equal")
             ins.tick_params(labelsize=6)
+            ins.xaxis.set_major_locator(MaxNLocator(3, symmetric=True))
+            ins.yaxis.set_major_locator(MaxNLocator(3, symmetric=True))
             ins.grid(True, alpha=0.3)
-            ins.set_title(f"zoom ×{outer / inner:.0f}, ±{lim:.3g} {ut}", fontsize=7)
+            ins.set_title(f"zoom on the aim point (×{outer / inner:.0f})", fontsize=7)
             ax.indicate_inset_zoom(ins, edgecolor="0.3")
     for ax in list(axes.flat)[len(gs) :]:
         ax.set_visible(False)

@@ -325,7 +325,8 @@ def test_resume_runs_only_the_missing_studies(serial, study_dir, monkeypatch):
     table = half.resolve(half.output.table)
     rows = [dict(r) for r in res0.rows if r["index"] in (1, 3)]
     units = read_sweep_table(res0.table).units
-    write_sweep_table(table, rows, [FIELD], OUTPUTS, units, {"title": "partial"})
+    bh = base_hash(load_team_deck(study_dir / "team_small.toml"))  # the table is this study's
+    write_sweep_table(table, rows, [FIELD], OUTPUTS, units, {"title": "partial", "base_hash": bh})
     calls = []
     real = pipeline.run_team
     monkeypatch.setattr(pipeline, "run_team", lambda cfg, **kw: calls.append(1) or real(cfg, **kw))

@@ -170,7 +170,28 @@ def _input_problems(path: Path, src: str, field: str, rel: str, kind: str, thash
                     src, field, rel, f"was built from another trajectory (hash {str(got)[:12]}, this one {thash[:12]})"
                 )
             ]
-    return []
+    why = _content_problem(path, kind)
+    return [_line(src, field, rel, why)] if why else []
+
+
+def _content_problem(path: Path, kind: str) -> str | None:
+    """What a run would refuse inside the file: its reader's checks (every dataset there,
+    dtypes, shapes, finite values, checksums, schema version), or None."""
+    from fracas.errors import FracasError  # noqa: PLC0415
+
+    try:
+        if kind == "fracas-stm":
+            from fracas.io.stm_file import read_stm_file  # noqa: PLC0415
+
+            read_stm_file(path)
+        elif kind == "fracas-punch":
+            from fracas.io.team_results import read_punch  # noqa: PLC0415
+
+            read_punch(path, "")
+    except FracasError as exc:
+        msg = str(exc)
+        return msg.split(f"{path}", 1)[-1].lstrip('": ') or msg  # the reason, without the path
+    return None
 
 
 def _trajectory_problems(tdeck: TrajectoryDeck) -> list[str]:

@@ -27,12 +27,16 @@ Files without the header (written by fracas before the header existed, or by oth
 programs) are still read, but only after a bounded probe: a child process (a fresh Python,
 so a hang or a crash of the HDF5 library cannot take fracas with it) opens the file and
 reads every attribute and every dataset; it is killed after ``FRACAS_HDF5_PROBE_S`` seconds
-(default 30) and the file refused in one line.  This keeps earlier STM files (minutes to
-rebuild) usable, costs ~0.3 s per legacy file (once per process: results are cached by
-inode, size and times), and bounds every read: a sealed file is decoded only if its hash
-holds, an unsealed one only if a disposable process decoded all of it in time.  A file
-changed in place after fracas wrote it (``h5py.File(path, "r+")``, a bit flip) no longer
-matches its hash and is refused; fracas itself never opens its files for writing in place.
+(default 30) and the file refused in one line.  Why a probe rather than refusing such files
+outright: earlier STM files take minutes to rebuild and are intact as a rule, and files
+written by hand (tests, other tools) stay readable; the probe costs ~0.3-1 s per file and
+bounds the decode all the same (a sealed file is decoded only if its hash holds, an
+unsealed one only if a disposable process decoded all of it in time).  A file whose check
+passed is not checked again in the same process while its inode, size, mtime and ctime are
+unchanged (kept only for files whose ctime is 2 s older than the check, so that a later
+change always shows in the ctime).  A file changed in place after fracas wrote it
+(``h5py.File(path, "r+")``, a bit flip) no longer matches its hash and is refused; fracas
+itself never opens its files for writing in place.
 
 Every dataset written by :func:`write` / :func:`write_strings` also carries ``data_sha256``, the
 SHA-256 of its bytes (:func:`digest_array`, :func:`digest_strings`); :class:`Checked` reads
@@ -53,6 +57,7 @@ import stat
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Callable, Iterator
 from importlib import metadata
 from pathlib import Path
@@ -171,7 +176,10 @@ def _parse_header(block: bytes) -> tuple[str, int, str] | str:
 
 
 # files checked in this process: resolved path -> (stat key, how, kind tag); how is "sealed"
-# (hash verified), "legacy" (no header, probed) or "probed" (header or hash wrong, probed)
+# (hash verified), "legacy" (no header, probed) or "probed" (header or hash wrong, probed).
+# Only files whose status last changed _SETTLED_NS before the check are kept: any change after
+# it then gets a later ctime (timestamps can be coarse, a few ms), so the stat key sees it.
+_SETTLED_NS = 2_000_000_000
 _VERIFIED: dict[str, tuple[tuple[int, ...], str, str]] = {}
 _VERIFIED_LOCK = threading.Lock()
 
@@ -232,8 +240,8 @@ def _probe(p: Path, timeout: float) -> str | None:
         r = subprocess.run(cmd, stdin=subprocess.DEVNULL, capture_output=True, timeout=timeout, check=False)
     except subprocess.TimeoutExpired:
         return (
-            f"damaged file: no integrity header (written before fracas sealed its files, or not by "
-            f"fracas), and decoding it did not finish within {timeout:g} s ({PROBE_ENV}): rebuild it"
+            f"no integrity header (written before fracas sealed its files, or not by fracas) and "
+            f"decoding it did not finish within {timeout:g} s (damaged? the limit is {PROBE_ENV}): rebuild it"
         )
     except OSError as exc:
         return f"cannot start the process that checks files without an integrity header: {one_line(exc)}"
@@ -258,6 +266,7 @@ def _check(p: Path, what: str, checksum: bool = True) -> tuple[str | None, str]:
         return f"is a directory, expected a {what or 'file'} (HDF5)", ""
     if not stat.S_ISREG(st.st_mode):
         return f"not a regular file, expected a {what or 'file'} (HDF5)", ""
+    started_ns = time.time_ns()
     key = str(p.resolve())
     with _VERIFIED_LOCK:
         hit = _VERIFIED.get(key)
@@ -298,8 +307,9 @@ def _check(p: Path, what: str, checksum: bool = True) -> tuple[str | None, str]:
         why = _probe(p, probe_timeout_s())
         if why is not None:
             return (f"{damage}; {why}" if damage else why), ""
-    with _VERIFIED_LOCK:
-        _VERIFIED[key] = (_stat_key(st), how, kind)
+    if st.st_ctime_ns < started_ns - _SETTLED_NS:  # a later change gets a new ctime: the key tells
+        with _VERIFIED_LOCK:
+            _VERIFIED[key] = (_stat_key(st), how, kind)
     return None, kind
 
 

@@ -263,7 +263,9 @@ def _attr_str(obj: h5py.HLObject, key: str, default: str = "") -> str:
 def _open(path: str | os.PathLike, verify: bool = True) -> tuple[Path, h5py.File]:
     """Open and check kind and schema (STMRDR's record-0 checks)."""
     src = Path(path)
-    verify_file(src, StmFileError, "STM file", checksum=verify)  # integrity header (or a bounded probe) before h5py
+    if not src.exists():
+        raise StmFileError(f"{src}: no such STM file")
+    verify_file(src, StmFileError, "fracas STM file", checksum=verify)  # integrity header, or a bounded probe
     try:
         f = h5py.File(src, "r")
     except OSError as exc:

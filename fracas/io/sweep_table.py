@@ -141,7 +141,8 @@ def read_sweep_table(path: str | os.PathLike) -> SweepTable:
             version = attr_int(f, "version")
             if version is None or not 1 <= version <= VERSION:
                 raise ResultsFileError(
-                    f"{p}: sweep table version = {f.attrs.get('version')!r}, this fracas reads 1 to {VERSION}"
+                    f"{p}: sweep table version = {version if version is not None else f.attrs.get('version')!r}, "
+                    f"this fracas reads 1 to {VERSION}"
                 )
             ins, outs = attr_strs(f, "input_columns"), attr_strs(f, "output_columns")
             units: dict[str, str] = {}

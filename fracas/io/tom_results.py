@@ -122,7 +122,8 @@ def read_tom_results(path: str | os.PathLike, *, verify: bool = True) -> dict[st
             version = attr_int(f, "schema_version")
             if version is None or not 1 <= version <= TOM_SCHEMA:
                 raise ResultsFileError(
-                    f"{p}: schema_version = {f.attrs.get('schema_version')!r}, this fracas reads 1 to {TOM_SCHEMA}"
+                    f"{p}: schema_version = {version if version is not None else f.attrs.get('schema_version')!r}, "
+                    f"this fracas reads 1 to {TOM_SCHEMA}"
                 )
             c = Checked(f, p, ResultsFileError, verify=verify)
             if not isinstance(f.get("tom"), h5py.Group):

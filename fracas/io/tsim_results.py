@@ -254,7 +254,8 @@ def _open_checked(p: Path, f: h5py.File, kind: str, schema: int, what: str, veri
         )
     version = attr_int(f, "schema_version")
     if version is None or version < 1 or version > schema:
-        raise ResultsFileError(f"{p}: schema_version = {f.attrs.get('schema_version')!r}, expected 1..{schema}")
+        shown = version if version is not None else repr(f.attrs.get("schema_version"))
+        raise ResultsFileError(f"{p}: schema_version = {shown}, this fracas reads 1 to {schema}")
     return Checked(f, p, ResultsFileError, verify=verify)
 
 

@@ -360,6 +360,13 @@ def open_h5(
     raised in the block passes through unchanged."""
     p = Path(path)
     verify_file(p, error, what, checksum=checksum)
+    with _opened(p, error, what) as f:
+        yield f
+
+
+@contextlib.contextmanager
+def _opened(p: Path, error: ErrorType, what: str) -> Iterator[h5py.File]:
+    """h5py.File(p, "r") of a file :func:`verify_file` passed, errors as in :func:`open_h5`."""
     try:
         f = h5py.File(p, "r")
     except (OSError, ValueError, RuntimeError) as exc:
@@ -382,7 +389,7 @@ def read_kind(path: str | os.PathLike, error: ErrorType = ResultsFileError, what
     tag = verify_file(path, error, what)
     if tag:
         return tag
-    with open_h5(path, error, what) as f:
+    with _opened(Path(path), error, what) as f:
         return kind_attr(f)
 
 

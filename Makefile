@@ -34,12 +34,17 @@ demo: $(STAMP)
 	$(BIN)/fracas validate out/imported_earth_mars_team.toml
 	$(BIN)/fracas export out/earth_mars_team.h5 --oem out/earth_mars_team.oem
 
-# the whole suite but the slow reference subset (< 10 min on CI's 2 cores); CI runs both
+# the whole suite but the slow reference subset (< 10 min cold on CI's 2 cores); CI runs both.
+# Two pytest-xdist workers (one per core: XLA compiles on one thread); --dist loadfile keeps a
+# module's tests, and so its module-scoped fixtures and compiled programs, on one worker.
+TEST_WORKERS ?= 2
+PYTEST := $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=20
+
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -m "not slow"
+	$(PYTEST) -m "not slow"
 
 test-slow: $(STAMP)
-	$(BIN)/python -m pytest -q -m slow
+	$(PYTEST) -m slow
 
 bench: $(STAMP)
 	$(BIN)/pip install --quiet -e ".[bench]"

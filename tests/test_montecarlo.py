@@ -56,6 +56,7 @@ def _same(a, b):
         np.testing.assert_array_equal(c, c2, err_msg=k)
 
 
+@pytest.mark.slow  # ~73 s of a cold make test (mostly XLA compilation; issue 22)
 def test_batch_size_and_resume_give_the_same_bits(tmp_path):
     """Tasks of 32 and of 64 missions, and a run killed after its first task and started
     again (resuming from its checkpoint): identical tables and statistics, bit for bit."""

@@ -125,6 +125,7 @@ def test_vary_refuses_bad_values_and_missing_entries(study_dir):
 
 
 # ----------------------------------------------------------------------------- vary
+@pytest.mark.slow  # ~36 s of a cold make test (mostly XLA compilation; issue 22)
 def test_vary_equals_the_deck_edited_by_hand(study_dir, tmp_path):
     base = load_team_deck(study_dir / "team_small.toml")
     v = vary(base, "tracking[1].sigma", 1.5)
@@ -297,6 +298,7 @@ run_sweep(load_sweep_deck(sys.argv[1]), workers=0, max_batch=1, progress=die)
 """
 
 
+@pytest.mark.slow  # ~30 s of a cold make test (mostly XLA compilation; issue 22)
 def test_killed_sweep_restarts_without_redoing_finished_studies(lean, study_dir, monkeypatch):
     import subprocess
     import sys
@@ -486,6 +488,7 @@ targets = ["x", "y", "z"]
 GUIDANCE_OUTPUTS = ["position_rss_km", "tcm1.dv_mean_m_s", "tcm1.dv_99_m_s", "tcm1.dv_rms_m_s", "tcm1.x_sigma_after"]
 
 
+@pytest.mark.slow  # ~49 s of a cold make test (mostly XLA compilation; issue 22)
 def test_guidance_sweep_equals_run_team_one_by_one(study_dir, tmp_path):
     """A study with a [[guidance]] event: its guidance outputs over a sweep of the thrust
     noise (one by one, in process) equal run_team's events; unknown names are one-line

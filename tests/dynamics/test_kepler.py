@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import jax
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
@@ -79,6 +80,7 @@ def test_stumpff_series_and_closed_forms_agree_at_the_switch():
         assert abs(float(c) - c_ref) < 1e-14 and abs(float(s) - s_ref) < 1e-13
 
 
+@pytest.mark.slow  # ~25 s of a cold make test (mostly XLA compilation; issue 22)
 def test_derivatives_match_finite_differences():
     """jacfwd of the conic state w.r.t. (r0, v0, tau, mu) vs central differences (steps
     1e-4 km, 1e-7 km/s, 1e-3 s, 1e-3 km^3/s^2: truncation and roundoff ~1e-9 relative)."""

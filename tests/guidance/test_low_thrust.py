@@ -82,6 +82,7 @@ def _fd_final(pr, x_start, t0, t1, label, h):
     return (xp - xm) / (2 * h)
 
 
+@pytest.mark.slow  # ~92 s of a cold make test (mostly XLA compilation; issue 22)
 def test_control_sensitivity_against_repropagation():
     """S over the guidance arc [t_I = t_on, t_c = t_off] (both switches at the ends) against
     central differences of re-propagated trajectories: k, α, β from x(t_I) to t_c (steps 1e-4,

@@ -173,6 +173,7 @@ LEO = np.array([7000.0, 0.0, 0.0, 0.0, 7.5, 1.0, 1000.0])
 FLYBY = np.array([-90000.0, 30000.0, 10000.0, 3.4, -1.0, -0.45, 1000.0])  # hyperbolic, approaching
 
 
+@pytest.mark.slow  # ~34 s of a cold make test (mostly XLA compilation; issue 22)
 @pytest.mark.parametrize(
     "x_c, t_f, names",
     [

@@ -132,6 +132,7 @@ exhaust_velocity_km_s = 30.0
     assert abs(xb[6] - 1000.0) < 1e-9
 
 
+@pytest.mark.slow  # ~22 s of a cold make test (mostly XLA compilation; issue 22)
 def test_backward_radius_stop_at_the_kepler_time():
     """Two-body ellipse (a = 10000 km, e = 0.2) from M = 90 deg backward to r = 9000 km:
     stops where Kepler's equation puts it, E = 60 deg (time within 1 ms, radius within 1 mm)."""

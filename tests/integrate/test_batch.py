@@ -68,6 +68,7 @@ def test_chunk_rows():
     assert chunk_rows(1, 1024, 2) == 2
 
 
+@pytest.mark.slow  # ~25 s of a cold make test (mostly XLA compilation; issue 22)
 def test_grouped_lanes_come_back_in_the_callers_order():
     """group_lanes sorts the lanes by their expected step count before chunking; each output
     row is still the propagation of the caller's row (the same numbers as ungrouped)."""
@@ -113,6 +114,7 @@ def test_chunking_with_padding_gives_the_same_results():
     np.testing.assert_array_equal(chunked.status, whole.status)
 
 
+@pytest.mark.slow  # ~25 s of a cold make test (mostly XLA compilation; issue 22)
 def test_batched_params_match_single_propagations():
     x0s = _states(3, seed=2)
     mus = np.array([[398600.4418], [398600.0], [398601.0]])

@@ -105,6 +105,7 @@ def test_radius_stop_during_a_thrust_arc(kind):
     assert abs(float(tr.x_final[6]) - sol.y_events[0][0][6]) < 1e-6
 
 
+@pytest.mark.slow  # ~36 s of a cold make test (mostly XLA compilation; issue 22)
 @pytest.mark.parametrize("kind", KINDS_NO_ENCKE)
 def test_leaving_earth_sphere_of_influence(kind):
     """Departure at 4 km/s above escape from 7000 km: the primary becomes the Sun where

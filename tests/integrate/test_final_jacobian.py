@@ -14,6 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from fracas.build.trajectory import build_propagation
 from fracas.config.trajectory import load_deck
@@ -33,6 +34,7 @@ def _setup():
     return pr, dx0, dp, np.array([0.0, 0.25 * 86400.0])
 
 
+@pytest.mark.slow  # ~80 s of a cold make test (mostly XLA compilation; issue 22)
 def test_equals_the_stm_and_parameter_matrix_along_the_directions():
     pr, dx0, dp, t_out = _setup()
     x_end, x_u = final_state_jacobian(pr.model, pr.params, pr.ephem, pr.epoch_et_s, pr.x0, t_out[-1], LABELS, dx0, dp)
@@ -43,6 +45,7 @@ def test_equals_the_stm_and_parameter_matrix_along_the_directions():
     assert (np.abs(np.asarray(x_u) - ref) / scale).max() < 1e-8
 
 
+@pytest.mark.slow  # ~0 s of a cold make test (mostly XLA compilation; issue 22)
 def test_matches_central_differences_along_the_directions():
     pr, dx0, dp, t_out = _setup()
     _, x_u = final_state_jacobian(pr.model, pr.params, pr.ephem, pr.epoch_et_s, pr.x0, t_out[-1], LABELS, dx0, dp)

@@ -106,6 +106,7 @@ def _reference_event(x0, event, t_max=30 * DAY):
     return sol.t_events[0][0], sol.y_events[0][0]
 
 
+@pytest.mark.slow  # ~42 s of a cold make test (mostly XLA compilation; issue 22)
 @pytest.mark.parametrize("kind", KINDS_NO_ENCKE)
 def test_sphere_of_influence_entry_is_located(kind):
     """Stop at Mars SOI entry: the time agrees with DOP853's event location to 1e-3 s and the
@@ -124,6 +125,7 @@ def test_sphere_of_influence_entry_is_located(kind):
     assert np.all(np.isnan(np.asarray(tr.x[-1])))  # the requested end was never reached
 
 
+@pytest.mark.slow  # ~74 s of a cold make test (mostly XLA compilation; issue 22)
 @pytest.mark.parametrize("kind", KINDS)
 def test_closest_approach_after_change_of_primary(kind):
     """Change primary to Mars at its SOI, stop at closest approach.  Reference: DOP853 of the

@@ -110,6 +110,7 @@ def leo_sensitivities():
     return m, p, t, ad, var
 
 
+@pytest.mark.slow  # ~78 s of a cold make test (mostly XLA compilation; issue 22)
 def test_variational_stm_equals_the_ad_stm(leo_sensitivities):
     """The explicit variational equations (analytic gravity gradient, AD of J2 and of the
     parameter columns) integrated with the state's stages are the derivative of the same
@@ -128,6 +129,7 @@ def test_variational_stm_equals_the_ad_stm(leo_sensitivities):
         assert np.max(np.abs(pa[..., j] - pv[..., j])) <= 1e-10 * np.max(np.abs(pa[..., j]))
 
 
+@pytest.mark.slow  # ~34 s of a cold make test (mostly XLA compilation; issue 22)
 def test_variational_stm_composes_and_preserves_volume(leo_sensitivities):
     """Without thrust the flow is Hamiltonian: det Phi = 1 (|det - 1| < 1e-9; measured 1.5e-11,
     the integration error at tol 1e-12 over a day), and Phi(1 d, 0) from one segment equals
@@ -143,6 +145,7 @@ def test_variational_stm_composes_and_preserves_volume(leo_sensitivities):
     assert np.max(np.abs(direct - np.asarray(s_v.stm[-1]))) <= 1e-7 * np.max(np.abs(direct))
 
 
+@pytest.mark.slow  # ~12 s of a cold make test (mostly XLA compilation; issue 22)
 def test_variational_columns_match_finite_differences(leo_sensitivities):
     """Every STM and parameter column (mu, J2) against central differences (FRACAS PTRAN) of
     full propagations: 1e-5 relative per column.  The perturbed runs choose their own steps,

@@ -84,6 +84,7 @@ def spiral(kind="fracas"):
     return m, p
 
 
+@pytest.mark.slow  # ~163 s of a cold make test (mostly XLA compilation; issue 22)
 @pytest.mark.parametrize("kind", KINDS_NO_ENCKE)
 def test_stm_and_gravity_parameters_match_finite_differences(kind):
     """LEO with J2 over 6000 s: every STM column and d/dmu, d/dJ2 vs central differences.
@@ -144,6 +145,7 @@ def test_thrust_parameters_match_finite_differences(kind):
     assert np.all(np.abs(par_fd).max(axis=0) > 0)  # every column is live
 
 
+@pytest.mark.slow  # ~125 s of a cold make test (mostly XLA compilation; issue 22)
 @pytest.mark.parametrize("kind", KINDS_NO_ENCKE)
 def test_ballistic_stm_is_volume_preserving(kind):
     """Liouville: det Phi(t, t0) = 1 for a Hamiltonian flow (no thrust).  The Nystrom map is
@@ -167,6 +169,7 @@ def test_ballistic_stm_is_volume_preserving(kind):
     assert devs[0] / devs[1] > 10.0, devs
 
 
+@pytest.mark.slow  # ~34 s of a cold make test (mostly XLA compilation; issue 22)
 @pytest.mark.parametrize("kind", KINDS_NO_ENCKE)
 @settings(max_examples=8, deadline=None)
 @given(frac=st.floats(min_value=0.05, max_value=0.95))

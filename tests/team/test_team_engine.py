@@ -538,6 +538,7 @@ def test_results_file_every_dataset_has_units(punched):
 
 
 # ----------------------------------------------------------------------------- prediction events
+@pytest.mark.slow  # ~37 s of a cold make test (mostly XLA compilation; issue 22)
 def test_prediction_equals_the_propagated_covariance(base):
     """PRED against the engine's own time updates: without thrust noise (so DYNO's
     interval-length dependence plays no part) and with no measurements after 3 d, the

@@ -129,6 +129,7 @@ def test_gencov_true_noise_differs(leo):
     np.testing.assert_allclose(sum(parts.values()), full, rtol=1e-9, atol=1e-12 * np.max(np.abs(full)))
 
 
+@pytest.mark.slow  # ~22 s of a cold make test (mostly XLA compilation; issue 22)
 def test_event_times_do_not_change_the_covariance(leo):
     """The exact integral composes: more events give the same covariance at the shared times."""
     tmp, study, ref, res = leo

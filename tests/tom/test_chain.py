@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from fracas.build.trajectory import build_propagation
@@ -48,6 +49,7 @@ sigma = 1.0
 """
 
 
+@pytest.mark.slow  # ~40 s of a cold make test (mostly XLA compilation; issue 22)
 def test_tom_reference_deck_feeds_team(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # the reference deck goes to out/ of the working directory
     ref = tmp_path / "lambert_reference.toml"

@@ -61,6 +61,7 @@ def test_controls_and_bodies_checked_against_the_trajectory(tmp_path):
         build_tom(parse_tom_deck(text, str(bad)))
 
 
+@pytest.mark.slow  # ~36 s of a cold make test (mostly XLA compilation; issue 22)
 def test_grid_is_one_batch_equal_to_single_propagations(tmp_path):
     """GRID over the Hohmann deck's first two controls (single and paired increments): the
     batched trajectories' targets equal single propagations to 1e-9 of the tolerance, and E

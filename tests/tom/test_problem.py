@@ -58,6 +58,7 @@ def test_event_stop_every_control_kind_against_central_differences():
     assert np.abs(s_ad[case.target_names.index("final_time")]).max() > 0
 
 
+@pytest.mark.slow  # ~63 s of a cold make test (mostly XLA compilation; issue 22)
 def test_impulses_and_final_time_against_central_differences():
     """Two impulses (one at t = 0, applied by the initial carry), the second one's time, and
     the final time as a control (its column is f(x_f) through the targets)."""
@@ -90,6 +91,7 @@ def test_launch_excess_velocity_controls_against_central_differences():
     _check(case)
 
 
+@pytest.mark.slow  # ~34 s of a cold make test (mostly XLA compilation; issue 22)
 def test_bplane_targets_at_closest_approach(tmp_path):
     """B-plane targeting stopped at closest approach (a located event): S against central
     differences, then the search converges, and the impact parameter of the solution's initial

@@ -30,14 +30,15 @@ WIDTH = 80
 def _wrap(text: str, width: int = WIDTH, indent: str = "", more: str = "    ") -> list[str]:
     """``text`` as lines of at most ``width`` columns; continuation lines indented by
     ``indent + more``."""
-    return textwrap.wrap(
+    lines = textwrap.wrap(
         text,
         width,
         initial_indent=indent,
         subsequent_indent=indent + more,
         break_on_hyphens=False,
         break_long_words=False,
-    ) or [indent.rstrip()]
+    )
+    return [s if len(s) <= width else s.lstrip() for s in lines] or [indent.rstrip()]  # a long word: no indent
 
 
 def _fill(text: str, width: int = WIDTH, indent: str = "", more: str = "    ") -> str:
@@ -60,7 +61,7 @@ def _fit_block(text: str, width: int = WIDTH) -> str:
         lead = line[: len(line) - len(line.lstrip())]
         m = _VALUE_COLUMN.match(line)
         hang = " " * len(m.group(1)) if m and len(m.group(1)) <= width // 2 else lead + "    "
-        out += textwrap.wrap(
+        wrapped = textwrap.wrap(
             line.strip(),
             width,
             initial_indent=lead,
@@ -68,6 +69,7 @@ def _fit_block(text: str, width: int = WIDTH) -> str:
             break_on_hyphens=False,
             break_long_words=False,
         )
+        out += [s if len(s) <= width else s.lstrip() for s in wrapped]
     return "\n".join(out)
 
 
@@ -441,7 +443,7 @@ def stm_build(ctx: click.Context, deck: Path, output: Path | None, debug: bool) 
 
         with _progress(True) as stage:
             path, data = build_stm(deck, output, on_stage=stage)
-        click.echo(
+        _say(
             f"written: {path} ({data.n_times} times, {len(data.param_labels)} parameters: "
             f"{', '.join(data.param_labels)})"
         )
@@ -841,7 +843,7 @@ def report(
                 file, plot, as_json, _verbosity(quiet, verbose), None, None, velocity_unit, width, written=False
             )
             return
-        if kind == "fracas sweep table":
+        if kind.replace("?", " ") == "fracas sweep table":  # (the integrity header spells spaces "?")
             _sweep_report(file, plot, as_json)
             return
         if kind == "fracas-stm":
@@ -856,7 +858,13 @@ def report(
                 f"{file}: a TEAM punch file (knowledge covariances for a later deck's a_priori.from_punch), "
                 "not a results file"
             )
-        if kind not in ("fracas-rendezvous-results", "fracas-tsim-results", "fracas-tom-results", "fracas-trajectory"):
+        if kind not in (
+            "fracas-rendezvous-results",
+            "fracas-tsim-results",
+            "fracas-tom-results",
+            "fracas-trajectory",
+            "",
+        ):
             raise ResultsFileError(
                 f"{file}: file kind {kind!r}: expected a trajectory, TEAM, TOM, TSIM, sweep or rendezvous results file"
             )

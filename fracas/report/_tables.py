@@ -44,13 +44,8 @@ def _num_col(t, header: str) -> None:
     t.add_column(header, justify="right", no_wrap=True)
 
 
-def _text_col(t, header: str, justify: str = "left", whole: bool = False) -> None:
-    """A text column; ``whole``: its cells are never wrapped (labels such as
-    ``station_radius_km[goldstone]``: the other columns wrap at word boundaries instead)."""
-    if whole:
-        t.add_column(header, justify=justify, no_wrap=True)
-    else:
-        t.add_column(header, justify=justify, overflow="fold")
+def _text_col(t, header: str, justify: str = "left") -> None:
+    t.add_column(header, justify=justify, overflow="fold")
 
 
 def fit_line(line: str, width: int = 80) -> str:
@@ -62,13 +57,12 @@ def fit_line(line: str, width: int = 80) -> str:
     import textwrap
 
     lead = line[: len(line) - len(line.lstrip())]
-    return "\n".join(
-        textwrap.wrap(
-            line.strip(),
-            width,
-            initial_indent=lead,
-            subsequent_indent=lead + "    ",
-            break_long_words=False,
-            break_on_hyphens=False,
-        )
+    lines = textwrap.wrap(
+        line.strip(),
+        width,
+        initial_indent=lead,
+        subsequent_indent=lead + "    ",
+        break_long_words=False,
+        break_on_hyphens=False,
     )
+    return "\n".join(s if len(s) <= width else s.lstrip() for s in lines)  # a long word: no indent

@@ -122,7 +122,7 @@ def covariance_table(
     sigma, corr, pos_axes, pos_vec, vel_axes, vel_vec = _eigen_at(h, k)
     state = labels[:6]
     t = _table(title, boxed=False)
-    _text_col(t, "", whole=True)
+    _text_col(t, "")
     _num_col(t, "1σ")
     _text_col(t, "unit")
     if correlations:
@@ -284,8 +284,7 @@ def print_team(
         )
     )
     pt = _table("augmented parameters (1σ)")
-    _text_col(pt, "label", whole=True)
-    for c in ("role", "unit"):
+    for c in ("label", "role", "unit"):
         _text_col(pt, c)
     for c in ("a priori\nassumed", "a priori\ntrue", "final\nassumed"):
         _num_col(pt, c)

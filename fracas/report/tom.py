@@ -32,6 +32,18 @@ def _g(x: float, width: int = 14) -> str:
     return f"{x:{width}.8g}"
 
 
+def _shown(path: str) -> str:
+    """A path as the reader would type it: relative to the working directory when it is
+    inside it, else as stored."""
+    import os
+
+    try:
+        rel = os.path.relpath(path)
+    except ValueError:  # another drive
+        return path
+    return rel if not rel.startswith("..") else path
+
+
 def summary_text(res: dict, width: int = 80) -> str:
     """The run's summary: verdict and stop reason, targets, controls, mass, cost split."""
     a = res["attrs"]
@@ -91,7 +103,7 @@ def summary_text(res: dict, width: int = 80) -> str:
     if "grid_s" in t:
         lines.append(f"GRID {t['grid_s']:.2f} s ({t.get('grid_trajectories_per_s', 0):.0f} trajectories/s)")
     if a.get("reference_deck"):
-        lines.append(f"reference deck: {a['reference_deck']}")
+        lines.append(f"reference deck: {_shown(a['reference_deck'])}")
     return "\n".join(fit_line(line, width) for line in lines)
 
 

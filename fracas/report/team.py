@@ -69,6 +69,23 @@ _SHORT_ROLE = {"dynamic_consider": "dyn_consider", "measurement_consider": "meas
 _NORMAL_EVENTS = ("initial", "thrust_on", "thrust_off", "eigenvector", "prediction", "punch", "final")
 
 
+def _breakable_where_too_wide(rows: list[list[str]], width: int) -> list[list[str]]:
+    """The parameter table's rows, with break points where the table is wider than ``width``.
+
+    Rows are (label, role, unit, three numbers).  When the widest cells need more than
+    ``width`` columns, a label may wrap before its bracket (``station_radius_km`` /
+    ``[goldstone]``) and a role at its underscore (``meas`` / ``consider``), so that rich never
+    folds a word in the middle (``station_radius_km[go`` / ``ldstone]``).  A table that fits is
+    printed as before.
+    """
+    if not rows:
+        return rows
+    natural = sum(max(len(r[j]) for r in rows) for j in range(6)) + 3 * 5 + 9 * 3  # separators; headers
+    if natural <= width:
+        return rows
+    return [[r[0].replace("[", " ["), r[1].replace("_", " "), *r[2:]] for r in rows]
+
+
 def load(path) -> dict:
     """The results file's contents (a one-line error if it is missing or not a results file)."""
     from fracas.io.team_results import read_team_results
@@ -288,19 +305,24 @@ def print_team(
         _text_col(pt, c)
     for c in ("a priori\nassumed", "a priori\ntrue", "final\nassumed"):
         _num_col(pt, c)
+    rows = []
     for i in range(nx, len(labels)):
         if roles[i] == "noise_state":
             continue
         f, u = _unit(units[i], vu)
         true0 = T["a_priori_sigma"][i] if gencov else A["a_priori_sigma"][i]
-        pt.add_row(
-            escape(labels[i]),
-            _SHORT_ROLE.get(roles[i], roles[i]),
-            escape(u),
-            _fmt(A["a_priori_sigma"][i] * f),
-            _fmt(true0 * f),
-            _fmt(A["sigma"][-1][i] * f),
+        rows.append(
+            [
+                labels[i],
+                _SHORT_ROLE.get(roles[i], roles[i]),
+                u,
+                _fmt(A["a_priori_sigma"][i] * f),
+                _fmt(true0 * f),
+                _fmt(A["sigma"][-1][i] * f),
+            ]
         )
+    for row in _breakable_where_too_wide(rows, con.width):
+        pt.add_row(*(escape(c) for c in row))
     con.print(pt)
 
     m = r["measurements"]

@@ -235,10 +235,14 @@ def _baseline_module(tmp_path):
 
 @pytest.mark.parametrize("verbosity", ["quiet", "normal", "verbose"])
 def test_old_file_prints_as_before(old, tmp_path, verbosity):
+    """A file without the guidance keys prints what the report printed before guidance existed,
+    on a terminal wide enough for every table (200 columns).  At 80 columns one declared change
+    (issue 22): a parameter table too wide for the terminal now breaks labels before their
+    bracket and roles at their underscore instead of folding a word mid-way (tests/test_first_run.py)."""
     base = _baseline_module(tmp_path)
     for unit in ("mm/s", "m/s"):
-        assert render(old, verbosity=verbosity, velocity_unit=unit) == render(
-            old, module=base, verbosity=verbosity, velocity_unit=unit
+        assert render(old, width=200, verbosity=verbosity, velocity_unit=unit) == render(
+            old, width=200, module=base, verbosity=verbosity, velocity_unit=unit
         )
 
 

@@ -116,8 +116,9 @@ def test_iteration_limit_writes_the_best_iterate_and_says_so(tmp_path, monkeypat
     res = read_tom_results(tmp_path / "o.h5")
     assert res["attrs"]["converged"] == 0 and "iteration limit" in res["attrs"]["stop_reason"]
     assert Path(res["attrs"]["reference_deck"]).exists()
-    # every line of the terminal summary fits 80 columns
-    assert max(len(line) for line in r.stdout.splitlines()) <= 80
+    # every line of the terminal summary fits 80 columns (the layout, measured with the
+    # temporary folder's path written short: pytest-xdist's paths alone are ~80 characters)
+    assert max(len(line) for line in r.stdout.replace(str(tmp_path), "<tmp>").splitlines()) <= 80
 
 
 def test_smag_given_sensitivities_are_used_at_the_first_iteration(tmp_path):

@@ -172,6 +172,7 @@ def _expected(base, value, tmp_path):
     }
 
 
+@pytest.mark.slow  # ~90 s of a cold make test (four single-study sweeps compiled and run; issue 22)
 def test_serial_sweep_equals_the_studies_run_one_by_one(serial, one_by_one, study_dir, tmp_path):
     cfg, res, _ = serial
     assert [r["status"] for r in res.rows] == ["ok"] * 4 and res.ran == [0, 1, 2, 3]

@@ -7,7 +7,8 @@
 * every line a command prints on a terminal fits 80 columns and no word is broken (the
   tokens of each 80-column printout are tokens of the same printout 400 columns wide).
 
-One module fixture runs every mode once (in process: they share the warm compile cache).
+One module fixture runs each mode once, on first use (in process: they share the compiled
+programs); the TSIM cases are in the slow subset.
 """
 
 from __future__ import annotations
@@ -66,29 +67,42 @@ def terminal():
     mp.undo()
 
 
+class _Runs(dict):
+    """mode -> (result, output folder, working directory, listings of the watched folders
+    before): each mode run once, on first use, with -o <mode>/x.h5 from an empty working
+    directory (so a deselected mode costs nothing)."""
+
+    def __init__(self, root: Path):
+        super().__init__()
+        self.root = root
+
+    def __missing__(self, mode: str):
+        args, _ = RUNS[mode]
+        cwd, dest = self.root / f"{mode}_cwd", self.root / mode
+        cwd.mkdir()
+        dest.mkdir()
+        before = {str(w): _listing(w) for w in WATCHED}
+        old = os.getcwd()
+        os.chdir(cwd)
+        try:
+            res = CliRunner().invoke(main, [*args, "-o", str(dest / "x.h5")])
+        finally:
+            os.chdir(old)
+        self[mode] = (res, dest, cwd, before)
+        return self[mode]
+
+
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory, terminal):
-    """Every mode run once with -o <mode>/x.h5 from an empty working directory: mode ->
-    (result, output folder, working directory, listings of the watched folders before)."""
-    root = tmp_path_factory.mktemp("runs")
-    out = {}
-    old = os.getcwd()
-    try:
-        for mode, (args, _) in RUNS.items():
-            cwd, dest = root / f"{mode}_cwd", root / mode
-            cwd.mkdir()
-            dest.mkdir()
-            before = {str(w): _listing(w) for w in WATCHED}
-            os.chdir(cwd)
-            res = CliRunner().invoke(main, [*args, "-o", str(dest / "x.h5")])
-            os.chdir(old)
-            out[mode] = (res, dest, cwd, before)
-    finally:
-        os.chdir(old)
-    return out
+    return _Runs(tmp_path_factory.mktemp("runs"))
 
 
-@pytest.mark.parametrize("mode", list(RUNS))
+# TSIM's first run compiles its mission programs (~60 s of a cold make test): its cases run in
+# the slow subset (tests/test_montecarlo.py runs a TSIM deck through the CLI in the fast one).
+MODES = [pytest.param(m, marks=pytest.mark.slow) if m == "tsim" else m for m in RUNS]
+
+
+@pytest.mark.parametrize("mode", MODES)
 def test_every_output_goes_where_o_says(runs, mode):
     res, dest, cwd, before = runs[mode]
     assert res.exit_code == 0, res.output
@@ -122,7 +136,7 @@ def test_tom_reference_deck_option_and_team_trajectory_deck(runs, tmp_path):
     assert ref.is_file()
 
 
-@pytest.mark.parametrize("mode", list(RUNS))
+@pytest.mark.parametrize("mode", MODES)
 def test_report_names_the_kind_and_writes_nothing(runs, mode):
     dest = runs[mode][1]
     before = _listing(dest)
@@ -154,7 +168,7 @@ def _fits(text: str, what: str) -> None:
     assert "…" not in text, f"{what}: something was cut"
 
 
-@pytest.mark.parametrize("mode", list(RUNS))
+@pytest.mark.parametrize("mode", MODES)
 def test_run_output_fits_80_columns(runs, mode):
     _fits(runs[mode][0].output, f"fracas {RUNS[mode][0][0]} ({mode})")
 
@@ -172,7 +186,7 @@ def _same_words(args: list[str], terminal, wide_args: list[str] = ()) -> None:
     assert not broken, f"{' '.join(args[:2])}: words broken at 80 columns: {sorted(broken)[:10]}"
 
 
-@pytest.mark.parametrize("mode", list(RUNS))
+@pytest.mark.parametrize("mode", MODES)
 def test_report_fits_80_columns_without_breaking_words(runs, mode, terminal):
     _same_words(["report", str(runs[mode][1] / "x.h5"), "--width", "80"], terminal, ["--width", "400"])
 

@@ -191,6 +191,7 @@ def test_serial_sweep_equals_the_studies_run_one_by_one(serial, one_by_one, stud
     assert head.startswith("index,key,thrust_noise.proportionality.sigma [1],position_rss_km [km]")
 
 
+@pytest.mark.slow  # ~43 s of a cold make test (issue 22)
 def test_unbatched_sweep_is_run_team_exactly(study_dir, tmp_path):
     cfg = make_deck(study_dir, VALUES[:2], table="unbatched.h5", name="unbatched.toml")
     res = run_sweep(cfg, workers=0, batch=False)

@@ -246,6 +246,7 @@ def _prior_only(study, ref, res):
     return run_filter(study, phi, Qa, Qt, none)[1]
 
 
+@pytest.mark.slow  # the horizon example deck: ~25 s of a cold make test (issue 22)
 def test_example_horizon_data_shrink_the_position_knowledge(example):
     study, ref, res = example
     P_prior = _prior_only(study, ref, res)
@@ -257,6 +258,7 @@ def test_example_horizon_data_shrink_the_position_knowledge(example):
     assert math.sqrt(res.Pa_plus[-1][i_gam, i_gam]) < 0.5 * 2.0  # gamma_H is observed
 
 
+@pytest.mark.slow  # the horizon example deck: ~25 s of a cold make test (issue 22)
 def test_example_regression_numbers(example):
     """Regression (this code's output at the time of writing, not a reference): the final
     position RSS and the horizon-altitude sigma of the example."""

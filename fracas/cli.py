@@ -517,9 +517,15 @@ def _print_options(f):
     "--workers",
     type=click.IntRange(0, 256),
     default=None,
-    help="TSIM: Dask LocalCluster worker processes (default, 0 or 1: in this process).",
+    help="TSIM and sweep decks: Dask LocalCluster worker processes (TSIM default, 0 or 1: in this "
+    "process; a sweep's default is one worker per core, 0 in this process).",
 )
-@click.option("--scheduler", metavar="ADDRESS", default=None, help="TSIM: run on an existing Dask cluster (tcp://...).")
+@click.option(
+    "--scheduler",
+    metavar="ADDRESS",
+    default=None,
+    help="TSIM and sweep decks: run on an existing Dask cluster (tcp://...).",
+)
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
 @click.pass_context
 def run(
@@ -555,8 +561,8 @@ def run(
             raise DeckError(f'{deck}: --reference-deck is for TOM decks (mode = "tom"); this is a {mode} deck')
         if trajectory_deck is not None and mode != "team":
             raise DeckError(f'{deck}: --trajectory-deck is for TEAM decks (mode = "team"); this is a {mode} deck')
-        if mode == "sweep":
-            _run_sweep(deck, (), None, None, True, output)
+        if mode == "sweep":  # --workers / --scheduler choose where its studies run, as for fracas sweep
+            _run_sweep(deck, (), workers, scheduler, True, output)
             return
         if mode == "tom":
             if stm_file is not None:
@@ -788,7 +794,7 @@ def _team_report(
     if png is not None:
         if stage is not None:
             stage("plotting")
-        plots = plot_all(r, png)
+        plots = plot_all(r, png, velocity_unit)  # the printout's units (ΔV in m/s in both)
     if as_json:
         out = summary_dict(r)
         out["timing_s"].update({k: round(float(v), 4) for k, v in (extra_timing or {}).items()})

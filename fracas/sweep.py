@@ -480,7 +480,10 @@ def run_sweep(
     fields = cfg.fields
     outputs = list(sw.outputs)
     out = check_output_path(table if table is not None else _table_path(cfg), "sweep table")
-    plot = check_output_path(cfg.resolve(cfg.output.plot), "plot") if cfg.output.plot else None
+    # -o decides where every output goes: with a table path given, the deck's plot and results
+    # folder keep their names but go beside it (the STM file the deck names stays where it says)
+    beside = (lambda p: out.parent / Path(p).name) if table is not None else cfg.resolve
+    plot = check_output_path(beside(cfg.output.plot), "plot") if cfg.output.plot else None
     bh = base_hash(base)
     studies = cfg.studies()
     keys = [study_key(bh, fields, v) for v in studies]
@@ -505,7 +508,7 @@ def run_sweep(
         stm = str(stm_path)
     res_dir = None
     if sw.keep_results:
-        res_dir = cfg.resolve(sw.results_folder) if sw.results_folder else out.parent / f"{out.stem}_results"
+        res_dir = beside(sw.results_folder) if sw.results_folder else out.parent / f"{out.stem}_results"
         res_dir.mkdir(parents=True, exist_ok=True)
     attrs = {"title": cfg.title, "base_hash": bh, "study": str(base.source_path), "combine": sw.combine}
 

@@ -39,10 +39,12 @@ RUNS = {
         "sweep table",
     ),
     "rendezvous": (["run", str(DATA / "rendezvous_small.toml"), *NARROW], "rendezvous results file"),
+    # a sweep deck naming its table, plot and results folder (under out/): -o moves them all
+    "sweep_deck": (["run", str(DATA / "sweep_small.toml"), "--workers", "0"], "sweep table"),
 }
 WATCHED = [DATA, REPO / "namelists", REPO / "out", REPO / "stm_files"]
 SHARED = (REPO / "out", REPO / "stm_files")  # the default folders: compared by the names this test's runs would use
-STEMS = ("team_small", "hohmann", "tsim_small", "tsim_team", "rendezvous_small", "apollo12", "x.", "x_")
+STEMS = ("team_small", "sweep_small", "hohmann", "tsim_small", "tsim_team", "rendezvous_small", "apollo12", "x.", "x_")
 
 
 def _listing(folder: Path) -> dict[str, int]:
@@ -117,6 +119,8 @@ def test_every_output_goes_where_o_says(runs, mode):
     written = set(_listing(dest))
     if mode == "tom":  # the optimized reference deck goes beside -o too
         assert "hohmann_tom_reference.toml" in written, written
+    if mode == "sweep_deck":  # the deck's plot and kept results go beside -o too
+        assert "sweep_small.png" in written and any(n.startswith("sweep_small_results") for n in written), written
 
 
 def test_tom_reference_deck_option_and_team_trajectory_deck(runs, tmp_path):

@@ -18,6 +18,7 @@ import numpy as np
 from fracas.constants import AU_KM, BODIES, DAY_S, OBLIQUITY_J2000_RAD
 from fracas.io.trajectory_file import TrajectoryData
 from fracas.report._conic import dense_path, osculating_aei
+from fracas.report._tables import fit_line
 from fracas.status import RunStatus, status_text
 
 __all__ = ["print_summary", "summary_table", "plot_trajectory", "trajectory_figure"]
@@ -88,12 +89,9 @@ def print_summary(data: TrajectoryData, path: str | Path | None = None, console=
         sd = data.sensitivities
         cols = ", ".join(sd.param_labels) if sd.param_labels else "none"
         n = sd.stm.shape[0]
-        console.print(
-            f"sensitivities: STM (n={n}, 7x7) and parameter matrices, columns: {cols}",
-            markup=False,
-            highlight=False,
-            soft_wrap=True,
-        )
+        line = f"sensitivities: STM (n={n}, 7x7) and parameter matrices, columns: {cols}"
+        # wrapped at word boundaries to the console's width (a label is never folded mid-way)
+        console.print(fit_line(line, console.width), markup=False, highlight=False, soft_wrap=True)
     if path is not None:
         console.print(f"written: {path}", markup=False, highlight=False, soft_wrap=True)
 

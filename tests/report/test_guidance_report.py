@@ -267,6 +267,25 @@ def test_new_sections_only_inserted(old, syn, verbosity):
 # --- command line --------------------------------------------------------------------------------
 
 
+@pytest.mark.parametrize("unit", ["m/s", "mm/s", "km/s"])
+def test_velocity_unit_reaches_the_plots(old, monkeypatch, tmp_path, unit):
+    """--velocity-unit sets the unit of every velocity in the printout and in the plots alike
+    (issue 22: the same quantity in the same unit on the terminal and in a plot)."""
+    from fracas.cli import main
+
+    seen = {}
+
+    def fake_plot_all(r, png, velocity_unit="mm/s", dv_unit="m/s"):
+        seen.update(velocity_unit=velocity_unit, dv_unit=dv_unit)
+        return []
+
+    monkeypatch.setattr(team_report, "plot_all", fake_plot_all)
+    png = tmp_path / "u.png"
+    res = CliRunner().invoke(main, ["report", old["path"], "--plot", str(png), "--velocity-unit", unit, "--quiet"])
+    assert res.exit_code == 0, res.output
+    assert seen == {"velocity_unit": unit, "dv_unit": "m/s"}  # ΔV: m/s in the printout's guidance table too
+
+
 def test_report_command_plots_and_prints_paths(old, monkeypatch, tmp_path):
     from fracas.cli import main
 

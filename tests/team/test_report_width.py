@@ -94,3 +94,25 @@ def test_trajectory_summary_fits_80_columns(tmp_path):
     for i in range(3):
         assert f"{float(data.r_final_km[i]):.9g}" in tokens and f"{float(data.v_final_km_s[i]):.9g}" in tokens
     assert f"{np.linalg.norm(data.r_final_km):.6f}" in tokens
+
+
+def test_trajectory_sensitivities_line_wraps_at_word_boundaries(tmp_path):
+    """The summary's "sensitivities:" line with many parameter columns wraps to 80 columns at
+    word boundaries: every label printed whole (issue 22: no line over 80, no word folded)."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from fracas.io.trajectory_file import read_trajectory_file
+    from fracas.pipeline import propagate_deck
+    from fracas.report.trajectory import print_summary
+
+    _, path = propagate_deck(SMALL.parent / "team_small_traj.toml", tmp_path / "traj.h5")
+    labels = ["mu[sun]", "thrust_scale", "bias_in_rad", "bias_out_rad", "station_radius_km[goldstone]"] * 4
+    sens = SimpleNamespace(param_labels=labels, stm=np.zeros((3, 7, 7)))
+    data = dataclasses.replace(read_trajectory_file(path), sensitivities=sens)
+    con = Console(width=80, record=True, file=open("/dev/null", "w"))  # noqa: SIM115
+    print_summary(data, None, console=con)
+    text = con.export_text()
+    assert max(map(len, text.splitlines())) <= 80
+    words = " ".join(text[text.index("sensitivities:") :].split())
+    assert words == f"sensitivities: STM (n=3, 7x7) and parameter matrices, columns: {', '.join(labels)}"

@@ -229,6 +229,7 @@ def test_numeric_and_structural_fields():
         assert not is_numeric_field(f), f
 
 
+@pytest.mark.slow  # ~47 s of a cold make test (issue 22)
 def test_mixed_sweep_batches_each_schedule(study_dir, tmp_path, monkeypatch):
     """filter.stop_days (structural) x the noise sigma (numeric): two batched groups, each one
     batched call; the numbers equal run_team one by one."""

@@ -111,6 +111,7 @@ def test_control_sensitivity_against_repropagation():
     assert np.isclose(np.linalg.norm(s[3:6, 4]), thrust / x_c[6], rtol=1e-12)
 
 
+@pytest.mark.slow  # ~25 s of a cold make test (issue 22)
 def test_gauss_spiral_and_nulling():
     """Digest G4 on a circular coplanar tangential spiral: A_T(a) Φ(t_f, t_c) S[:, t_off]
     equals Gauss's 2a²(v·f)/μ at t_c to 1e-8 (the energy equation, exact; measured 2.4e-9, the

@@ -849,7 +849,7 @@ def report(
                 file, plot, as_json, _verbosity(quiet, verbose), None, None, velocity_unit, width, written=False
             )
             return
-        if kind.replace("?", " ") == "fracas sweep table":  # (the integrity header spells spaces "?")
+        if kind == "fracas sweep table":
             _sweep_report(file, plot, as_json)
             return
         if kind == "fracas-stm":

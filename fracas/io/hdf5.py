@@ -137,7 +137,7 @@ def seal(path: str | os.PathLike, kind: str = "") -> str:
     header's own SHA-256.  Returns the data SHA-256 (hex).  Also re-seals a file changed on
     purpose (tests that build damaged-but-consistent files)."""
     p = Path(path)
-    kind = re.sub(r"[^\x21-\x7e]", "?", kind)[:100]
+    kind = re.sub(r"[^\x20-\x7e]", "?", kind)[:100]  # printable ASCII, spaces kept
     with open(p, "r+b") as fh:
         length = os.fstat(fh.fileno()).st_size
         fh.seek(USERBLOCK_SIZE)
@@ -167,7 +167,7 @@ def _parse_header(block: bytes) -> tuple[str, int, str] | str:
     m = re.fullmatch(rb"header_sha256 ([0-9a-f]{64})", lines[4])
     if m is None or hashlib.sha256(MAGIC + body).hexdigest().encode() != m.group(1):
         return "integrity header does not match its own checksum"
-    kind = re.fullmatch(rb"kind ([\x21-\x7e]*)", lines[1])
+    kind = re.fullmatch(rb"kind ([\x20-\x7e]*)", lines[1])
     length = re.fullmatch(rb"length ([0-9]{1,18})", lines[2])
     sha = re.fullmatch(rb"sha256 ([0-9a-f]{64})", lines[3])
     if kind is None or length is None or sha is None:

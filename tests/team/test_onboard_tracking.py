@@ -124,6 +124,7 @@ def small():
     return study, ref, assemble_measurements(study, ref)
 
 
+@pytest.mark.slow  # its module fixture: ~22 s of a cold make test (issue 22)
 def test_count_starts_are_event_free_schedule_times(small):
     study, ref, meas = small
     sched = study.schedule
@@ -138,6 +139,7 @@ def test_count_starts_are_event_free_schedule_times(small):
     assert first and not first[0].used  # the count at t = 0 started before the study: skipped
 
 
+@pytest.mark.slow  # its module fixture: ~22 s of a cold make test (issue 22)
 def test_doppler_count_row_is_the_exact_stm_form_near_the_short_arc_limit(small):
     """H row of a 60 s count (q = rho(t_M) - rho(t0)) against the exact STM form with Phi(t0, t_M)
     expanded in dt_c: Phi_rr = I + dt^2 G / 2, Phi_rv = -dt I - dt^3 G / 6, G = mu (3 i i^T - I)
@@ -184,6 +186,7 @@ def _gravity_gradient(r, mu):
     return mu * (3.0 * np.outer(i_r, i_r) - np.eye(3)) / np.linalg.norm(r) ** 3
 
 
+@pytest.mark.slow  # its module fixture: ~22 s of a cold make test (issue 22)
 def test_onboard_rows_are_the_model_partials(small):
     study, ref, meas = small
     nx = study.nx
@@ -218,6 +221,7 @@ def test_onboard_rows_are_the_model_partials(small):
             assert np.linalg.norm(h[:3]) > 0.0
 
 
+@pytest.mark.slow  # its module fixture: ~22 s of a cold make test (issue 22)
 def test_onboard_data_shrink_the_knowledge(small):
     study, ref, _ = small
     res = run_study(study, ref)

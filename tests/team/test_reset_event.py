@@ -40,6 +40,7 @@ def runs():
     return (base, run_study(base, ref_b)), (reset, ref_r, run_study(reset, ref_r))
 
 
+@pytest.mark.slow  # its module fixture: ~22 s of a cold make test (issue 22)
 def test_reset_sets_the_filter_state_block_and_leaves_the_truth(runs):
     (base, rb), (study, ref, rr) = runs
     times = study.schedule.times_s
@@ -60,6 +61,7 @@ def test_reset_sets_the_filter_state_block_and_leaves_the_truth(runs):
     assert not np.allclose(rr.Pt_plus[-1], rb.Pt_plus[-1], rtol=1e-6)
 
 
+@pytest.mark.slow  # its module fixture: ~22 s of a cold make test (issue 22)
 def test_true_covariance_after_reset_uses_the_reset_filters_gain(runs):
     _, (study, ref, rr) = runs
     meas = rr.meas
@@ -97,6 +99,7 @@ def test_reset_needs_generalized_covariance():
         parse_team_deck(text, str(DECK))
 
 
+@pytest.mark.slow  # its module fixture: ~22 s of a cold make test (issue 22)
 def test_square_root_mode_resets_the_same_way(runs):
     """The W-matrix mode refactors the reset covariance; its history equals the covariance
     form's (1e-8 relative: the QR time and measurement updates round differently)."""

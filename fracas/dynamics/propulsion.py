@@ -50,12 +50,14 @@ def velocity_frame(r, v):
     return jnp.stack([x, y, z], axis=1)
 
 
-def _frame_axes(r, v):
+def _frame_axes(r, v, h=None):
     """The three axes of :func:`velocity_frame` (unit vectors by sqrt(1/|.|^2): no float64
-    rsqrt, which XLA CPU does not vectorise)."""
-    h = jnp.cross(r, v)
-    x = v * jnp.sqrt(1.0 / dot3(v, v))
-    z = h * jnp.sqrt(1.0 / dot3(h, h))
+    rsqrt, which XLA CPU does not vectorise; one division for both norms)."""
+    h = jnp.cross(r, v) if h is None else h
+    vv, hh = dot3(v, v), dot3(h, h)
+    inv = 1.0 / (vv * hh)
+    x = v * jnp.sqrt(hh * inv)
+    z = h * jnp.sqrt(vv * inv)
     return x, jnp.cross(z, x), z
 
 
@@ -65,19 +67,21 @@ def angles_to_unit(alpha, beta):
     return jnp.stack([cb * jnp.cos(alpha), cb * jnp.sin(alpha), jnp.sin(beta)])
 
 
-def thrust_direction(r, v, alpha, beta, frame):
+def thrust_direction(r, v, alpha, beta, frame, u_angles=None):
     """Unit thrust vector in the inertial frame.
 
     ``frame`` (float code, as ``Params.arc_frame``): 0 velocity frame, 1 inertial RA/Dec
     pointing, 2 velocity frame with the out-of-plane sign switched at the antinodes (module
-    docstring)."""
+    docstring).  ``u_angles``: ``angles_to_unit(alpha, beta)`` when already known (the
+    integrator computes it once per step, so its stages do no trigonometry); the yaw switch
+    flips its third component (sin beta is odd, cos beta even)."""
     inertial = (frame > 0.5) & (frame < 1.5)
     switch = frame > 1.5
     h = jnp.cross(r, v)
     sign_cos_u = jnp.where(h[0] * r[1] - h[1] * r[0] >= 0.0, 1.0, -1.0)
-    beta_eff = jnp.where(switch, sign_cos_u * beta, beta)
-    u_local = angles_to_unit(alpha, beta_eff)
-    x, y, z = _frame_axes(r, v)
+    u_fixed = angles_to_unit(alpha, beta) if u_angles is None else u_angles
+    u_z = jnp.where(switch, sign_cos_u, 1.0) * u_fixed[2]
+    x, y, z = _frame_axes(r, v, h)
     # the frame applied as a sum of axes, not a matrix product (a batched dot_general under vmap)
-    u_vel = x * u_local[0] + y * u_local[1] + z * u_local[2]
-    return jnp.where(inertial, angles_to_unit(alpha, beta), u_vel)
+    u_vel = x * u_fixed[0] + y * u_fixed[1] + z * u_z
+    return jnp.where(inertial, u_fixed, u_vel)

@@ -116,7 +116,11 @@ class StepControls(NamedTuple):
     thrust_factor: jax.Array  # throttle * per-arc scale * overall scale (0 when coasting)
     alpha: jax.Array  # rad
     beta: jax.Array  # rad
-    inertial: jax.Array  # 0/1
+    inertial: jax.Array  # frame code (``Params.arc_frame``): 0 velocity, 1 inertial, 2 yaw switch
+    # the pointing's trigonometry, done once per step (None: computed at every evaluation);
+    # propulsion.angles_to_unit(alpha, beta), the unit vector in the velocity frame or, for
+    # inertial pointing, in ICRF
+    u_angles: jax.Array | None = None
 
 
 def step_controls(model: ForceModel, params: Params, t_mid) -> StepControls:
@@ -129,7 +133,7 @@ def step_controls(model: ForceModel, params: Params, t_mid) -> StepControls:
     alpha = jnp.sum(on * (params.arc_alpha + params.arc_bias_in_rad)) + params.bias_in_rad
     beta = jnp.sum(on * (params.arc_beta + params.arc_bias_out_rad)) + params.bias_out_rad
     inertial = jnp.sum(on * params.arc_frame)
-    return StepControls(factor, alpha, beta, inertial)
+    return StepControls(factor, alpha, beta, inertial, propulsion.angles_to_unit(alpha, beta))
 
 
 def acting_third_bodies(model: ForceModel) -> tuple[int, ...]:
@@ -172,7 +176,7 @@ def perturbation(model: ForceModel, params: Params, t, r, v, primary, bodies_pos
             solar=model.power == "solar",
         )
         tmag = ctl.thrust_factor * propulsion.thrust_magnitude(p_kw, params.efficiency, params.exhaust_velocity_km_s)
-        u = propulsion.thrust_direction(r, v, ctl.alpha, ctl.beta, ctl.inertial)
+        u = propulsion.thrust_direction(r, v, ctl.alpha, ctl.beta, ctl.inertial, ctl.u_angles)
         force = force + tmag * u
         mdot = -tmag / params.exhaust_velocity_km_s
     return a, force, mdot
@@ -429,8 +433,8 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
 
     adaptive = st.adaptive
     faithful = st.method == "rkn4" and st.formulation == "encke"
-    if var_labels is not None and not highorder.variational_supported(model):
-        raise ValueError("explicit variational equations: Cowell + a special RKN method, no thrust/impulses/events")
+    if var_labels is not None and not highorder.variational_supported(model, var_labels):
+        raise ValueError("explicit variational equations: Cowell, no impulses, events or break-time parameters")
     if adaptive:
         expo = highorder.control_exponent(st.method)
 
@@ -478,6 +482,7 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
                 st.tolerance,
                 perturbation=perturbation,
                 body_states=body_states,
+                step_controls=step_controls,
                 var_labels=var_labels,
             )
             t1, rc1, vc1, d1, n1, m1 = out[:6]
@@ -528,21 +533,27 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
         c = rectify(c)
         p = c.primary
         dt_normal = normal_step(c)
-        # Newton step on the event being located: dt = -g/gdot, gdot = dg/dt along the motion
-        r = c.rc + c.delta
-        v = c.vc + c.nu
+        # Newton step on the event being located: dt = -g/gdot, gdot = dg/dt along the motion.
+        # Only while locating (lax.cond: a normal step pays nothing for it; the cheap test is
+        # the sign change of the event functions at the end of an accepted step, below)
         locating = c.locating >= 0
         k_ev = jnp.maximum(c.locating, 0)
-        pos, vel = body_states(model, params, ephem, epoch_et + c.t)
-        ctl0 = step_controls(model, params, c.t)
 
-        def g_of(tt, rr, vv):
-            ps, vs = body_states(model, params, ephem, epoch_et + tt)
-            return event_functions(model, params, rr, vv, p, ps, vs, radius_sign)[k_ev]
+        def newton_step(c: Carry):
+            r = c.rc + c.delta
+            v = c.vc + c.nu
+            pos, _ = body_states(model, params, ephem, epoch_et + c.t)
+            ctl0 = step_controls(model, params, c.t)
 
-        acc = total_acceleration(model, params, c.t, r, v, c.m, p, pos, ctl0)
-        g_val, g_dot = jax.jvp(g_of, (c.t, r, v), (jnp.ones(()), v, acc))
-        dt_newton = -g_val / jnp.where(g_dot == 0.0, 1e-30, g_dot)
+            def g_of(tt, rr, vv):
+                ps, vs = body_states(model, params, ephem, epoch_et + tt)
+                return event_functions(model, params, rr, vv, p, ps, vs, radius_sign)[k_ev]
+
+            acc = total_acceleration(model, params, c.t, r, v, c.m, p, pos, ctl0)
+            g_val, g_dot = jax.jvp(g_of, (c.t, r, v), (jnp.ones(()), v, acc))
+            return -g_val / jnp.where(g_dot == 0.0, 1e-30, g_dot)
+
+        dt_newton = jax.lax.cond(locating, newton_step, lambda c: jnp.zeros_like(c.t), c)
         lim = jnp.abs(c.dt_norm)
         dt_newton = jnp.clip(dt_newton, -lim, lim)
         # never step past the segment end while locating
@@ -569,15 +580,19 @@ def advance(model: ForceModel, params: Params, ephem, epoch_et, c: Carry, t_end,
         new = jax.tree_util.tree_map(lambda a, b: jnp.where(located, a, b), c, new)
         new = new._replace(n_steps=c.n_steps + 1, n_reject=jnp.where(located, c.n_reject, new.n_reject))
         if model.change_primary_at_soi:
-            b = c.locating - 1
-            is_exit = b == p
-            parent = params.parent[jnp.maximum(b, 0)].astype(jnp.int32)
-            new_p = jnp.where(is_exit, parent, b)
-            switched = _switch_primary(model, params, c, new_p, pos, vel)
-            g_sw = event_functions(model, params, switched.rc, switched.vc, switched.primary, pos, vel, radius_sign)
-            switched = switched._replace(g_prev=g_sw, locating=jnp.asarray(-1, jnp.int32))
             do_switch = located & (c.locating > 0)
-            new = jax.tree_util.tree_map(lambda a, b: jnp.where(do_switch, a, b), switched, new)
+
+            def switch(c: Carry, new: Carry) -> Carry:
+                pos, vel = body_states(model, params, ephem, epoch_et + c.t)
+                b = c.locating - 1
+                is_exit = b == p
+                parent = params.parent[jnp.maximum(b, 0)].astype(jnp.int32)
+                new_p = jnp.where(is_exit, parent, b)
+                switched = _switch_primary(model, params, c, new_p, pos, vel)
+                g_sw = event_functions(model, params, switched.rc, switched.vc, switched.primary, pos, vel, radius_sign)
+                return switched._replace(g_prev=g_sw, locating=jnp.asarray(-1, jnp.int32))
+
+            new = jax.lax.cond(do_switch, switch, lambda c, new: new, c, new)
         new = check_finite(c, new, stop_now)
         return new._replace(locating=jnp.where(stop_now, -1, new.locating))
 

@@ -44,7 +44,8 @@ from fracas import _jax  # noqa: F401
 from fracas.dynamics import forces
 from fracas.dynamics.kepler import kepler_fg, predict_universal_anomaly
 from fracas.integrate import rkn as _rkn
-from fracas.integrate.tableaux import DOP853, DPRKN8, DPRKN12, RKN4, NystromTableau, RungeKuttaTableau
+from fracas.integrate import stages as _stages
+from fracas.integrate.tableaux import DOP853, DPRKN8, DPRKN12, RKN4, RungeKuttaTableau
 
 __all__ = [
     "variational_supported",
@@ -96,93 +97,76 @@ _lincomb = _rkn._lincomb
 _duplicates = _rkn._duplicate_stages
 
 
-@jax.custom_batching.custom_vmap
-def _materialise(k):
-    """Keep a stage value as a value of its own (perf-notes: XLA CPU otherwise re-fuses the
-    cheap part of every stage into each later stage).  The identity; under ``vmap`` it adds
-    0 x (the sum over every lane, non-finite values mapped to 0), a reduction across the
-    batch that the stage's consumers cannot fuse through, so the stage is computed once for
-    all lanes and stored (measured 1.3-1.7x on DPRKN12 LEO batches)."""
-    return k
-
-
-@_materialise.def_vmap
-def _materialise_vmap(axis_size, in_batched, k):
-    (batched,) = in_batched
-    if not batched:
-        return k, False
-    # nan_to_num: a lane that failed (NaN/inf) must not poison the others through the sum
-    return k + 0.0 * jnp.nan_to_num(jnp.sum(k), nan=0.0, posinf=0.0, neginf=0.0), True
-
-
 # --------------------------------------------------------------------- stage geometry
-class _Frame:
-    """What a stage needs besides its own state: time, body positions, conic (Encke)."""
+class _Nodes:
+    """What a step's stages need besides their own state, prepared once per step at the
+    plan's distinct nodes t + c h (``stages.StagePlan.nodes``, 1.0 included): body positions
+    and velocities (one vectorised ephemeris evaluation), and for Encke the conic states (one
+    Kepler solve vectorised over the nodes, from the step's starting conic point: a
+    third-order prediction of the universal anomaly, then ``_N_NEWTON`` Newton steps).
+    Stage i reads row ``plan.node[i]`` (a dynamic index: the stage function is traced once)."""
 
-    def __init__(self, model, params, ephem, epoch_et, c, h, body_states):
+    def __init__(self, model, params, ephem, epoch_et, c, h, plan, body_states):
         self.model, self.params, self.ephem, self.epoch_et = model, params, ephem, epoch_et
-        self.c, self.h = c, h
-        self.body_states = body_states
+        self.c, self.h, self.body_states = c, h, body_states
         # without primary changes the primary is the model's (static): plain slices, no gathers
         self.primary = c.primary if model.change_primary_at_soi else model.primary
         self.mu = params.mu[self.primary]
-        self._pos = {}
-        self._conic = {0.0: (c.rc, c.vc)}
         self.encke = model.integrator.formulation == "encke"
+        nodes = jnp.asarray(plan.nodes)
+        self.node = jnp.asarray(plan.node)
+        self.c_stage = jnp.asarray(plan.c)
+        self.t_nodes = c.t + nodes * h
+        self.pos, self.vel = jax.vmap(lambda tt: body_states(model, params, ephem, epoch_et + tt))(self.t_nodes)
+        if self.encke:
+            rc, vc, mu = c.rc, c.vc, self.mu
+            sqrt_mu = jnp.sqrt(mu)
 
-    def bodies(self, ci: float):
-        if ci not in self._pos:
-            self._pos[ci] = self.body_states(
-                self.model, self.params, self.ephem, self.epoch_et + self.c.t + ci * self.h
-            )
-        return self._pos[ci]
+            def solve(tau):
+                xs = predict_universal_anomaly(0.0, rc, vc, mu, sqrt_mu, tau)
+                cs = kepler_fg(rc, vc, tau, mu, xs, n_newton=_N_NEWTON, short_arc=True)
+                return cs.r, cs.v
 
-    def prepare_conics(self, nodes):
-        """Conic states at t + c h for every node: one vectorised Kepler solve over the nodes
-        from the step's starting conic point (a third-order prediction of the universal
-        anomaly, then ``_N_NEWTON`` Newton steps: one compiled solve, not one per node)."""
-        if not self.encke:
-            return
-        todo = sorted({float(x) for x in nodes} - {0.0})
-        rc, vc, mu = self.c.rc, self.c.vc, self.mu
-        sqrt_mu = jnp.sqrt(mu)
+            rs, vs = jax.vmap(solve)(nodes * h)
+            at0 = (nodes == 0.0)[:, None]
+            self.rc_nodes = jnp.where(at0, rc, rs)
+            self.vc_nodes = jnp.where(at0, vc, vs)
 
-        def solve(tau):
-            xs = predict_universal_anomaly(0.0, rc, vc, mu, sqrt_mu, tau)
-            cs = kepler_fg(rc, vc, tau, mu, xs, n_newton=_N_NEWTON, short_arc=True)
-            return cs.r, cs.v
+    def t_of(self, i):
+        return self.c.t + self.c_stage[i] * self.h
 
-        rs, vs = jax.vmap(solve)(jnp.asarray(todo) * self.h)
-        for k, ci in enumerate(todo):
-            self._conic[ci] = (rs[k], vs[k])
+    def bodies_end(self):
+        """(positions, velocities) of the bodies at t + h (node 1.0, the last)."""
+        return self.pos[-1], self.vel[-1]
 
-    def conic(self, ci: float):
-        return self._conic[float(ci)]
+    def conic_end(self):
+        return self.rc_nodes[-1], self.vc_nodes[-1]
 
 
-def _accel(frame: _Frame, ci, q, p, m, ctl, perturbation):
-    """(q'' , mdot) at stage node ci for stage state (q, p, m) of the formulation."""
-    c = frame.c
-    t = c.t + ci * frame.h
-    pos, _ = frame.bodies(ci)
-    if frame.encke:
-        rc, vc = frame.conic(ci)
-        r, v = rc + q, vc + p
+def _accel(nd: _Nodes, i, q, p, m, ctl, perturbation, params=None, pos=None):
+    """(q'', mdot) at stage i for stage state (q, p, m) of the formulation."""
+    model = nd.model
+    params = nd.params if params is None else params
+    t = nd.t_of(i)
+    ni = nd.node[i]
+    pos = nd.pos[ni] if pos is None else pos
+    if nd.encke:
+        rc = nd.rc_nodes[ni]
+        r, v = rc + q, nd.vc_nodes[ni] + p
     else:
         r, v = q, p
-    fused_j2 = frame.model.j2 and not frame.encke
-    a_free, force, mdot = perturbation(
-        frame.model, frame.params, t, r, v, frame.primary, pos, ctl, with_j2=not fused_j2
-    )
-    has_force = frame.model.srp or frame.model.thrust  # else force is zero: skip force/m
-    if frame.encke:
-        acc = forces.encke_deviation_accel(frame.mu, rc, q, a_free, force if has_force else 0.0, m)
+    fused_j2 = model.j2 and not nd.encke
+    a_free, force, mdot = perturbation(model, params, t, r, v, nd.primary, pos, ctl, with_j2=not fused_j2)
+    has_force = model.srp or model.thrust  # else force is zero: skip force/m
+    mu = params.mu[nd.primary]
+    if nd.encke:
+        acc = forces.encke_deviation_accel(mu, rc, q, a_free, force if has_force else 0.0, m)
     else:
         if fused_j2:
-            prm, b = frame.params, frame.primary
-            acc = forces.central_j2_accel(r, frame.mu, prm.j2[b], prm.radius[b], prm.pole[b]) + a_free
+            b = nd.primary
+            acc = forces.central_j2_accel(r, mu, params.j2[b], params.radius[b], params.pole[b]) + a_free
         else:
-            acc = forces.point_mass_accel(r, frame.mu) + a_free
+            acc = forces.point_mass_accel(r, mu) + a_free
         if has_force:
             acc = acc + force / m
     return acc, mdot
@@ -200,143 +184,141 @@ def _error_ratio(e_r, e_v, e_m, r1, v1, m1, tol):
     return jnp.where(jnp.isfinite(err), err, jnp.inf)
 
 
-def step(model, params, ephem, epoch_et, c, dt, ctl, tol, *, perturbation, body_states, var_labels=None):
+def _dop853_error(e5, e3, r1, v1, m1, tol):
+    """dop853.f: err = err5^2 / sqrt(err5^2 + 0.01 err3^2), per scaled component."""
+    s5 = _error_ratio(e5[0], e5[1], e5[2], r1, v1, m1, 1.0)
+    s3 = _error_ratio(e3[0], e3[1], e3[2], r1, v1, m1, 1.0)
+    den = jnp.sqrt(s5 * s5 + 0.01 * s3 * s3)
+    err = jnp.where(den > 0, s5 * s5 / jnp.where(den > 0, den, 1.0), 0.0) / tol
+    return jnp.where(jnp.isfinite(err), err, jnp.inf)
+
+
+def step(
+    model, params, ephem, epoch_et, c, dt, ctl, tol, *, perturbation, body_states, step_controls=None, var_labels=None
+):
     """One step of size dt with the model's (method, formulation).
 
     Returns ((t + dt, rc, vc, delta, nu, m), (body positions, velocities) at t + dt, err)
     with err the error ratio of the module docstring (0 for a method without an embedded
     pair).  ``perturbation`` and ``body_states`` are the loop's force-model functions
-    (``encke.perturbation``, ``encke.body_states``), passed in to keep this module below
-    the loop in the import order.
+    (``encke.perturbation``, ``encke.body_states``, ``encke.step_controls``: the last only
+    needed by DOP853's variational equations), passed in to keep this module below the loop
+    in the import order.  The stages run as data (:mod:`fracas.integrate.stages`):
+    the force model is traced once per step program, whatever the method.
 
     ``var_labels`` (a tuple of parameter labels, or None): also advance ``c.phi`` (7, 7 + np),
     the sensitivities of (r, v, m) to the state at the start of the segment and to the
     labelled parameters, by the explicit variational equations with the same stages
-    (:func:`_variational_rkn`); returned as a seventh element of the state tuple.
+    (:func:`_variational_rkn`, :func:`_variational_rk`); returned as a seventh element of the
+    state tuple.
     """
     st = model.integrator
-    tab = METHODS[st.method]
-    frame = _Frame(model, params, ephem, epoch_et, c, dt, body_states)
-    nodes = list(tab.c) + [1.0]
-    frame.prepare_conics(nodes)
-    if frame.encke:
+    plan = _stages.plan_of(st.method)
+    nd = _Nodes(model, params, ephem, epoch_et, c, dt, plan, body_states)
+    if var_labels is not None:
+        if plan.first_order:
+            return _variational_rk(model, params, nd, plan, c, dt, ctl, tol, perturbation, step_controls, var_labels)
+        return _variational_rkn(model, params, nd, plan, c, dt, ctl, tol, perturbation, var_labels)
+    if nd.encke:
         q, p = c.delta, c.nu
     else:
         q, p = c.rc + c.delta, c.vc + c.nu
     m = c.m
     h = dt
-    if var_labels is not None:
-        return _variational_rkn(model, params, frame, tab, c, dt, ctl, tol, perturbation, var_labels)
-    if isinstance(tab, NystromTableau):
-        dup = _duplicates(tab)
-        ks = []
-        mds = []
-        for i in range(tab.stages):
-            if dup[i] is not None:
-                ks.append(ks[dup[i]])
-                mds.append(mds[dup[i]])
-                continue
-            ci = float(tab.c[i])
-            qi = q if ci == 0.0 else q + (ci * h) * p
-            s = _lincomb(tab.a_bar[i, :i], ks)
-            if s is not None:
-                qi = qi + (h * h) * s
-            # velocity at the stage: only used by velocity-dependent forces, which the
-            # special RKN methods exclude (the configuration refuses them); p is a placeholder
-            k, md = _accel(frame, ci, qi, p, m, ctl, perturbation)
-            ks.append(_materialise(k))
-            mds.append(md)
-        q1 = q + h * p + (h * h) * _lincomb(tab.bbar, ks)
-        p1 = p + h * _lincomb(tab.b, ks)
-        m1 = m + h * _lincomb(tab.b, mds) if model.thrust else m
-        if tab.bbar_low is None:
-            err = jnp.zeros(())
-            e_q = e_p = None
-        else:
-            e_q = (h * h) * _lincomb(tab.ebar, ks)
-            e_p = h * _lincomb(tab.e, ks)
+    if not plan.first_order:
+        # velocity at the stage: only used by velocity-dependent forces, which the special
+        # RKN methods exclude (the configuration refuses them); p is a placeholder.  The mass
+        # is constant (no thrust with these methods).
+        ks = _stages.nystrom_stages(lambda i, qi: _accel(nd, i, qi, p, m, ctl, perturbation)[0], q, p, h, plan)
+        q1 = q + h * p + (h * h) * _stages.weighted(plan.bbar, ks)
+        p1 = p + h * _stages.weighted(plan.b, ks)
+        m1 = m
     else:
-        # the stages of (q, p, m) kept as three arrays (no concatenation per stage: XLA CPU
-        # copies); k_q of a stage is its velocity p_i, k_p its acceleration, k_m its mass flow
         varying_mass = model.thrust
-        kq, kp, km = [], [], []
-        for i in range(tab.stages):
-            row = tab.a[i, :i]
-            sq = _lincomb(row, kq)
-            qi = q if sq is None else q + h * sq
-            sp = _lincomb(row, kp)
-            pi = p if sp is None else p + h * sp
-            mi = m
-            if varying_mass and sp is not None:
-                mi = m + h * _lincomb(row, km)
-            k, md = _accel(frame, float(tab.c[i]), qi, pi, mi, ctl, perturbation)
-            kq.append(pi)
-            kp.append(_materialise(k))
-            km.append(md)
-        q1 = q + h * _lincomb(tab.b, kq)
-        p1 = p + h * _lincomb(tab.b, kp)
-        m1 = m + h * _lincomb(tab.b, km) if varying_mass else m
-        k_end, md_end = _accel(frame, 1.0, q1, p1, m1, ctl, perturbation)
-        kq.append(p1)
-        kp.append(k_end)
-        km.append(md_end)
-        e5 = [h * _lincomb(tab.e, kq), h * _lincomb(tab.e, kp), h * _lincomb(tab.e, km) if varying_mass else None]
-        e3 = [h * _lincomb(tab.e_aux, kq), h * _lincomb(tab.e_aux, kp)]
-        e3.append(h * _lincomb(tab.e_aux, km) if varying_mass else None)
-    if frame.encke:
-        rc1, vc1 = frame.conic(1.0)
+
+        def stage(i, y):
+            qi, pi, mi = y
+            k, md = _accel(nd, i, qi, pi, mi if varying_mass else m, ctl, perturbation)
+            return pi, k, (md if varying_mass else jnp.zeros(()))
+
+        ks = _stages.rk_stages(stage, (q, p, m), h, plan)
+        kq, kp, km = ks
+        q1 = q + h * _stages.weighted(plan.b, kq)
+        p1 = p + h * _stages.weighted(plan.b, kp)
+        m1 = m + h * _stages.weighted(plan.b, km) if varying_mass else m
+    if nd.encke:
+        rc1, vc1 = nd.conic_end()
         r1, v1 = rc1 + q1, vc1 + p1
         out = (c.t + dt, rc1, vc1, q1, p1, m1)
     else:
         r1, v1 = q1, p1
         z3 = jnp.zeros(3)
         out = (c.t + dt, q1, p1, z3, z3, m1)
-    if isinstance(tab, NystromTableau):
-        if e_q is not None:
+    if not plan.first_order:
+        if plan.e is None:
+            err = jnp.zeros(())
+        else:
+            e_q = (h * h) * _stages.weighted(plan.ebar, ks)
+            e_p = h * _stages.weighted(plan.e, ks)
             err = _error_ratio(e_q, e_p, None, r1, v1, m1, tol)
     else:
-        # dop853.f: err = err5^2 / sqrt(err5^2 + 0.01 err3^2), per scaled component
-        s5 = _error_ratio(e5[0], e5[1], e5[2], r1, v1, m1, 1.0)
-        s3 = _error_ratio(e3[0], e3[1], e3[2], r1, v1, m1, 1.0)
-        den = jnp.sqrt(s5 * s5 + 0.01 * s3 * s3)
-        err = jnp.where(den > 0, s5 * s5 / jnp.where(den > 0, den, 1.0), 0.0) / tol
-        err = jnp.where(jnp.isfinite(err), err, jnp.inf)
-    return out, frame.bodies(1.0), err
+        e5 = [h * _stages.weighted(plan.e, k) for k in ks]
+        e3 = [h * _stages.weighted(plan.e_aux, k) for k in ks]
+        if not model.thrust:
+            e5[2] = e3[2] = None
+        err = _dop853_error(e5, e3, r1, v1, m1, tol)
+    return out, nd.bodies_end(), err
 
 
 # ------------------------------------------------------------- variational equations
-def variational_supported(model) -> bool:
-    """Whether :func:`step` can integrate explicit variational equations for this model:
-    Cowell with a special RKN method, no thrust (the mass is constant), no impulses and no
-    located events (stop conditions, primary changes).  Elsewhere the forward-mode AD path
-    (``propagate_with_sensitivities(method="ad")``) serves, and it is the cross-check here."""
+_BREAK_FIELDS = ("arc_t_on", "arc_t_off", "impulse_t")
+
+
+def variational_supported(model, labels=()) -> bool:
+    """Whether :func:`step` can integrate explicit variational equations for this model and
+    these parameter labels: Cowell, no impulses, no located events (stop conditions, primary
+    changes), and no label that moves a step boundary (thrust switch or impulse times: the
+    derivative through a break's step size is not a variational equation).  Any method: the
+    special RKN ones (no thrust) and DOP853 (thrust, mass and switching arcs included).
+    Elsewhere the forward-mode AD path (``propagate_with_sensitivities(method="ad")``) serves,
+    and it is the cross-check here."""
+    from fracas.params import parse_label
+
     st = model.integrator
+    if any(parse_label(lab, model)[0] in _BREAK_FIELDS for lab in labels):
+        return False
     return (
         st.formulation == "cowell"
-        and isinstance(METHODS[st.method], NystromTableau)
-        and not model.thrust
         and model.n_impulses == 0
         and model.stop.kind == "time"
         and not model.change_primary_at_soi
     )
 
 
-def _stage_jacobians(model, params, frame, ci, r, m, ctl, perturbation, labels):
-    """Acceleration a (3,) at stage node ci and its derivatives: G = da/dr (3, 3), a_m = da/dm
+def _label_params(model, params, labels):
+    """(p0, params_of): the labelled values and a function p -> Params with them replaced."""
+    from fracas.dynamics.parameters import get_values, set_values
+
+    if not labels:
+        return jnp.zeros(0), lambda pp: params
+    return get_values(params, labels, model), lambda pp: set_values(params, labels, pp, model)
+
+
+def _stage_jacobians(model, params, nd, i, r, m, ctl, perturbation, labels):
+    """Acceleration a (3,) at stage i and its derivatives: G = da/dr (3, 3), a_m = da/dm
     (3,) or None (no force), a_p = da/dp (3, np) or None.  The two-body part of G is analytic,
     mu/r^3 (3 r_hat r_hat^T - I) (the gravity gradient, FRACAS DERY's G), as is a_m =
     -force/m^2; the perturbations (J2, third bodies, SRP) are differentiated by forward-mode
     AD in r, and every parameter column by AD in the parameter."""
-    c = frame.c
-    t = c.t + ci * frame.h
-    mu = frame.mu
+    t = nd.t_of(i)
+    mu = nd.mu
     zero_v = jnp.zeros(3)
-    pos, _ = frame.bodies(ci)
+    pos = nd.pos[nd.node[i]]
     has_force = model.srp or model.thrust
-    a, _ = _accel(frame, ci, r, zero_v, m, ctl, perturbation)  # the state path's own value
+    a, _ = _accel(nd, i, r, zero_v, m, ctl, perturbation)  # the state path's own value
 
     def pert(rr):
-        a_free, force, _ = perturbation(model, params, t, rr, zero_v, frame.primary, pos, ctl)
+        a_free, force, _ = perturbation(model, params, t, rr, zero_v, nd.primary, pos, ctl)
         return a_free + force / m if has_force else a_free
 
     has_pert = model.j2 or bool(model.acting_third_bodies()) or has_force
@@ -348,19 +330,20 @@ def _stage_jacobians(model, params, frame, ci, r, m, ctl, perturbation, labels):
     g = g + (3.0 * k3 * inv_rr) * (r[:, None] * r[None, :]) - k3 * jnp.eye(3)
     a_m = None
     if has_force:
-        _, force, _ = perturbation(model, params, t, r, zero_v, frame.primary, pos, ctl)
+        _, force, _ = perturbation(model, params, t, r, zero_v, nd.primary, pos, ctl)
         a_m = -force / (m * m)
     a_p = None
     if labels:
-        from fracas.dynamics.parameters import get_values, set_values
+        p0, params_of = _label_params(model, params, labels)
 
         def acc_p(pp):
-            prm = set_values(params, labels, pp, model)
-            pos_p, _ = frame.body_states(model, prm, frame.ephem, frame.epoch_et + t)
-            a_free, force, _ = perturbation(model, prm, t, r, zero_v, frame.primary, pos_p, ctl)
-            return forces.point_mass_accel(r, prm.mu[frame.primary]) + a_free + force / m
+            prm = params_of(pp)
+            # the DE421 table does not depend on parameters; fixed-conic bodies do
+            pos_p = nd.body_states(model, prm, nd.ephem, nd.epoch_et + t)[0] if model.conic_bodies else pos
+            a_free, force, _ = perturbation(model, prm, t, r, zero_v, nd.primary, pos_p, ctl)
+            return forces.point_mass_accel(r, prm.mu[nd.primary]) + a_free + force / m
 
-        a_p = jnp.reshape(jax.jacfwd(acc_p)(get_values(params, labels, model)), (3, len(labels)))
+        a_p = jnp.reshape(jax.jacfwd(acc_p)(p0), (3, len(labels)))
     return a, g, a_m, a_p
 
 
@@ -370,7 +353,7 @@ def _matmul3(g, q):
     return g[:, 0:1] * q[0:1, :] + g[:, 1:2] * q[1:2, :] + g[:, 2:3] * q[2:3, :]
 
 
-def _variational_rkn(model, params, frame, tab, c, dt, ctl, tol, perturbation, labels):
+def _variational_rkn(model, params, nd, plan, c, dt, ctl, tol, perturbation, labels):
     """A special-RKN Cowell step of the state and of Phi = d(r, v, m)/d(x_start, p) (7, 7 + np):
 
         Q'' = G(t, r) Q + a_m M + a_p S,   Q = Phi[0:3], Q' = Phi[3:6], M = Phi[6] (constant)
@@ -385,38 +368,83 @@ def _variational_rkn(model, params, frame, tab, c, dt, ctl, tol, perturbation, l
     r, v, m = c.rc + c.delta, c.vc + c.nu, c.m
     phi = c.phi
     q_mat, p_mat, m_row = phi[0:3], phi[3:6], phi[6]
-    dup = _duplicates(tab)
-    ks, kms = [], []
-    for i in range(tab.stages):
-        if dup[i] is not None:
-            ks.append(ks[dup[i]])
-            kms.append(kms[dup[i]])
-            continue
-        ci = float(tab.c[i])
-        ri = r if ci == 0.0 else r + (ci * h) * v
-        qi = q_mat if ci == 0.0 else q_mat + (ci * h) * p_mat
-        s = _lincomb(tab.a_bar[i, :i], ks)
-        if s is not None:
-            ri = ri + (h * h) * s
-            qi = qi + (h * h) * _lincomb(tab.a_bar[i, :i], kms)
-        a, g, a_m, a_p = _stage_jacobians(model, params, frame, ci, ri, m, ctl, perturbation, labels)
+
+    def stage(i, y):
+        ri, qi = y
+        a, g, a_m, a_p = _stage_jacobians(model, params, nd, i, ri, m, ctl, perturbation, labels)
         km = _matmul3(g, qi)
         if a_m is not None:
             km = km + a_m[:, None] * m_row[None, :]
         if n_p:
             km = km + jnp.concatenate([jnp.zeros((3, 7)), a_p], axis=1)
-        ks.append(_materialise(a))
-        kms.append(_materialise(km))
-    r1 = r + h * v + (h * h) * _lincomb(tab.bbar, ks)
-    v1 = v + h * _lincomb(tab.b, ks)
-    q1 = q_mat + h * p_mat + (h * h) * _lincomb(tab.bbar, kms)
-    p1 = p_mat + h * _lincomb(tab.b, kms)
+        return a, km
+
+    ks = _stages.nystrom_stages(stage, (r, q_mat), (v, p_mat), h, plan)
+    (r1, q1) = jax.tree_util.tree_map(
+        lambda x, y, k: x + h * y + (h * h) * k, (r, q_mat), (v, p_mat), _stages.weighted(plan.bbar, ks)
+    )
+    (v1, p1) = jax.tree_util.tree_map(lambda y, k: y + h * k, (v, p_mat), _stages.weighted(plan.b, ks))
     phi1 = jnp.concatenate([q1, p1, m_row[None, :]], axis=0)
-    if tab.bbar_low is None:
+    if plan.e is None:
         err = jnp.zeros(())
     else:
-        e_q = (h * h) * _lincomb(tab.ebar, ks)
-        e_p = h * _lincomb(tab.e, ks)
+        e_q = (h * h) * _stages.weighted(plan.ebar, ks[0])
+        e_p = h * _stages.weighted(plan.e, ks[0])
         err = _error_ratio(e_q, e_p, None, r1, v1, m, tol)
     z3 = jnp.zeros(3)
-    return (c.t + dt, r1, v1, z3, z3, m, phi1), frame.bodies(1.0), err
+    return (c.t + dt, r1, v1, z3, z3, m, phi1), nd.bodies_end(), err
+
+
+def _variational_rk(model, params, nd, plan, c, dt, ctl, tol, perturbation, step_controls, labels):
+    """A first-order (DOP853) Cowell step of x = (r, v, m) and of Phi = dx/d(x_start, p)
+    (7, 7 + np), thrust, mass and the arc controls included:
+
+        Phi' = A(t, x) Phi + B(t, x) S,   A = df/dx (7, 7),  B = df/dp (7, np)
+
+    integrated with the state's stages and weights.  Each stage's A Phi + B S is one
+    forward-mode derivative of the stage function f(x, p) along the columns of (Phi, S)
+    (``jax.jvp`` vectorised over the columns: the primal is evaluated once), with the thrust
+    controls of the step recomputed from p, so a column of an arc's angle or throttle is
+    exact.  Phi is the exact derivative of the discrete step map at fixed step sizes, as in
+    :func:`_variational_rkn`."""
+    labels = tuple(labels)
+    n_p = len(labels)
+    h = dt
+    x = jnp.concatenate([c.rc + c.delta, c.vc + c.nu, c.m[None]])
+    phi = c.phi
+    p0, params_of = _label_params(model, params, labels)
+    d_par = jnp.concatenate([jnp.zeros((n_p, 7)), jnp.eye(n_p)], axis=1)  # S: parameter tangents
+    t_mid = c.t + 0.5 * dt
+    varying_mass = model.thrust
+
+    def f(i, xx, pp):
+        prm = params_of(pp) if n_p else params
+        cc = step_controls(model, prm, t_mid) if (model.thrust and n_p) else ctl
+        pos = None
+        if n_p and model.conic_bodies:  # the DE421 table does not depend on parameters
+            pos = nd.body_states(model, prm, nd.ephem, nd.epoch_et + nd.t_of(i))[0]
+        acc, md = _accel(nd, i, xx[:3], xx[3:6], xx[6], cc, perturbation, params=prm, pos=pos)
+        md = md if varying_mass else jnp.zeros(())
+        return jnp.concatenate([xx[3:6], acc, jnp.reshape(md, (1,))])
+
+    def stage(i, y):
+        xi, phii = y
+
+        def col(dx, dp):
+            return jax.jvp(lambda xx, pp: f(i, xx, pp), (xi, p0), (dx, dp))
+
+        k, kphi = jax.vmap(col, in_axes=(1, 1), out_axes=(None, 1))(phii, d_par)
+        return k, kphi
+
+    ks = _stages.rk_stages(stage, (x, phi), h, plan)
+    x1 = x + h * _stages.weighted(plan.b, ks[0])
+    phi1 = phi + h * _stages.weighted(plan.b, ks[1])
+    r1, v1, m1 = x1[:3], x1[3:6], x1[6]
+    kx = ks[0]
+    e5 = [h * _stages.weighted(plan.e, kx[:, s]) for s in (slice(0, 3), slice(3, 6))]
+    e3 = [h * _stages.weighted(plan.e_aux, kx[:, s]) for s in (slice(0, 3), slice(3, 6))]
+    e5.append(h * _stages.weighted(plan.e, kx[:, 6]) if varying_mass else None)
+    e3.append(h * _stages.weighted(plan.e_aux, kx[:, 6]) if varying_mass else None)
+    err = _dop853_error(e5, e3, r1, v1, m1, tol)
+    z3 = jnp.zeros(3)
+    return (c.t + dt, r1, v1, z3, z3, m1, phi1), nd.bodies_end(), err

@@ -167,8 +167,9 @@ def propagate_with_sensitivities(
 
     ``method``: ``"ad"`` -- forward-mode automatic differentiation through the integrator
     (every model); ``"variational"`` -- the explicit variational equations integrated with the
-    same steps (``highorder.variational_supported`` models: Cowell, a special RKN method, no
-    thrust, impulses or located events); ``"auto"`` -- variational where supported, else AD.
+    same steps (``highorder.variational_supported`` models: Cowell, any method -- DOP853 with
+    thrust, mass and arcs included --, no impulses, no located events, no switch- or
+    impulse-time labels); ``"auto"`` -- variational where supported, else AD.
     Both give the derivative of the same discrete map at fixed step sizes (equal to rounding;
     tests/integrate/test_variational_stm.py).
     """
@@ -177,10 +178,11 @@ def propagate_with_sensitivities(
     static, dyn = split_model(model)
     if method not in ("auto", "ad", "variational"):
         raise ValueError(f"method = {method!r}: expected 'auto', 'ad' or 'variational'")
-    supported = highorder.variational_supported(model)
+    supported = highorder.variational_supported(model, param_labels)
     if method == "variational" and not supported:
         raise ValueError(
-            "explicit variational equations need Cowell + dprkn8/dprkn12, no thrust, impulses or located events"
+            "explicit variational equations need Cowell, no impulses, no located events and no"
+            " switch- or impulse-time parameters"
         )
     if method == "variational" or (method == "auto" and supported):
         return _propagate_var(static, dyn, params, ephem, epoch_et_s, x0, t_out, tuple(param_labels))

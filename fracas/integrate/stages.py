@@ -1,0 +1,219 @@
+"""Runge-Kutta(-Nystrom) stages as data: one traced stage function per step program.
+
+A step of an s-stage method used to be a Python loop over the stages, so the force model
+was traced (and compiled) once per stage: 17 copies for DPRKN12, 13 for DOP853 (issue 23).
+Here the tableau is a set of arrays and the stages run under ``lax.fori_loop``: the stage
+function is traced **once**, whatever the method, and each stage's value is written into a
+stage array (which also keeps XLA CPU from re-fusing early stages into later ones, the job
+``highorder._materialise`` did for the unrolled loop; ../shared/perf-notes.md item 2).
+
+:func:`plan_of` turns a tableau of :mod:`fracas.integrate.tableaux` into a :class:`StagePlan`
+(numpy, static, cached per method):
+
+* special RKN methods (y'' = f(t, y)): stages that repeat an earlier stage (same node and the
+  same position coupling: RKN4's two stages at t + h/2) are folded into it, so each distinct
+  acceleration is evaluated once;
+* first-order methods (DOP853): the stage f(t + h, y1) of the error estimate is appended as
+  an extra stage whose coupling row is the weights b, so the step's last evaluation is the
+  same traced function too (its input is y1 itself).
+
+The stage states and values may be any pytree of arrays (a state, a state with its
+variational matrices, ...): every leaf gets a stage axis in front.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from fracas import _jax  # noqa: F401
+from fracas.integrate.tableaux import NystromTableau, RungeKuttaTableau
+
+__all__ = ["StagePlan", "plan_of", "plan_of_tableau", "nystrom_stages", "rk_stages", "weighted"]
+
+
+class StagePlan(NamedTuple):
+    """A method's tableau as arrays (numpy; static per method).
+
+    c (S,): stage nodes (fraction of the step); a (S, S): strictly lower coupling (RKN: the
+    position coupling a_bar; RK: a); node (S,): index of each stage's node in ``nodes``;
+    nodes (U,): the distinct nodes, 1.0 always included (body states and conics are prepared
+    once per step at these); b, bbar (S,): velocity and position weights (bbar None for a
+    first-order method); e, ebar (S,): the embedded error weights (None without an embedded
+    pair); e_aux (S,): DOP853's second (third-order) estimate; first_order: a first-order
+    method (its last stage is f(t + h, y1)).
+    """
+
+    name: str
+    c: np.ndarray
+    a: np.ndarray
+    node: np.ndarray
+    nodes: np.ndarray
+    b: np.ndarray
+    bbar: np.ndarray | None
+    e: np.ndarray | None
+    ebar: np.ndarray | None
+    e_aux: np.ndarray | None
+    first_order: bool
+
+    @property
+    def stages(self) -> int:
+        return len(self.c)
+
+
+def _nodes(c) -> tuple[np.ndarray, np.ndarray]:
+    nodes = np.array(sorted({float(x) for x in c} | {1.0}))
+    node = np.array([int(np.flatnonzero(nodes == float(x))[0]) for x in c], dtype=np.int32)
+    return node, nodes
+
+
+def _fold_nystrom(tab: NystromTableau) -> StagePlan:
+    s = tab.stages
+    root: list[int] = []
+    for i in range(s):
+        r = i
+        for j in range(i):
+            if tab.c[i] == tab.c[j] and np.array_equal(tab.a_bar[i], tab.a_bar[j]):
+                r = root[j]
+                break
+        root.append(r)
+    keep = [i for i in range(s) if root[i] == i]
+    pos = {i: keep.index(root[i]) for i in range(s)}
+    n = len(keep)
+
+    def fold(w):
+        if w is None:
+            return None
+        out = np.zeros(n)
+        for i in range(s):
+            out[pos[i]] += float(w[i])
+        return out
+
+    a = np.stack([fold(tab.a_bar[i]) for i in keep])
+    c = np.array([float(tab.c[i]) for i in keep])
+    node, nodes = _nodes(c)
+    return StagePlan(
+        name=tab.name,
+        c=c,
+        a=a,
+        node=node,
+        nodes=nodes,
+        b=fold(tab.b),
+        bbar=fold(tab.bbar),
+        e=fold(tab.e),
+        ebar=fold(tab.ebar),
+        e_aux=None,
+        first_order=False,
+    )
+
+
+def _extend_rk(tab: RungeKuttaTableau) -> StagePlan:
+    s = tab.stages
+    a = np.zeros((s + 1, s + 1))
+    a[:s, :s] = np.asarray(tab.a, float)
+    a[s, :s] = np.asarray(tab.b, float)
+    c = np.concatenate([np.asarray(tab.c, float), [1.0]])
+    b = np.concatenate([np.asarray(tab.b, float), [0.0]])
+    node, nodes = _nodes(c)
+    return StagePlan(
+        name=tab.name,
+        c=c,
+        a=a,
+        node=node,
+        nodes=nodes,
+        b=b,
+        bbar=None,
+        e=np.asarray(tab.e, float),
+        ebar=None,
+        e_aux=None if tab.e_aux is None else np.asarray(tab.e_aux, float),
+        first_order=True,
+    )
+
+
+@functools.cache
+def _plan_cached(tab) -> StagePlan:
+    if isinstance(tab, NystromTableau):
+        return _fold_nystrom(tab)
+    return _extend_rk(tab)
+
+
+def plan_of_tableau(tab) -> StagePlan:
+    """The :class:`StagePlan` of a tableau (cached; tableaux hash by identity)."""
+    return _plan_cached(tab)
+
+
+def plan_of(method: str) -> StagePlan:
+    """The :class:`StagePlan` of a method name of ``highorder.METHODS``."""
+    from fracas.integrate.tableaux import DOP853, DPRKN8, DPRKN12, RKN4
+
+    return plan_of_tableau({"rkn4": RKN4, "dprkn8": DPRKN8, "dprkn12": DPRKN12, "dop853": DOP853}[method])
+
+
+def weighted(w, ks):
+    """sum_j w[j] ks[j] over the stage axis of every leaf of the pytree ``ks``.
+
+    Written as a broadcast product and a sum (not a dot product): under ``vmap`` a
+    batched ``dot_general`` runs as a separate, unvectorised kernel on XLA CPU."""
+    w = jnp.asarray(w, jnp.float64)
+
+    def one(k):
+        return jnp.sum(jnp.reshape(w, (-1,) + (1,) * (k.ndim - 1)) * k, axis=0)
+
+    return jax.tree_util.tree_map(one, ks)
+
+
+def _axpy(y, alpha, x):
+    return jax.tree_util.tree_map(lambda yy, xx: yy + alpha * xx, y, x)
+
+
+def nystrom_stages(stage, q, p, h, plan: StagePlan, k0=None):
+    """All stage values of a special RKN step: K (S, ...) per leaf.
+
+    ``stage(i, q_i)``: the acceleration (pytree like ``q``) at stage i (node ``plan.c[i]``)
+    for the stage position q_i = q + c_i h p + h^2 sum_j a_ij K_j.  ``q``, ``p``: pytrees of
+    the same structure (positions, velocities).  ``k0``: stage 0's value when already known
+    (first same as last), else it is evaluated.  Traces ``stage`` once.
+    """
+    c = jnp.asarray(plan.c)
+    a = jnp.asarray(plan.a)
+    n = plan.stages
+    ks0 = jax.tree_util.tree_map(lambda x: jnp.zeros((n,) + jnp.shape(x), jnp.result_type(x, jnp.float64)), q)
+    start = 0
+    if k0 is not None:
+        ks0 = jax.tree_util.tree_map(lambda ks, k: ks.at[0].set(k), ks0, k0)
+        start = 1
+
+    def body(i, ks):
+        qi = _axpy(_axpy(q, c[i] * h, p), h * h, weighted(a[i], ks))
+        k = stage(i, qi)
+        return jax.tree_util.tree_map(lambda kk, new: kk.at[i].set(new), ks, k)
+
+    return jax.lax.fori_loop(start, n, body, ks0)
+
+
+def rk_stages(stage, y, h, plan: StagePlan, k0=None):
+    """All stage derivatives of a first-order step: K (S, ...) per leaf (S counts the final
+    stage f(t + h, y1) of the error estimate, ``plan.first_order``).
+
+    ``stage(i, y_i)``: the derivative (pytree like ``y``) at stage i for
+    y_i = y + h sum_j a_ij K_j.  ``k0``: stage 0's value when already known.  The final
+    stage's input is y1 = y + h sum_j b_j K_j itself (its coupling row is b).
+    """
+    a = jnp.asarray(plan.a)
+    n = plan.stages
+    ks0 = jax.tree_util.tree_map(lambda x: jnp.zeros((n,) + jnp.shape(x), jnp.result_type(x, jnp.float64)), y)
+    start = 0
+    if k0 is not None:
+        ks0 = jax.tree_util.tree_map(lambda ks, k: ks.at[0].set(k), ks0, k0)
+        start = 1
+
+    def body(i, ks):
+        yi = _axpy(y, h, weighted(a[i], ks))
+        k = stage(i, yi)
+        return jax.tree_util.tree_map(lambda kk, new: kk.at[i].set(new), ks, k)
+
+    return jax.lax.fori_loop(start, n, body, ks0)

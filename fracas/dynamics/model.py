@@ -67,6 +67,12 @@ class IntegratorSettings:
     method: str = "rkn4"
     formulation: str = "encke"
     step_control: str = "c_nom"
+    # how a high-order step runs its stages (a property of the compiled program, not of the
+    # numbers: both give the same bits up to rounding order): "loop" -- the tableau as data
+    # under lax.fori_loop, the force model traced once (small programs, fast compiles: single
+    # propagations); "unrolled" -- one traced copy per stage, which XLA CPU fuses into a few
+    # wide kernels (vmapped batches: fracas.integrate.batch sets it)
+    stage_loop: str = "loop"
 
     @property
     def adaptive(self) -> bool:
@@ -74,7 +80,12 @@ class IntegratorSettings:
 
     def static_part(self) -> IntegratorSettings:
         """The settings with every number at its default (the static key of a compiled program)."""
-        return IntegratorSettings(method=self.method, formulation=self.formulation, step_control=self.step_control)
+        return IntegratorSettings(
+            method=self.method,
+            formulation=self.formulation,
+            step_control=self.step_control,
+            stage_loop=self.stage_loop,
+        )
 
 
 @dataclass(frozen=True)

@@ -116,6 +116,7 @@ class _Nodes:
         nodes = jnp.asarray(plan.nodes)
         self.node = jnp.asarray(plan.node)
         self.c_stage = jnp.asarray(plan.c)
+        self.plan = plan
         self.t_nodes = c.t + nodes * h
         self.pos, self.vel = jax.vmap(lambda tt: body_states(model, params, ephem, epoch_et + tt))(self.t_nodes)
         if self.encke:
@@ -132,8 +133,13 @@ class _Nodes:
             self.rc_nodes = jnp.where(at0, rc, rs)
             self.vc_nodes = jnp.where(at0, vc, vs)
 
+    def node_of(self, i):
+        """Row of stage i in the node arrays (a Python int for an unrolled stage)."""
+        return int(self.plan.node[i]) if isinstance(i, int) else self.node[i]
+
     def t_of(self, i):
-        return self.c.t + self.c_stage[i] * self.h
+        ci = float(self.plan.c[i]) if isinstance(i, int) else self.c_stage[i]
+        return self.c.t + ci * self.h
 
     def bodies_end(self):
         """(positions, velocities) of the bodies at t + h (node 1.0, the last)."""
@@ -148,7 +154,7 @@ def _accel(nd: _Nodes, i, q, p, m, ctl, perturbation, params=None, pos=None):
     model = nd.model
     params = nd.params if params is None else params
     t = nd.t_of(i)
-    ni = nd.node[i]
+    ni = nd.node_of(i)
     pos = nd.pos[ni] if pos is None else pos
     if nd.encke:
         rc = nd.rc_nodes[ni]
@@ -214,6 +220,7 @@ def step(
     """
     st = model.integrator
     plan = _stages.plan_of(st.method)
+    unroll = st.stage_loop == "unrolled"
     nd = _Nodes(model, params, ephem, epoch_et, c, dt, plan, body_states)
     if var_labels is not None:
         if plan.first_order:
@@ -229,9 +236,11 @@ def step(
         # velocity at the stage: only used by velocity-dependent forces, which the special
         # RKN methods exclude (the configuration refuses them); p is a placeholder.  The mass
         # is constant (no thrust with these methods).
-        ks = _stages.nystrom_stages(lambda i, qi: _accel(nd, i, qi, p, m, ctl, perturbation)[0], q, p, h, plan)
-        q1 = q + h * p + (h * h) * _stages.weighted(plan.bbar, ks)
-        p1 = p + h * _stages.weighted(plan.b, ks)
+        ks = _stages.nystrom_stages(
+            lambda i, qi: _accel(nd, i, qi, p, m, ctl, perturbation)[0], q, p, h, plan, unroll=unroll
+        )
+        q1 = q + h * p + (h * h) * ks.weighted(plan.bbar)
+        p1 = p + h * ks.weighted(plan.b)
         m1 = m
     else:
         varying_mass = model.thrust
@@ -241,11 +250,11 @@ def step(
             k, md = _accel(nd, i, qi, pi, mi if varying_mass else m, ctl, perturbation)
             return pi, k, (md if varying_mass else jnp.zeros(()))
 
-        ks = _stages.rk_stages(stage, (q, p, m), h, plan)
-        kq, kp, km = ks
-        q1 = q + h * _stages.weighted(plan.b, kq)
-        p1 = p + h * _stages.weighted(plan.b, kp)
-        m1 = m + h * _stages.weighted(plan.b, km) if varying_mass else m
+        ks = _stages.rk_stages(stage, (q, p, m), h, plan, unroll=unroll)
+        kq, kp, km = ks.part(0), ks.part(1), ks.part(2)
+        q1 = q + h * kq.weighted(plan.b)
+        p1 = p + h * kp.weighted(plan.b)
+        m1 = m + h * km.weighted(plan.b) if varying_mass else m
     if nd.encke:
         rc1, vc1 = nd.conic_end()
         r1, v1 = rc1 + q1, vc1 + p1
@@ -258,12 +267,12 @@ def step(
         if plan.e is None:
             err = jnp.zeros(())
         else:
-            e_q = (h * h) * _stages.weighted(plan.ebar, ks)
-            e_p = h * _stages.weighted(plan.e, ks)
+            e_q = (h * h) * ks.weighted(plan.ebar)
+            e_p = h * ks.weighted(plan.e)
             err = _error_ratio(e_q, e_p, None, r1, v1, m1, tol)
     else:
-        e5 = [h * _stages.weighted(plan.e, k) for k in ks]
-        e3 = [h * _stages.weighted(plan.e_aux, k) for k in ks]
+        e5 = [h * k.weighted(plan.e) for k in (kq, kp, km)]
+        e3 = [h * k.weighted(plan.e_aux) for k in (kq, kp, km)]
         if not model.thrust:
             e5[2] = e3[2] = None
         err = _dop853_error(e5, e3, r1, v1, m1, tol)
@@ -313,7 +322,7 @@ def _stage_jacobians(model, params, nd, i, r, m, ctl, perturbation, labels):
     t = nd.t_of(i)
     mu = nd.mu
     zero_v = jnp.zeros(3)
-    pos = nd.pos[nd.node[i]]
+    pos = nd.pos[nd.node_of(i)]
     has_force = model.srp or model.thrust
     a, _ = _accel(nd, i, r, zero_v, m, ctl, perturbation)  # the state path's own value
 
@@ -365,6 +374,7 @@ def _variational_rkn(model, params, nd, plan, c, dt, ctl, tol, perturbation, lab
     labels = tuple(labels)
     n_p = len(labels)
     h = dt
+    unroll = model.integrator.stage_loop == "unrolled"
     r, v, m = c.rc + c.delta, c.vc + c.nu, c.m
     phi = c.phi
     q_mat, p_mat, m_row = phi[0:3], phi[3:6], phi[6]
@@ -379,17 +389,17 @@ def _variational_rkn(model, params, nd, plan, c, dt, ctl, tol, perturbation, lab
             km = km + jnp.concatenate([jnp.zeros((3, 7)), a_p], axis=1)
         return a, km
 
-    ks = _stages.nystrom_stages(stage, (r, q_mat), (v, p_mat), h, plan)
+    ks = _stages.nystrom_stages(stage, (r, q_mat), (v, p_mat), h, plan, unroll=unroll)
     (r1, q1) = jax.tree_util.tree_map(
-        lambda x, y, k: x + h * y + (h * h) * k, (r, q_mat), (v, p_mat), _stages.weighted(plan.bbar, ks)
+        lambda x, y, k: x + h * y + (h * h) * k, (r, q_mat), (v, p_mat), ks.weighted(plan.bbar)
     )
-    (v1, p1) = jax.tree_util.tree_map(lambda y, k: y + h * k, (v, p_mat), _stages.weighted(plan.b, ks))
+    (v1, p1) = jax.tree_util.tree_map(lambda y, k: y + h * k, (v, p_mat), ks.weighted(plan.b))
     phi1 = jnp.concatenate([q1, p1, m_row[None, :]], axis=0)
     if plan.e is None:
         err = jnp.zeros(())
     else:
-        e_q = (h * h) * _stages.weighted(plan.ebar, ks[0])
-        e_p = h * _stages.weighted(plan.e, ks[0])
+        e_q = (h * h) * ks.part(0).weighted(plan.ebar)
+        e_p = h * ks.part(0).weighted(plan.e)
         err = _error_ratio(e_q, e_p, None, r1, v1, m, tol)
     z3 = jnp.zeros(3)
     return (c.t + dt, r1, v1, z3, z3, m, phi1), nd.bodies_end(), err
@@ -410,6 +420,7 @@ def _variational_rk(model, params, nd, plan, c, dt, ctl, tol, perturbation, step
     labels = tuple(labels)
     n_p = len(labels)
     h = dt
+    unroll = model.integrator.stage_loop == "unrolled"
     x = jnp.concatenate([c.rc + c.delta, c.vc + c.nu, c.m[None]])
     phi = c.phi
     p0, params_of = _label_params(model, params, labels)
@@ -436,15 +447,15 @@ def _variational_rk(model, params, nd, plan, c, dt, ctl, tol, perturbation, step
         k, kphi = jax.vmap(col, in_axes=(1, 1), out_axes=(None, 1))(phii, d_par)
         return k, kphi
 
-    ks = _stages.rk_stages(stage, (x, phi), h, plan)
-    x1 = x + h * _stages.weighted(plan.b, ks[0])
-    phi1 = phi + h * _stages.weighted(plan.b, ks[1])
+    ks = _stages.rk_stages(stage, (x, phi), h, plan, unroll=unroll)
+    kx = ks.part(0)
+    x1 = x + h * kx.weighted(plan.b)
+    phi1 = phi + h * ks.part(1).weighted(plan.b)
     r1, v1, m1 = x1[:3], x1[3:6], x1[6]
-    kx = ks[0]
-    e5 = [h * _stages.weighted(plan.e, kx[:, s]) for s in (slice(0, 3), slice(3, 6))]
-    e3 = [h * _stages.weighted(plan.e_aux, kx[:, s]) for s in (slice(0, 3), slice(3, 6))]
-    e5.append(h * _stages.weighted(plan.e, kx[:, 6]) if varying_mass else None)
-    e3.append(h * _stages.weighted(plan.e_aux, kx[:, 6]) if varying_mass else None)
+    e5 = [h * kx.cols(s).weighted(plan.e) for s in (slice(0, 3), slice(3, 6))]
+    e3 = [h * kx.cols(s).weighted(plan.e_aux) for s in (slice(0, 3), slice(3, 6))]
+    e5.append(h * kx.cols(6).weighted(plan.e) if varying_mass else None)
+    e3.append(h * kx.cols(6).weighted(plan.e_aux) if varying_mass else None)
     err = _dop853_error(e5, e3, r1, v1, m1, tol)
     z3 = jnp.zeros(3)
     return (c.t + dt, r1, v1, z3, z3, m1, phi1), nd.bodies_end(), err

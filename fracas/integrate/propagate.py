@@ -118,6 +118,7 @@ def join_model(static: ForceModel, dyn) -> ForceModel:
             method=st.method,
             formulation=st.formulation,
             step_control=st.step_control,
+            stage_loop=st.stage_loop,
         ),
     )
 

@@ -1,8 +1,9 @@
 """High-order embedded Runge-Kutta(-Nystrom) steps and an adaptive driver (Cowell form).
 
 Kernels for the tableaux of :mod:`fracas.integrate.tableaux`, written as pure JAX functions
-(jit-, vmap- and grad-friendly: the only Python control flow is over the tableau's static
-coefficients, never over traced values):
+(jit-, vmap- and grad-friendly; the stages run as data under ``lax.fori_loop``, the same
+kernels :mod:`fracas.integrate.stages` gives the propagator's step, so ``accel`` is traced
+once per step program):
 
 * :func:`rkn_step` -- one step of a special Runge-Kutta-Nystrom method (RKN4, DPRKN8(6),
   DPRKN12(10)) for an acceleration ``accel(t, r) -> (3,)`` that does not depend on velocity;
@@ -40,6 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fracas import _jax  # noqa: F401
+from fracas.integrate import stages as _stages
 from fracas.integrate.tableaux import NystromTableau, RungeKuttaTableau
 from fracas.status import RunStatus
 
@@ -87,37 +89,21 @@ def _duplicate_stages(tab: NystromTableau) -> list[int | None]:
 
 
 def _nystrom_stages(accel, t, r, v, h, tab: NystromTableau, k1=None):
-    """All stage accelerations (s, 3) of one Nystrom step."""
-    dup = _duplicate_stages(tab)
-    h2 = h * h
-    ks = []
-    for i in range(tab.stages):
-        if i == 0 and k1 is not None:
-            ks.append(k1)
-            continue
-        if dup[i] is not None:
-            ks.append(ks[dup[i]])
-            continue
-        ci = float(tab.c[i])
-        ri = r if ci == 0.0 else r + (ci * h) * v
-        s = _lincomb(tab.a_bar[i, :i], ks)
-        if s is not None:
-            ri = ri + h2 * s
-        ks.append(accel(t + ci * h, ri))
-    return ks
+    """All stage accelerations of one Nystrom step (``stages.StageValues``; the tableau as
+    data under ``lax.fori_loop``: ``accel`` is traced once; repeated stages folded)."""
+    plan = _stages.plan_of_tableau(tab)
+    c = jnp.asarray(plan.c)
+    return _stages.nystrom_stages(lambda i, ri: accel(t + c[i] * h, ri), r, v, h, plan, k0=k1)
 
 
 def _nystrom_update(r, v, h, tab: NystromTableau, ks):
-    r1 = r + h * v + (h * h) * _lincomb(tab.bbar, ks)
-    v1 = v + h * _lincomb(tab.b, ks)
-    if tab.bbar_low is None:
+    plan = _stages.plan_of_tableau(tab)
+    r1 = r + h * v + (h * h) * ks.weighted(plan.bbar)
+    v1 = v + h * ks.weighted(plan.b)
+    if plan.e is None:
         err = jnp.zeros(6, dtype=r1.dtype)
     else:
-        er = _lincomb(tab.ebar, ks)
-        ev = _lincomb(tab.e, ks)
-        er = jnp.zeros_like(r1) if er is None else (h * h) * er
-        ev = jnp.zeros_like(v1) if ev is None else h * ev
-        err = jnp.concatenate([er, ev])
+        err = jnp.concatenate([(h * h) * ks.weighted(plan.ebar), h * ks.weighted(plan.e)])
     return r1, v1, err
 
 
@@ -137,23 +123,17 @@ def _first_order(accel):
 
 
 def _rk_core(accel, t, r, v, h, tab: RungeKuttaTableau, k1=None):
-    """Stages of a first-order step; returns (r1, v1, err, err_aux, f(t + h, y1))."""
+    """Stages of a first-order step; returns (r1, v1, err, err_aux, f(t + h, y1)) (the
+    tableau as data, its last stage f(t + h, y1): ``stages.rk_stages``)."""
     f = _first_order(accel)
+    plan = _stages.plan_of_tableau(tab)
+    c = jnp.asarray(plan.c)
     y = jnp.concatenate([r, v])
-    ks = []
-    for i in range(tab.stages):
-        if i == 0 and k1 is not None:
-            ks.append(k1)
-            continue
-        s = _lincomb(tab.a[i, :i], ks)
-        yi = y if s is None else y + h * s
-        ks.append(f(t + float(tab.c[i]) * h, yi))
-    y1 = y + h * _lincomb(tab.b, ks)
-    k_new = f(t + h, y1)
-    ks_ext = [*ks, k_new]
-    err = h * _lincomb(tab.e, ks_ext)
-    err_aux = None if tab.e_aux is None else h * _lincomb(tab.e_aux, ks_ext)
-    return y1[:3], y1[3:], err, err_aux, k_new
+    ks = _stages.rk_stages(lambda i, yi: f(t + c[i] * h, yi), y, h, plan, k0=k1)
+    y1 = y + h * ks.weighted(plan.b)
+    err = h * ks.weighted(plan.e)
+    err_aux = None if plan.e_aux is None else h * ks.weighted(plan.e_aux)
+    return y1[:3], y1[3:], err, err_aux, ks.last()
 
 
 def rk_step(accel, t, r, v, h, tab: RungeKuttaTableau, k1=None):
@@ -310,7 +290,7 @@ def integrate_adaptive(
         if nystrom:
             ks = _nystrom_stages(accel, t, r, v, hs, tab, k1_arg)
             r1, v1, err = _nystrom_update(r, v, hs, tab, ks)
-            k_new = ks[-1]
+            k_new = ks.last()
         else:
             r1, v1, err, err_aux, k_new = _rk_core(accel, t, r, v, hs, tab, k1_arg)
         y0 = jnp.concatenate([r, v])

@@ -215,6 +215,12 @@ class StageValues:
             return jax.tree_util.tree_map(jnp.zeros_like, self.ks[0])
         return out
 
+    def last(self):
+        """The last stage's value."""
+        if isinstance(self.ks, list):
+            return self.ks[-1]
+        return jax.tree_util.tree_map(lambda k: k[-1], self.ks)
+
     def part(self, j):
         """Element j of a tuple-valued stage value, for every stage."""
         if isinstance(self.ks, list):

@@ -165,7 +165,15 @@ def test_rkn4_is_the_fracas_nystrom_step():
         return two_body(t_, r)
 
     rkn.rkn_step(counting, 0.0, jnp.array(X0[:3]), jnp.array(X0[3:]), 10.0, t)
-    assert len(calls) == 3  # stages 2 and 3 coincide without velocity dependence
+    # stages as data (issue 23): the acceleration is traced once per step program ...
+    assert len(calls) == 1
+    # ... and evaluated at 3 distinct stages: 2 and 3 coincide without velocity dependence
+    from fracas.integrate.stages import plan_of_tableau
+
+    plan = plan_of_tableau(t)
+    assert plan.stages == 3
+    np.testing.assert_array_equal(plan.c, [0, 0.5, 1])
+    np.testing.assert_allclose(plan.b, [1 / 6, 4 / 6, 1 / 6], rtol=0, atol=1e-17)
     with pytest.raises(ValueError):
         rkn.integrate_adaptive(two_body, 0.0, X0[:3], X0[3:], 10.0, t)
 

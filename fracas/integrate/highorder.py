@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from fracas import _jax  # noqa: F401
 from fracas.dynamics import forces
@@ -377,7 +378,13 @@ def _variational_rkn(model, params, nd, plan, c, dt, ctl, tol, perturbation, lab
     unroll = model.integrator.stage_loop == "unrolled"
     r, v, m = c.rc + c.delta, c.vc + c.nu, c.m
     phi = c.phi
-    q_mat, p_mat, m_row = phi[0:3], phi[3:6], phi[6]
+    # without a force (thrust, SRP) nothing depends on the mass: its column of d(r, v)/dx0 is
+    # zero for good, so only the 6 state columns and the parameters are integrated (the 6x6
+    # block, not the 7x7: issue 23) and the mass column is put back unchanged
+    mass_col = model.srp or model.thrust
+    cols = np.arange(phi.shape[1]) if mass_col else np.delete(np.arange(phi.shape[1]), 6)
+    n_x = 7 if mass_col else 6
+    q_mat, p_mat, m_row = phi[0:3][:, cols], phi[3:6][:, cols], phi[6][cols]
 
     def stage(i, y):
         ri, qi = y
@@ -386,7 +393,7 @@ def _variational_rkn(model, params, nd, plan, c, dt, ctl, tol, perturbation, lab
         if a_m is not None:
             km = km + a_m[:, None] * m_row[None, :]
         if n_p:
-            km = km + jnp.concatenate([jnp.zeros((3, 7)), a_p], axis=1)
+            km = km + jnp.concatenate([jnp.zeros((3, n_x)), a_p], axis=1)
         return a, km
 
     ks = _stages.nystrom_stages(stage, (r, q_mat), (v, p_mat), h, plan, unroll=unroll)
@@ -395,6 +402,8 @@ def _variational_rkn(model, params, nd, plan, c, dt, ctl, tol, perturbation, lab
     )
     (v1, p1) = jax.tree_util.tree_map(lambda y, k: y + h * k, (v, p_mat), ks.weighted(plan.b))
     phi1 = jnp.concatenate([q1, p1, m_row[None, :]], axis=0)
+    if not mass_col:
+        phi1 = jnp.insert(phi1, 6, phi[:, 6], axis=1)
     if plan.e is None:
         err = jnp.zeros(())
     else:

@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from fracas import _jax  # noqa: F401
 from fracas.dynamics import forces
@@ -382,9 +381,12 @@ def _variational_rkn(model, params, nd, plan, c, dt, ctl, tol, perturbation, lab
     # zero for good, so only the 6 state columns and the parameters are integrated (the 6x6
     # block, not the 7x7: issue 23) and the mass column is put back unchanged
     mass_col = model.srp or model.thrust
-    cols = np.arange(phi.shape[1]) if mass_col else np.delete(np.arange(phi.shape[1]), 6)
     n_x = 7 if mass_col else 6
-    q_mat, p_mat, m_row = phi[0:3][:, cols], phi[3:6][:, cols], phi[6][cols]
+
+    def cols(a):  # the integrated columns (static slices: no gather)
+        return a if mass_col else jnp.concatenate([a[..., :6], a[..., 7:]], axis=-1)
+
+    q_mat, p_mat, m_row = cols(phi[0:3]), cols(phi[3:6]), cols(phi[6])
 
     def stage(i, y):
         ri, qi = y
@@ -403,7 +405,7 @@ def _variational_rkn(model, params, nd, plan, c, dt, ctl, tol, perturbation, lab
     (v1, p1) = jax.tree_util.tree_map(lambda y, k: y + h * k, (v, p_mat), ks.weighted(plan.b))
     phi1 = jnp.concatenate([q1, p1, m_row[None, :]], axis=0)
     if not mass_col:
-        phi1 = jnp.insert(phi1, 6, phi[:, 6], axis=1)
+        phi1 = jnp.concatenate([phi1[:, :6], phi[:, 6:7], phi1[:, 6:]], axis=1)
     if plan.e is None:
         err = jnp.zeros(())
     else:

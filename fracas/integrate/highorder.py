@@ -43,7 +43,6 @@ import jax.numpy as jnp
 from fracas import _jax  # noqa: F401
 from fracas.dynamics import forces
 from fracas.dynamics.kepler import kepler_fg, predict_universal_anomaly
-from fracas.integrate import rkn as _rkn
 from fracas.integrate import stages as _stages
 from fracas.integrate.tableaux import DOP853, DPRKN8, DPRKN12, RKN4, RungeKuttaTableau
 
@@ -86,15 +85,7 @@ def control_exponent(method: str) -> float:
 
 def stages_per_step(method: str) -> int:
     """Acceleration evaluations per step (distinct stages; DOP853 counts its error stage)."""
-    tab = METHODS[method]
-    if isinstance(tab, RungeKuttaTableau):
-        return tab.stages + 1
-    return sum(1 for d in _duplicates(tab) if d is None)
-
-
-# the tableau helpers of the pure kernels (fracas.integrate.rkn): one definition
-_lincomb = _rkn._lincomb
-_duplicates = _rkn._duplicate_stages
+    return _stages.plan_of(method).stages
 
 
 # --------------------------------------------------------------------- stage geometry

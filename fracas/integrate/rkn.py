@@ -38,7 +38,6 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from fracas import _jax  # noqa: F401
 from fracas.integrate import stages as _stages
@@ -59,35 +58,6 @@ _NONFINITE = int(RunStatus.NONFINITE)
 
 
 # ----------------------------------------------------------------------------- helpers
-def _lincomb(coeffs, ks):
-    """sum_j coeffs[j] ks[j] over the nonzero (static) coefficients; None when all vanish."""
-    out = None
-    for cj, kj in zip(coeffs, ks):
-        cj = float(cj)
-        if cj == 0.0:
-            continue
-        term = cj * kj
-        out = term if out is None else out + term
-    return out
-
-
-def _duplicate_stages(tab: NystromTableau) -> list[int | None]:
-    """For each stage, an earlier stage with the same node and position coupling (or None).
-
-    Without velocity dependence such stages evaluate the same acceleration (RKN4's two
-    stages at t + h/2), so it is evaluated once.
-    """
-    dup: list[int | None] = []
-    for i in range(tab.stages):
-        found = None
-        for j in range(i):
-            if tab.c[i] == tab.c[j] and np.array_equal(tab.a_bar[i], tab.a_bar[j]):
-                found = j
-                break
-        dup.append(found)
-    return dup
-
-
 def _nystrom_stages(accel, t, r, v, h, tab: NystromTableau, k1=None):
     """All stage accelerations of one Nystrom step (``stages.StageValues``; the tableau as
     data under ``lax.fori_loop``: ``accel`` is traced once; repeated stages folded)."""

@@ -177,6 +177,16 @@ def _write_team_results(path: str | os.PathLike, res: TeamProduct) -> None:
         g.attrs["noise_cell_s"] = float(st.get("noise_cell_s", float("nan")))
         if "guidance_model" in st:
             g.attrs["guidance_model"] = str(st["guidance_model"])
+        # the process noise applied (assumed model): Gauss-Markov thrust noise per component,
+        # white acceleration noise, PDOT's RK4 steps (docs/team_results.md)
+        for key in ("thrust_noise_sigma", "thrust_noise_tau_s"):
+            if key in st:
+                g.attrs[key] = np.asarray(st[key], np.float64)
+        for key in ("white_noise_km2_s3", "pdot_step_min_s", "pdot_step_max_s"):
+            if key in st:
+                g.attrs[key] = float(st[key])
+        if "white_noise_direction" in st:
+            g.attrs["white_noise_direction"] = str(st["white_noise_direction"])
         pr = g.create_group("print")
         for k, v in st.get("print", {}).items():
             pr.attrs[k] = v

@@ -247,6 +247,34 @@ def _log_rows(events: list[list[str]], every: int, verbosity: str, bad: set[int]
     return sorted(keep)
 
 
+def process_noise_line(at) -> str:
+    """The process noise the run applied (the filter's model; issue 24), in one line: the
+    Gauss-Markov thrust noise by component (1-sigma, tau), white acceleration noise, and how
+    it was propagated (PHI's model, or PDOT with its RK4 steps).  Empty without any noise."""
+    sig = np.ravel(np.asarray(at.get("thrust_noise_sigma", []), float))
+    tau = np.ravel(np.asarray(at.get("thrust_noise_tau_s", []), float))
+    q = float(at.get("white_noise_km2_s3", 0.0) or 0.0)
+    parts = []
+    if sig.size == 3 and np.any(sig > 0):
+        # one 80-column line: proportionality ("scale"), in-plane and out-of-plane pointing
+        names = ("scale", "in", "out")
+        scale = (1.0, np.degrees(1.0), np.degrees(1.0))
+        unit = ("", "°", "°")
+        comps = [
+            f"{n} {sig[i] * scale[i]:.3g}{unit[i]}/{tau[i] / DAY_S:.3g} d" for i, n in enumerate(names) if sig[i] > 0
+        ]
+        parts.append("thrust 1σ/τ: " + ", ".join(comps))
+    if q > 0:
+        parts.append(f"white {q:.3g} km²/s³ {at.get('white_noise_direction', 'full')}")
+    if not parts:
+        return ""
+    how = str(at.get("process_noise", ""))
+    if how == "pdot":
+        lo, hi = at.get("pdot_step_min_s"), at.get("pdot_step_max_s")
+        how = "PDOT" + (f" steps {float(lo):.3g}-{float(hi):.3g} s" if lo is not None else "")
+    return f"noise ({how}) " + "; ".join(parts)
+
+
 def print_team(
     r: dict,
     console=None,
@@ -352,7 +380,10 @@ def print_team(
     ev.caption = _EVENT_LEGEND
     ev.caption_justify = "left"
     con.print(ev)
-    if int(pr.get("process_noise", 0)):
+    noise_line = process_noise_line(at)
+    if noise_line:
+        con.print(noise_line)
+    if int(pr.get("process_noise", 0)) and at.get("process_noise") != "pdot":
         kq = [k for k in range(K) if "propagation" in events[k]]
         if kq:
             q = np.array([_trace_rss(A["process_noise"][k], slice(3, 6)) * vf for k in kq])

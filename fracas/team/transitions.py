@@ -69,6 +69,7 @@ from fracas.filters.process_noise import dyno_q, gauss_legendre, white_direction
 from fracas.integrate.propagate import propagate_with_sensitivities
 from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at
 from fracas.products import TIME_TOL_S, ReferenceTrajectory, chain, time_indices
+from fracas.team.pdot_step import pdot_steps
 from fracas.team.study import Study
 
 __all__ = [
@@ -396,7 +397,14 @@ def noise_settings(study: Study, ref) -> dict:
         }
         if study.gencov:
             white["white_noise_direction_true"] = study.white_direction_true
+    # the noise actually applied, for the printout and the results file (issue 24)
+    white["thrust_noise_sigma"] = [float(x) for x in np.ravel(study.noise_sigma_assumed)]
+    white["thrust_noise_tau_s"] = [float(x) for x in np.ravel(study.noise_tau_assumed)]
+    white["white_noise_km2_s3"] = float(study.white_q_assumed) if study.has_white_noise else 0.0
     if study.propagation == "pdot":
+        h = pdot_steps(study, ref)
+        if h.size:
+            white["pdot_step_min_s"], white["pdot_step_max_s"] = float(h.min()), float(h.max())
         return {"process_noise": "pdot", **white}
     if study.noise_model == "interval":
         return {"process_noise": "interval", **white}

@@ -65,3 +65,34 @@ def test_step_bounds_follow_the_orbit_and_the_noise(tmp_path):
         study, noise_sigma_assumed=np.array([0.01, 0.0, 0.0]), noise_tau_assumed=np.array([60.0, 1e9, 1e9])
     )
     np.testing.assert_allclose(pdot_step_bounds(gm, ref), np.minimum(h, PDOT_TAU_STEP * 60.0), rtol=1e-12)
+
+
+def test_results_file_and_printout_state_the_noise_applied(tmp_path):
+    """The issue's complaint: PDOT printed "process noise 0..0" with white noise on.  The
+    results file records the model (white q and direction, Gauss-Markov sigma and tau by
+    component, PDOT's RK4 steps) and the report prints it (compared with the deck's values)."""
+    from fracas.io.team_results import read_team_results, write_team_results
+    from fracas.report.team import process_noise_line
+    from fracas.team.result import team_product
+
+    study, ref = _leo_pdot(tmp_path)
+    res = run_study(study, ref)
+    path = tmp_path / "r.h5"
+    write_team_results(path, team_product(res, reference_source="integrated"))
+    at = read_team_results(path)["attrs"]
+    assert at["process_noise"] == "pdot"
+    assert at["white_noise_km2_s3"] == 1e-10 and at["white_noise_direction"] == "crosstrack"
+    steps = np.diff(ref.times_s)
+    n = np.ceil(steps / pdot_step_bounds(study, ref) - 1e-9)
+    assert at["pdot_step_min_s"] == pytest.approx(np.min(steps / n), rel=1e-12)
+    assert at["pdot_step_max_s"] == pytest.approx(np.max(steps / n), rel=1e-12)
+    line = process_noise_line(at)
+    assert "white 1e-10 km²/s³ crosstrack" in line and "(PDOT steps" in line
+    # Gauss-Markov components by name, in deck units
+    at2 = dict(at, thrust_noise_sigma=[0.02, np.radians(0.5), 0.0], thrust_noise_tau_s=[43200.0, 86400.0, 1.0])
+    line2 = process_noise_line(at2)
+    assert "thrust 1σ/τ: scale 0.02/0.5 d, in 0.5°/1 d;" in line2
+    assert "out " not in line2
+    # three components alone fit one 80-column line of the report
+    at3 = dict(at2, thrust_noise_sigma=[0.02, 0.01, 0.01], white_noise_km2_s3=0.0, process_noise="grid")
+    assert len(process_noise_line(at3)) <= 80, process_noise_line(at3)

@@ -204,6 +204,8 @@ class ErTraj(_Section):
     # PDOT's largest RK4 step.  RK4 converges at 4th order: on tests/data/team_small.toml the
     # max relative sigma error against a 0.15 h step is 1.7e-5 (4.8 h), 1.0e-6 (2.4 h, the
     # default: better than 1e-5), 6.1e-8 (1.2 h) (tests/team/test_noise_invariance.py).
+    # The step taken is this capped by the dynamics (0.015 / sqrt(mu / r^3) on an orbit,
+    # 0.07 tau for Gauss-Markov noise: fracas.team.pdot_step; about 14 s in LEO).
     pdot_step_hours: PositiveFloat = 2.4
 
 

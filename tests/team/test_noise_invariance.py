@@ -129,11 +129,17 @@ def test_grid_noise_is_invariant_to_events(grid_pair):
     eigenvector, prediction and propagation events (INVARIANT_TOL)."""
     a, b = grid_pair
     assert a.study.has_noise and np.any(a.Q_assumed[1:] != 0)
-    assert noise_settings(a.study, a.ref) == {
+    ns = noise_settings(a.study, a.ref)
+    assert {k: ns.pop(k) for k in ("process_noise", "noise_cells", "noise_cell_s")} == {
         "process_noise": "grid",
         "noise_cells": "reference",
         "noise_cell_s": 7200.0,
     }
+    # the noise applied (issue 24): tests/data/team_small.toml's [thrust_noise], no white noise
+    assert sorted(ns) == ["thrust_noise_sigma", "thrust_noise_tau_s", "white_noise_km2_s3"]
+    np.testing.assert_allclose(ns["thrust_noise_sigma"], [0.01, np.radians(0.3), np.radians(0.3)], rtol=1e-15)
+    np.testing.assert_allclose(ns["thrust_noise_tau_s"], [2.0 * 86400.0] * 3, rtol=1e-15)
+    assert ns["white_noise_km2_s3"] == 0.0
     e = _max_diff(a, b)
     print(f"in-line grid: max scaled difference with/without extra events {e:.2e}")
     assert e < INVARIANT_TOL

@@ -234,6 +234,25 @@ class StageValues:
         return StageValues(self.ks[..., sl])
 
 
+def _looped(stage, y_of, like, plan: StagePlan, k0):
+    """The stages under ``lax.fori_loop`` (``stage`` traced once): stage i's input is
+    ``y_of(i, sum_j a_ij K_j)``; the stage values are written into arrays with a leading
+    stage axis, shaped like the pytree ``like``."""
+    a = jnp.asarray(plan.a)
+    n = plan.stages
+    ks0 = jax.tree_util.tree_map(lambda x: jnp.zeros((n,) + jnp.shape(x), jnp.result_type(x, jnp.float64)), like)
+    start = 0
+    if k0 is not None:
+        ks0 = jax.tree_util.tree_map(lambda ks, k: ks.at[0].set(k), ks0, k0)
+        start = 1
+
+    def body(i, ks):
+        k = stage(i, y_of(i, weighted(a[i], ks)))
+        return jax.tree_util.tree_map(lambda kk, new: kk.at[i].set(new), ks, k)
+
+    return StageValues(jax.lax.fori_loop(start, n, body, ks0))
+
+
 def weighted(w, ks):
     """sum_j w[j] ks[j] over the stage axis of every leaf of the pytree ``ks``.
 
@@ -271,20 +290,7 @@ def nystrom_stages(stage, q, p, h, plan: StagePlan, k0=None, unroll=False):
 
         return _unrolled(stage, y_of, plan, k0)
     c = jnp.asarray(plan.c)
-    a = jnp.asarray(plan.a)
-    n = plan.stages
-    ks0 = jax.tree_util.tree_map(lambda x: jnp.zeros((n,) + jnp.shape(x), jnp.result_type(x, jnp.float64)), q)
-    start = 0
-    if k0 is not None:
-        ks0 = jax.tree_util.tree_map(lambda ks, k: ks.at[0].set(k), ks0, k0)
-        start = 1
-
-    def body(i, ks):
-        qi = _axpy(_axpy(q, c[i] * h, p), h * h, weighted(a[i], ks))
-        k = stage(i, qi)
-        return jax.tree_util.tree_map(lambda kk, new: kk.at[i].set(new), ks, k)
-
-    return StageValues(jax.lax.fori_loop(start, n, body, ks0))
+    return _looped(stage, lambda i, s: _axpy(_axpy(q, c[i] * h, p), h * h, s), q, plan, k0)
 
 
 def rk_stages(stage, y, h, plan: StagePlan, k0=None, unroll=False):
@@ -298,17 +304,4 @@ def rk_stages(stage, y, h, plan: StagePlan, k0=None, unroll=False):
     """
     if unroll:
         return _unrolled(stage, lambda i, s: y if s is None else _axpy(y, h, s), plan, k0)
-    a = jnp.asarray(plan.a)
-    n = plan.stages
-    ks0 = jax.tree_util.tree_map(lambda x: jnp.zeros((n,) + jnp.shape(x), jnp.result_type(x, jnp.float64)), y)
-    start = 0
-    if k0 is not None:
-        ks0 = jax.tree_util.tree_map(lambda ks, k: ks.at[0].set(k), ks0, k0)
-        start = 1
-
-    def body(i, ks):
-        yi = _axpy(y, h, weighted(a[i], ks))
-        k = stage(i, yi)
-        return jax.tree_util.tree_map(lambda kk, new: kk.at[i].set(new), ks, k)
-
-    return StageValues(jax.lax.fori_loop(start, n, body, ks0))
+    return _looped(stage, lambda i, s: _axpy(y, h, s), y, plan, k0)

@@ -88,12 +88,12 @@ if ARGS.ref:
     subprocess.run(["tar", "-x", "-C", REF_DIR], input=_arch, check=True)
     sys.path.insert(0, REF_DIR)  # before ROOT: this copy of fracas is imported
 
+import fracas_cases  # noqa: E402
 import heyoka as hy  # noqa: E402
 import heyoka_cases as hc  # noqa: E402
 import numpy as np  # noqa: E402
 from tables import emit, si, table  # noqa: E402
 
-from fracas.dynamics.model import ForceModel, IntegratorSettings, default_params  # noqa: E402
 from fracas.integrate.batch import auto_chunk_size, host_devices, propagate_batch  # noqa: E402
 
 TARGET_M = 1.0
@@ -137,31 +137,19 @@ def leo_orbits(n: int, seed: int = 0) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- fracas side
 def fracas_problem(case, method, tol):
-    """ForceModel and Params of a heyoka_cases.Case as a deck's defaults build it (Cowell,
-    tolerance control, no dt_max); thrust as a nuclear source of constant power with
-    T = 2 eta P / ve, eta = 1, along the velocity (as bench_highorder.fracas_problem)."""
-    ig = IntegratorSettings(
-        method=method, formulation="cowell", step_control="tolerance", tolerance=tol, dt_max_s=np.inf
-    )
-    common = {"mu": [hc.MU_E], "j2": [hc.J2_E], "radius": [hc.R_E], "pole": [[0.0, 0.0, 1.0]]}
-    if case.thrust_kg_km_s2 > 0:
-        m = ForceModel(
-            bodies=("earth",), j2=True, thrust=True, velocity_dependent=True, power="nuclear", n_arcs=1, integrator=ig
-        )
-        p = default_params(
-            m,
-            **common,
-            power_kw=case.thrust_kg_km_s2 * case.ve_km_s / 2e-3,
-            power_decay_s=1e30,
-            efficiency=1.0,
-            exhaust_velocity_km_s=case.ve_km_s,
-            arc_t_on=[0.0],
-            arc_t_off=[2.0 * case.t_final_s],
-        )
-    else:
-        m = ForceModel(bodies=("earth",), j2=True, integrator=ig)
-        p = default_params(m, **common)
-    return m, p
+    """As a deck's defaults build it: Cowell, tolerance control, no dt_max (fracas_cases)."""
+    return fracas_cases.fracas_problem(case, method, "cowell", tol)
+
+
+def loosest(ladder, err_at):
+    """(the first tolerance of ``ladder`` (loosest first) whose error is <= TARGET_M, or None;
+    [(tol, error m)] tried)."""
+    tried = []
+    for t in ladder:
+        tried.append((t, err_at(t)))
+        if tried[-1][1] <= TARGET_M:
+            return t, tried
+    return None, tried
 
 
 def _fracas_call(case, m, p, x0s, stm):
@@ -176,16 +164,13 @@ def _traj(out):
 def fracas_side(case, method, stm, pool, truth_ref, ladder, target_cpu_s, repeat):
     """Tolerance search on the reference lanes, calibration, timed calls.  Returns a dict."""
     ref = pool[:N_REF]
-    tried = []
-    tol = None
-    for t in ladder:
+
+    def err_at(t):
         m, p = fracas_problem(case, method, t)
         tr = _traj(_fracas_call(case, m, p, ref, stm))
-        err = hc.pos_err_m(tr.x[:, -1, :6], truth_ref) if np.all(tr.status == 0) else np.inf
-        tried.append((t, err))
-        if err <= TARGET_M:
-            tol = t
-            break
+        return hc.pos_err_m(tr.x[:, -1, :6], truth_ref) if np.all(tr.status == 0) else np.inf
+
+    tol, tried = loosest(ladder, err_at)
     if tol is None:
         return {"tol": None, "tried": tried}
     m, p = fracas_problem(case, method, tol)
@@ -250,14 +235,7 @@ def heyoka_side(case, var, batch, x0s, truth_ref, ladder, repeat, min_cpu_s, **k
     A timed measurement is as many passes over ``x0s`` as make >= ``min_cpu_s`` CPU-s (heyoka
     is often much faster than the fracas call that sized ``x0s``); best of ``repeat``."""
     ref = x0s[:N_REF]
-    tried = []
-    tol = None
-    for t in ladder:
-        err = hc.pos_err_m(HB(case, t, batch, var, **kw).run(ref)[0], truth_ref)
-        tried.append((t, err))
-        if err <= TARGET_M:
-            tol = t
-            break
+    tol, tried = loosest(ladder, lambda t: hc.pos_err_m(HB(case, t, batch, var, **kw).run(ref)[0], truth_ref))
     if tol is None:
         return {"tol": None, "tried": tried}
     hc.set_cold(True)  # a cold LLVM compile for the "first s" column

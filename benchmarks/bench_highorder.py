@@ -57,7 +57,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import numpy as np  # noqa: E402
 
-from fracas.dynamics.model import ForceModel, IntegratorSettings, default_params  # noqa: E402
+from fracas.dynamics.model import IntegratorSettings  # noqa: E402
 from fracas.integrate import highorder  # noqa: E402
 from fracas.integrate.batch import host_devices, propagate_batch  # noqa: E402
 
@@ -67,42 +67,7 @@ TOLS = (1e-7, 3e-8, 1e-8, 3e-9, 1e-9, 3e-10, 1e-10, 3e-11, 1e-11, 3e-12, 1e-12)
 
 
 # ----------------------------------------------------------------------------- models
-def fracas_problem(case, method, formulation, tol, c_nom=None):
-    """ForceModel and Params of a heyoka_cases.Case (same constants; thrust as a nuclear source
-    of constant power with T = 2 eta P / ve, eta = 1, pointed along the velocity)."""
-    import heyoka_cases as hc
-
-    if c_nom is not None:
-        ig = IntegratorSettings(c_nom=c_nom)
-    else:
-        ig = IntegratorSettings(
-            method=method, formulation=formulation, step_control="tolerance", tolerance=tol, dt_max_s=np.inf
-        )
-    common = {"mu": [hc.MU_E], "j2": [hc.J2_E], "radius": [hc.R_E], "pole": [[0.0, 0.0, 1.0]]}
-    if case.thrust_kg_km_s2 > 0:
-        m = ForceModel(
-            bodies=("earth",),
-            j2=True,
-            thrust=True,
-            velocity_dependent=True,
-            power="nuclear",
-            n_arcs=1,
-            integrator=ig,
-        )
-        p = default_params(
-            m,
-            **common,
-            power_kw=case.thrust_kg_km_s2 * case.ve_km_s / 2e-3,
-            power_decay_s=1e30,
-            efficiency=1.0,
-            exhaust_velocity_km_s=case.ve_km_s,
-            arc_t_on=[0.0],
-            arc_t_off=[2.0 * case.t_final_s],
-        )
-    else:
-        m = ForceModel(bodies=("earth",), j2=True, integrator=ig)
-        p = default_params(m, **common)
-    return m, p
+from fracas_cases import fracas_problem  # noqa: E402  (shared with bench_heyoka_ratio.py)
 
 
 def run_batch(m, p, x0s, t_final, devices, sens=None, repeat=2, chunk=None, group=False):

@@ -85,7 +85,7 @@ def control_exponent(method: str) -> float:
 
 def stages_per_step(method: str) -> int:
     """Acceleration evaluations per step (distinct stages; DOP853 counts its error stage)."""
-    return _stages.plan_of(method).stages
+    return _stages.plan_of_tableau(METHODS[method]).stages
 
 
 # --------------------------------------------------------------------- stage geometry
@@ -210,7 +210,7 @@ def step(
     state tuple.
     """
     st = model.integrator
-    plan = _stages.plan_of(st.method)
+    plan = _stages.plan_of_tableau(METHODS[st.method])
     unroll = st.stage_loop == "unrolled"
     nd = _Nodes(model, params, ephem, epoch_et, c, dt, plan, body_states)
     if var_labels is not None:

@@ -7,7 +7,7 @@ function is traced **once**, whatever the method, and each stage's value is writ
 stage array (which also keeps XLA CPU from re-fusing early stages into later ones, the job
 ``highorder._materialise`` did for the unrolled loop; ../shared/perf-notes.md item 2).
 
-:func:`plan_of` turns a tableau of :mod:`fracas.integrate.tableaux` into a :class:`StagePlan`
+:func:`plan_of_tableau` turns a tableau of :mod:`fracas.integrate.tableaux` into a :class:`StagePlan`
 (numpy, static, cached per method):
 
 * special RKN methods (y'' = f(t, y)): stages that repeat an earlier stage (same node and the
@@ -33,7 +33,7 @@ import numpy as np
 from fracas import _jax  # noqa: F401
 from fracas.integrate.tableaux import NystromTableau, RungeKuttaTableau
 
-__all__ = ["StagePlan", "StageValues", "plan_of", "plan_of_tableau", "nystrom_stages", "rk_stages", "weighted"]
+__all__ = ["StagePlan", "StageValues", "plan_of_tableau", "nystrom_stages", "rk_stages", "weighted"]
 
 
 class StagePlan(NamedTuple):
@@ -144,13 +144,6 @@ def _plan_cached(tab) -> StagePlan:
 def plan_of_tableau(tab) -> StagePlan:
     """The :class:`StagePlan` of a tableau (cached; tableaux hash by identity)."""
     return _plan_cached(tab)
-
-
-def plan_of(method: str) -> StagePlan:
-    """The :class:`StagePlan` of a method name of ``highorder.METHODS``."""
-    from fracas.integrate.tableaux import DOP853, DPRKN8, DPRKN12, RKN4
-
-    return plan_of_tableau({"rkn4": RKN4, "dprkn8": DPRKN8, "dprkn12": DPRKN12, "dop853": DOP853}[method])
 
 
 @jax.custom_batching.custom_vmap

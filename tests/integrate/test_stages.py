@@ -124,7 +124,7 @@ def test_dop853_stages_equal_the_plain_tableau_step(unroll):
 def test_loop_and_unrolled_steps_are_the_same_under_vmap():
     """The two forms of the propagator's step on a batch of states (what propagate_batch and a
     single propagation compile): the same numbers to rounding."""
-    plan = S.plan_of("dprkn12")
+    plan = S.plan_of_tableau(T.DPRKN12)
     rng = np.random.default_rng(3)
     rs = R0 + rng.normal(0, 50, (16, 3))
     vs = V0 + rng.normal(0, 0.01, (16, 3))

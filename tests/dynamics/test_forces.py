@@ -137,6 +137,13 @@ def test_yaw_switch_frame_flips_beta_with_cos_u():
         np.testing.assert_allclose(d2, d0, rtol=0, atol=1e-15)
         h_hat = np.cross(r, v) / np.linalg.norm(np.cross(r, v))
         assert np.sign(d2 @ h_hat) == sign and abs(d2 @ h_hat - sign * np.sin(beta)) < 1e-14
+    # the integrator passes the trigonometry computed once per step (issue 23): the same vector
+    for code in (0.0, 1.0, 2.0):
+        pre = propulsion.angles_to_unit(alpha, beta)
+        np.testing.assert_array_equal(
+            np.asarray(propulsion.thrust_direction(r, v, alpha, beta, code, pre)),
+            np.asarray(propulsion.thrust_direction(r, v, alpha, beta, code)),
+        )
     # frame 1 stays inertial RA/Dec pointing
     d1 = np.asarray(propulsion.thrust_direction(r, v, alpha, beta, 1.0))
     np.testing.assert_allclose(

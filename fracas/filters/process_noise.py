@@ -159,18 +159,20 @@ def pdot_propagate(P0, F_nodes, Qc, dt_s):
     h = dt_s (s; negative integrates backward); Qc (n, n) constant, or (2N+1, n, n) at the
     same nodes.  Each step uses F at its start, midpoint and end (stages 2 and 3 share the
     midpoint); P is symmetrised after every step.  Returns P (n, n) at t0 + N h.
+    ``dt_s`` may also be one step per node pair, (N,): a zero step leaves P as it is, so a
+    caller can pad N to a few sizes and share one compiled program (fracas.team.pdot).
     Global error O(h^4) (tests/filters/test_process_noise.py checks the order).
     """
     P0 = _f64(P0)
     F_nodes = _f64(F_nodes)
     Qc = _f64(Qc)
-    h = _f64(dt_s)
     if Qc.ndim == 2:
         Qc = jnp.broadcast_to(Qc, F_nodes.shape)
-    xs = (F_nodes[0:-1:2], F_nodes[1::2], F_nodes[2::2], Qc[0:-1:2], Qc[1::2], Qc[2::2])
+    hs = jnp.broadcast_to(_f64(dt_s), ((F_nodes.shape[0] - 1) // 2,))
+    xs = (F_nodes[0:-1:2], F_nodes[1::2], F_nodes[2::2], Qc[0:-1:2], Qc[1::2], Qc[2::2], hs)
 
     def step(P, nodes):
-        f0, fm, f1, q0, qm, q1 = nodes
+        f0, fm, f1, q0, qm, q1, h = nodes
         k1 = covariance_derivative(P, f0, q0)
         k2 = covariance_derivative(P + (0.5 * h) * k1, fm, qm)
         k3 = covariance_derivative(P + (0.5 * h) * k2, fm, qm)

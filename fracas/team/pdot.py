@@ -41,6 +41,11 @@ def _pdot_fn():
     return jax.jit(pdot_propagate)
 
 
+def _pad_nodes(a: np.ndarray, extra: int):
+    """The node array ``a`` with its last node repeated ``extra`` times (zero-length steps)."""
+    return jnp.asarray(np.concatenate([a, np.repeat(a[-1:], extra, axis=0)]))
+
+
 def _expand(P: np.ndarray, sig: np.ndarray) -> np.ndarray:
     n = P.shape[0]
     out = np.zeros((n + 3, n + 3))
@@ -139,11 +144,17 @@ def run_pdot(study: Study, ref, meas):
             N = Ns[k - 1]
             seg = slice(start, start + 2 * N + 1)
             start += 2 * N + 1
-            dt = (t[k] - t[k - 1]) / N
-            qa, qt = (q[seg] if q.ndim == 3 else q for q in Qcs)
-            Pa = pdot(Pa, jnp.asarray(Fs[0][seg]), jnp.asarray(qa), dt)
+            # padded to a bucket of steps with zero-length steps: one compiled program per
+            # bucket, not one per distinct N (intervals of every length in LEO)
+            n_pad = bucket(N, 8)
+            dts = np.zeros(n_pad)
+            dts[:N] = (t[k] - t[k - 1]) / N
+
+            extra = 2 * (n_pad - N)
+            qa, qt = (_pad_nodes(q[seg], extra) if q.ndim == 3 else q for q in Qcs)
+            Pa = pdot(Pa, _pad_nodes(Fs[0][seg], extra), qa, jnp.asarray(dts))
             if study.gencov:
-                Pt = pdot(Pt, jnp.asarray(Fs[1][seg]), jnp.asarray(qt), dt)
+                Pt = pdot(Pt, _pad_nodes(Fs[1][seg], extra), qt, jnp.asarray(dts))
         am, ap, tm, tp, sg = _scan(
             Pa,
             Pt,

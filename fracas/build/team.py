@@ -391,6 +391,13 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
         sched.predict_to_s.pop(0, None)
 
     gain = load_user_gain(deck.filter.user_gain, src) if deck.filter.type == "user" else None
+    noise_model, noise_note = deck.errcon.process_noise, ""
+    has_gm = bool(np.any(num["noise_sigma_assumed"] > 0) or (gen is not None and np.any(num["noise_sigma_true"] > 0)))
+    if noise_model == "exact" and has_gm and deck.errcon.propagation == "phi" and guid:
+        # guidance events propagate control covariances on the study's own layout; they do
+        # not carry the noise states yet (issue 24): DYNO on fixed cells, said aloud
+        noise_model = "grid"
+        noise_note = "exact Gauss-Markov model not yet available with guidance events: FRACAS DYNO on fixed cells used"
     problem = dataclasses.replace(
         problem, param_labels=tuple(lab for lab, d in zip(labels, dynamic) if d), sensitivities=True
     )
@@ -425,7 +432,8 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
         thrust_switches_s=thrust_switch_times(tdeck),
         trajectory_end_s=dur,
         pdot_step_s=deck.ertraj.pdot_step_hours * 3600.0,
-        noise_model=deck.errcon.process_noise,
+        noise_model=noise_model,
+        noise_model_note=noise_note,
         noise_step_s=num["noise_step_s"],
         white_q_assumed=num["white_q_assumed"],
         white_q_true=num["white_q_true"],

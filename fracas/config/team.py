@@ -174,15 +174,15 @@ class ErrCon(_Section):
     analysis: bool = True
     propagation: Literal["phi", "pdot"] = "phi"
     stm_file: str | None = None
-    # PHI mode's thrust-noise model (fracas.team.transitions): "grid" (default) computes
-    # DYNO's Q̃ on fixed noise cells (a grid anchored at the epoch, cut at the thrust
-    # switches; its step is the smallest multiple of noise_step_hours on the [stm] grid, so
-    # in-line runs and runs from the deck's STM file share it, and the file's runs read the
-    # cells from the file without integrating) and maps each cell's Q̃ to the event times,
-    # so eigenvector, prediction and print events leave every covariance unchanged;
-    # "interval" is FRACAS's DYNO over each schedule interval (every event time changes the
-    # noise: up to ~3e-3 in sigma on tests/data/team_small.toml; docs/team_results.md).
-    process_noise: Literal["grid", "interval"] = "grid"
+    # PHI mode's Gauss-Markov thrust-noise model: "exact" (default; fracas.team.gm_exact)
+    # carries the three noise states through the filter with their exact transition and
+    # noise (within 1e-3 of the augmented covariance equation; docs/process_noise.md).
+    # FRACAS DYNO's effective Q̃ (fracas.team.transitions) stays available: "grid" computes
+    # it on fixed noise cells (a grid anchored at the epoch, cut at the thrust switches;
+    # event times leave it unchanged), "interval" over each schedule interval (FRACAS's
+    # own: every event time changes it).  DYNO is off by factors on short correlation
+    # times (0.5x to 2.8x by component on the issue-24 case).
+    process_noise: Literal["exact", "grid", "interval"] = "exact"
     guidance_model: Literal[GUIDANCE_MODELS] = "report"  # type: ignore[valid-type]
     # which blocks GUIDM's reset of the control covariance to the knowledge touches (report
     # model): "state" (default, digest P-B2) the state and state-parameter blocks, keeping

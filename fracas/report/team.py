@@ -269,10 +269,14 @@ def process_noise_line(at) -> str:
     if not parts:
         return ""
     how = str(at.get("process_noise", ""))
+    if how in ("grid", "interval") and sig.size == 3 and np.any(sig > 0):
+        how = f"DYNO {how}"  # FRACAS's effective Q̃: approximate (docs/process_noise.md)
     if how == "pdot":
         lo, hi = at.get("pdot_step_min_s"), at.get("pdot_step_max_s")
         how = "PDOT" + (f" steps {float(lo):.3g}-{float(hi):.3g} s" if lo is not None else "")
-    return f"noise ({how}) " + "; ".join(parts)
+    line = f"noise ({how}) " + "; ".join(parts)
+    note = str(at.get("process_noise_note", "") or "")
+    return line + (f"\nnote: {note}" if note else "")
 
 
 def print_team(

@@ -92,6 +92,8 @@ def prepare(study: Study, ref: Reference) -> BatchSetup:
     scan does not do; such studies run one by one)."""
     if study.propagation != "phi" or study.filter_kind == "user" or study.guidance or study.resets:
         raise ValueError("batched studies need PHI propagation, a built-in gain, no guidance and no reset events")
+    if study.noise_model == "exact" and study.has_noise:
+        raise ValueError("batched studies need DYNO thrust noise (the exact model carries noise states)")
     return BatchSetup(study, ref, assemble_measurements(study, ref), augmented_transitions(study, ref))
 
 

@@ -132,9 +132,14 @@ def _mask_r(meas, kind: str | None) -> np.ndarray:
     return np.where(m, R, 0.0)
 
 
-def error_budget(study: Study, phi_aug, Qa, Qt, meas, full_outs, guidance_run=None, span=None) -> ErrorBudget:
+def error_budget(
+    study: Study, phi_aug, Qa, Qt, meas, full_outs, guidance_run=None, span=None, augmented=None
+) -> ErrorBudget:
     """One true-side run per source (module docstring); ``full_outs``: the full run's
-    filter outputs, ``guidance_run``: its :class:`~fracas.team.guidance.GuidanceRun`."""
+    filter outputs, ``guidance_run``: its :class:`~fracas.team.guidance.GuidanceRun`;
+    ``augmented``: the exact Gauss-Markov model's inputs (``run_filter``'s ``augmented``;
+    no guidance): the noise states' stationary a priori then belongs to the thrust-noise
+    source, and every other source's a priori gets zero noise-state rows."""
     from fracas.team.guidance import run_guidance
     from fracas.team.scan import run_filter
 
@@ -161,9 +166,18 @@ def error_budget(study: Study, phi_aug, Qa, Qt, meas, full_outs, guidance_run=No
         )
         qt = Qt if src["thrust"] else np.zeros_like(Qt)
         ms = dataclasses.replace(meas, R_true=_mask_r(meas, src["kind"]))
+        aug = None
+        if augmented is not None:
+            n = study.layout.n
+            p0t = np.zeros((n + 3, n + 3))
+            p0t[:n, :n] = src["P0t"]
+            if src["thrust"]:
+                p0t[n:, n:] = np.diag(np.asarray(sig_t, np.float64) ** 2)
+            phit = augmented.get("phi_true")
+            aug = dict(augmented, P0_true=p0t, phi_true=phi_aug if phit is None else phit)
 
-        def filt(xa, xt, st=st, qt=qt, ms=ms):
-            return run_filter(st, phi_aug, Qa, qt, ms, xa, xt, host=False)
+        def filt(xa, xt, st=st, qt=qt, ms=ms, aug=aug):
+            return run_filter(st, phi_aug, Qa, qt, ms, xa, xt, host=False, augmented=aug)
 
         if guidance_run is not None:
             gr = run_guidance(

@@ -22,13 +22,24 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
+from fracas.filters.covariance import Layout
+from fracas.team.gm_exact import augment_noise, augment_P0, augment_transitions, exact_noise, pad_H, uses_exact
 from fracas.team.measure import assemble_measurements
 from fracas.team.pdot import run_pdot
 from fracas.team.reference import Reference
 from fracas.team.result import TeamResult, finish, psd_problems
 from fracas.team.scan import run_filter
 from fracas.team.study import Study
-from fracas.team.transitions import EPS_T, augmented_transitions, interval_noise, process_noise, theta_columns
+from fracas.team.transitions import (
+    EPS_T,
+    augmented_transitions,
+    interval_noise,
+    process_noise,
+    theta_columns,
+    white_noise,
+)
 
 __all__ = [
     "TeamResult",
@@ -41,6 +52,70 @@ __all__ = [
     "run_filter",
     "EPS_T",
 ]
+
+
+def exact_inputs(study: Study, ref: Reference) -> dict:
+    """The exact Gauss-Markov model's filter inputs (fracas.team.gm_exact): transitions and
+    noise over n + 3 states, the expanded a priori and H, and the x-block noise for the
+    results file (Q_assumed / Q_true, (K, nx, nx))."""
+    t = np.asarray(ref.times_s, np.float64)
+    nx, n = study.nx, study.layout.n
+    ex = exact_noise(study, t, np.asarray(ref.states)[0], ref.states, ref.primary)
+    wa, wt = white_noise(study, t, np.asarray(ref.states)[0]) if study.has_white_noise else (0.0, 0.0)
+    zero = np.zeros((len(t), nx, nx))
+    wa, wt = wa + zero, wt + zero
+    phi_n = augmented_transitions(study, ref)
+    phi_a = augment_transitions(phi_n, ex.gamma_assumed, ex.E_assumed, nx)
+    same = np.array_equal(study.noise_tau_assumed, study.noise_tau_true) or not study.gencov
+    phi_t = None if same else augment_transitions(phi_n, ex.gamma_true, ex.E_true, nx)
+    L = study.layout
+    return {
+        "phi": phi_a,
+        "Qa": augment_noise(ex.Q_assumed, wa, n),
+        "Qt": augment_noise(ex.Q_true, wt, n),
+        "Qa_x": ex.Q_assumed[:, :nx, :nx] + wa,
+        "Qt_x": ex.Q_true[:, :nx, :nx] + wt,
+        "augmented": {
+            "layout": Layout(L.nx, L.ns, L.nu, L.nv, L.nw + 3),
+            "P0_assumed": augment_P0(study.P0_assumed, study.noise_sigma_assumed),
+            "P0_true": augment_P0(study.P0_true, study.noise_sigma_true),
+            "phi_true": phi_t,
+        },
+        "pieces": ex.pieces,
+        "piece_step_s": ex.piece_step_s,
+    }
+
+
+def _run_exact(study: Study, ref: Reference, meas, tm: dict, t1: float) -> TeamResult:
+    """The PHI run with the noise states augmented (exact Gauss-Markov thrust noise)."""
+    got = exact_inputs(study, ref)
+    aug = dict(got["augmented"], H=pad_H(meas.H))
+    tm["noise_transitions_s"] = time.perf_counter() - t1
+    t2 = time.perf_counter()
+    Pa_m, Pa_p, Pt_m, Pt_p, sig = run_filter(study, got["phi"], got["Qa"], got["Qt"], meas, augmented=aug)
+    tm["filter_s"] = time.perf_counter() - t2
+    tm["gm_pieces"] = got["pieces"]
+    res = TeamResult(
+        study,
+        ref,
+        meas,
+        Pa_m,
+        Pa_p,
+        Pt_m if study.gencov else None,
+        Pt_p if study.gencov else None,
+        got["Qa_x"],
+        got["Qt_x"],
+        sig,
+        noise_states=True,
+    )
+    if study.budget:
+        from fracas.team.budget import error_budget
+
+        t3 = time.perf_counter()
+        outs = (Pa_m, Pa_p, Pt_m, Pt_p, sig)
+        res.budget = error_budget(study, got["phi"], got["Qa"], got["Qt"], meas, outs, augmented=aug)
+        tm["budget_s"] = time.perf_counter() - t3
+    return res
 
 
 def run_study(study: Study, ref: Reference, progress=None, product=None) -> TeamResult:
@@ -63,6 +138,10 @@ def run_study(study: Study, ref: Reference, progress=None, product=None) -> Team
         res.timing.update(tm)
         return res
     stage("process noise and transitions")
+    if uses_exact(study):
+        res = _run_exact(study, ref, meas, tm, t1)
+        finish(res, tm)
+        return res
     Qa, Qt = process_noise(study, ref)
     phi_aug = augmented_transitions(study, ref)
     tm["noise_transitions_s"] = time.perf_counter() - t1

@@ -61,6 +61,8 @@ def predict_from(res, k: int, t_to: float):
         prim = [bodies[int(i)] for i in np.asarray(traj.primary)]
         sub = Reference(t_out, np.array(traj.x), prim, phi, theta, labels, "prediction")
     phis = augmented_transitions(study, sub)
+    if res.noise_states and study.propagation == "phi":  # exact Gauss-Markov: carry the noise states
+        return _predict_exact(res, k, t_out, sub, phis, prim)
     if study.noise_model == "interval":
         Qa, Qt = interval_noise(study, t_out, sub.states, prim, phi)
     else:  # the fixed noise cells, clipped to start at t_k
@@ -73,6 +75,39 @@ def predict_from(res, k: int, t_to: float):
         if Pt is not None:
             Pt = np.asarray(cov.time_update(Pt, phis[j], Qt[j]))
     return Pa, Pt, RunStatus.OK
+
+
+def _predict_exact(res, k: int, t_out: np.ndarray, sub, phis: np.ndarray, prim):
+    """The prediction with the exact model's noise states (fracas.team.gm_exact): the
+    covariance over n + 3 states mapped with the exact Gamma, E and Q from t_k; returns the
+    n x n blocks (the noise states are not reported in predictions)."""
+    from fracas.team.gm_exact import augment_noise, augment_transitions, exact_noise
+    from fracas.team.transitions import white_noise
+
+    study = res.study
+    nx, n = study.nx, study.layout.n
+    ex = exact_noise(study, t_out, sub.states[0], sub.states, list(prim))
+    zero = np.zeros((len(t_out), nx, nx))
+    wa, wt = white_noise(study, t_out, sub.states[0]) if study.has_white_noise else (zero, zero)
+    Pa, Pt = res.Pa_plus[k], (res.Pt_plus[k] if res.Pt_plus is not None else None)
+    for P, gam, E, Q, W, name in (
+        (Pa, ex.gamma_assumed, ex.E_assumed, ex.Q_assumed, wa, "a"),
+        (Pt, ex.gamma_true, ex.E_true, ex.Q_true, wt, "t"),
+    ):
+        if P is None:
+            continue
+        ph = augment_transitions(phis, gam, E, nx)
+        Qf = augment_noise(Q, W + zero, n)
+        for j in range(1, len(t_out)):
+            P = np.asarray(cov.time_update(P, ph[j], Qf[j]))
+        if name == "a":
+            Pa = P
+        else:
+            Pt = P
+    if not (np.all(np.isfinite(Pa))):
+        nan = np.full((n, n), np.nan)
+        return nan, (nan.copy() if Pt is not None else None), RunStatus.OUTSIDE_TRAJECTORY
+    return Pa[:n, :n], (Pt[:n, :n] if Pt is not None else None), RunStatus.OK
 
 
 def predictions(res):

@@ -54,6 +54,7 @@ def _scan(
     Xt=None,
     reset_flag=None,
     reset_cov=None,
+    phi_t=None,
     *,
     layout,
     kind,
@@ -66,7 +67,9 @@ def _scan(
     measurement update (guidance events, GUIDM); the ``P_plus`` outputs include it.
     reset_flag (K,), reset_cov (K, 6, 6), optional: assumed-covariance resets applied after
     the time update and before the event's measurements (:func:`reset_state_block`); the
-    ``Pa_minus`` outputs are after the reset (the filter's a priori for the marks)."""
+    ``Pa_minus`` outputs are after the reset (the filter's a priori for the marks).
+    phi_t (K, n, n), optional: the true covariance's transitions where they differ from the
+    filter's (exact Gauss-Markov noise with true correlation times, fracas.team.gm_exact)."""
     n_est = layout.n_est
     eye_n = jnp.eye(layout.n)
     if Xa is None:
@@ -77,13 +80,15 @@ def _scan(
         reset_flag = jnp.zeros(Qa.shape[0], dtype=Qa.dtype)
         reset_cov = jnp.zeros((Qa.shape[0], 6, 6), dtype=Qa.dtype)
     nx = Qa.shape[-1]
+    same_phi = phi_t is None  # Python-level: the usual program scans one transition per event
 
     def add_exec(P, x):
         return P.at[:nx, :nx].add(x)
 
     def step(carry, ev):
         A, T, Pnc = carry
-        phi, qa, qt, h, ra, rt, xa, xt, fl, rc = ev
+        phi, qa, qt, h, ra, rt, xa, xt, fl, rc = ev[:10]
+        phit = phi if same_phi else ev[10]
         if kind == "wls":
             Pnc = cov.wls_time_update(Pnc, phi, layout)
         if square_root:
@@ -106,11 +111,11 @@ def _scan(
         _, J = cov.innovation(Pa_m, h, ra)
         if gencov:
             if square_root:
-                Wt = sqr.sqrt_time_update(T, phi, qt)
+                Wt = sqr.sqrt_time_update(T, phit, qt)
                 Wt1 = sqr.sqrt_time_update(sqr.sqrt_joseph_update(Wt, h, rt, K), eye_n, xt)
                 Pt_m, Pt_p, T1 = Wt @ Wt.T, Wt1 @ Wt1.T, Wt1
             else:
-                Pt_m = cov.time_update(T, phi, qt)
+                Pt_m = cov.time_update(T, phit, qt)
                 Pt_p = add_exec(cov.joseph_update(Pt_m, h, rt, K), xt)
                 T1 = Pt_p
         else:
@@ -122,7 +127,8 @@ def _scan(
     else:
         A0, T0 = P0a, P0t
     Pnc0 = P0a[:n_est, :n_est]
-    _, outs = jax.lax.scan(step, (A0, T0, Pnc0), (phi_aug, Qa, Qt, H, Ra, Rt, Xa, Xt, reset_flag, reset_cov))
+    xs = (phi_aug, Qa, Qt, H, Ra, Rt, Xa, Xt, reset_flag, reset_cov) + (() if same_phi else (phi_t,))
+    _, outs = jax.lax.scan(step, (A0, T0, Pnc0), xs)
     return outs
 
 
@@ -152,8 +158,13 @@ def reset_arrays(study: Study, Kp: int) -> tuple[np.ndarray, np.ndarray]:
     return flag, rcov
 
 
-def run_filter(study: Study, phi_aug, Qa, Qt, meas, Xa=None, Xt=None, host: bool = True):
+def run_filter(study: Study, phi_aug, Qa, Qt, meas, Xa=None, Xt=None, host: bool = True, *, augmented=None):
     """Run the jitted scan over the schedule (padded to a bucket size); numpy outputs.
+
+    ``augmented``: the exact Gauss-Markov model's noise states (fracas.team.gm_exact), a
+    dict with ``layout`` (the study's, three ignore rows more), ``P0_assumed``/``P0_true``,
+    ``H`` (K, m, n + 3) and ``phi_true`` (the true covariance's transitions, or None when
+    the filter's serve); ``phi_aug``, Qa, Qt are then (K, n + 3, n + 3).
 
     Xa / Xt (K, nx, nx): execution-error covariances of guidance events (zero elsewhere;
     default none), added to the assumed / true knowledge after the event.  host=False
@@ -164,6 +175,10 @@ def run_filter(study: Study, phi_aug, Qa, Qt, meas, Xa=None, Xt=None, host: bool
     Xa = np.zeros_like(Qa) if Xa is None else Xa
     Xt = np.zeros_like(Qt) if Xt is None else Xt
     flag, rcov = reset_arrays(study, Kp)
+    aug = augmented or {}
+    layout = aug.get("layout", study.layout)
+    P0a, P0t = aug.get("P0_assumed", study.P0_assumed), aug.get("P0_true", study.P0_true)
+    phi_t = aug.get("phi_true")
     phi_aug, Qa, Qt, H, Ra, Rt, Xa, Xt = _pad_events(
         K,
         Kp,
@@ -171,17 +186,19 @@ def run_filter(study: Study, phi_aug, Qa, Qt, meas, Xa=None, Xt=None, host: bool
             ("phi", phi_aug),
             ("Q", Qa),
             ("Q", Qt),
-            ("H", meas.H),
+            ("H", aug.get("H", meas.H)),
             ("R", meas.R_assumed),
             ("R", meas.R_true),
             ("Q", Xa),
             ("Q", Xt),
         ],
     )
+    if phi_t is not None:
+        (phi_t,) = _pad_events(K, Kp, [("phi", phi_t)])
     try:
         outs = _scan(
-            jnp.asarray(study.P0_assumed),
-            jnp.asarray(study.P0_true),
+            jnp.asarray(P0a),
+            jnp.asarray(P0t),
             jnp.asarray(phi_aug),
             jnp.asarray(Qa),
             jnp.asarray(Qt),
@@ -192,7 +209,8 @@ def run_filter(study: Study, phi_aug, Qa, Qt, meas, Xa=None, Xt=None, host: bool
             jnp.asarray(Xt),
             jnp.asarray(flag),
             jnp.asarray(rcov),
-            layout=study.layout,
+            None if phi_t is None else jnp.asarray(phi_t),
+            layout=layout,
             kind=study.filter_kind,
             gencov=study.gencov,
             square_root=study.square_root,

@@ -90,8 +90,10 @@ class Study:
     noise sigma (km, km/s or rad); thrust_switches_s: the thrust on/off times of the
     trajectory (sorted, s); trajectory_end_s: where the reference trajectory ends (s);
     pdot_step_s: the largest RK4 step of PDOT propagation (s); noise_model: PHI mode's
-    thrust-noise model, "grid" (DYNO on fixed cells of noise_step_s, s) or "interval"
-    (FRACAS's DYNO per schedule interval; fracas.team.transitions); resets: (t_s, six
+    thrust-noise model, "exact" (the noise states augmented; fracas.team.gm_exact),
+    "grid" (DYNO on fixed cells of noise_step_s, s) or "interval" (FRACAS's DYNO per
+    schedule interval; fracas.team.transitions); noise_model_note: why the deck's model
+    was replaced (the exact model with guidance events or an error budget), else ""; resets: (t_s, six
     sigmas km, km/s) of the assumed-covariance reset events; source: where the study came
     from (a deck path, for messages); user_gain_spec: the "module:function" of a user gain;
     white_q_assumed / white_q_true (km^2/s^3), white_direction_* ("full", "crosstrack",
@@ -130,7 +132,8 @@ class Study:
     thrust_switches_s: tuple[float, ...] = ()
     trajectory_end_s: float = 0.0
     pdot_step_s: float = 3600.0
-    noise_model: str = "grid"
+    noise_model: str = "exact"
+    noise_model_note: str = ""
     noise_step_s: float = 3600.0
     user_gain_spec: str = ""
     trajectory_hash: str = ""

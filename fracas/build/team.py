@@ -434,6 +434,14 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
         pdot_step_s=deck.ertraj.pdot_step_hours * 3600.0,
         noise_model=noise_model,
         noise_model_note=noise_note,
+        P0_noise_states=(
+            (
+                np.array(punched["assumed_with_noise_states"], dtype=np.float64),
+                np.array(punched.get("true_with_noise_states", punched["assumed_with_noise_states"]), np.float64),
+            )
+            if punched is not None and "assumed_with_noise_states" in punched
+            else None
+        ),
         noise_step_s=num["noise_step_s"],
         white_q_assumed=num["white_q_assumed"],
         white_q_true=num["white_q_true"],

@@ -450,6 +450,12 @@ def _write_punch(path: str | os.PathLike, res: TeamProduct, indices: list[int] |
                 write(g, "true", res.true.P_plus[k][:n, :n], "labels/units x labels/units")
             if res.control is not None:
                 write(g, "control", res.control.P_plus[k][:n, :n], "labels/units x labels/units")
+            if len(res.roles) > n:  # the Gauss-Markov noise states (exact PHI, PDOT): punched too,
+                # so a restart carries their correlations with the state (issue 24)
+                unit = "labels/units + eta x same"
+                write(g, "assumed_with_noise_states", res.assumed.P_plus[k], unit)
+                if res.true is not None:
+                    write(g, "true_with_noise_states", res.true.P_plus[k], unit)
         write_provenance(f, res.provenance)
 
 
@@ -498,7 +504,11 @@ def read_punch(path: str | os.PathLike, source: str = "<deck>", *, verify: bool 
                 out["true"] = c.num(f"{k}/true", (n, n), finite=True)
             if "control" in f[k]:
                 out["control"] = c.num(f"{k}/control", (n, n), finite=True)
-            for which in ("assumed", "true", "control"):
+            for which in ("assumed", "true"):
+                name = f"{which}_with_noise_states"
+                if name in f[k]:
+                    out[name] = c.num(f"{k}/{name}", (n + 3, n + 3), finite=True)
+            for which in ("assumed", "true", "control", "assumed_with_noise_states", "true_with_noise_states"):
                 if which in out and not np.allclose(out[which], out[which].T, rtol=1e-10, atol=0.0):
                     raise c.fail(f"{k}/{which}", "not symmetric, expected a covariance matrix")
             return out

@@ -171,8 +171,12 @@ def error_budget(
             n = study.layout.n
             p0t = np.zeros((n + 3, n + 3))
             p0t[:n, :n] = src["P0t"]
-            if src["thrust"]:
-                p0t[n:, n:] = np.diag(np.asarray(sig_t, np.float64) ** 2)
+            if src["thrust"]:  # the noise states' a priori (and, punched, their correlations)
+                if study.P0_noise_states is not None:
+                    p0t = np.array(study.P0_noise_states[1 if study.gencov else 0], np.float64)
+                    p0t[:n, :n] = src["P0t"]
+                else:
+                    p0t[n:, n:] = np.diag(np.asarray(sig_t, np.float64) ** 2)
             phit = augmented.get("phi_true")
             aug = dict(augmented, P0_true=p0t, phi_true=phi_aug if phit is None else phit)
 

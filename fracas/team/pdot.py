@@ -131,8 +131,11 @@ def run_pdot(study: Study, ref, meas):
         Qcs.append(Qc)
     t_nodes = time.perf_counter() - t0
 
-    Pa = jnp.asarray(_expand(study.P0_assumed, study.noise_sigma_assumed))
-    Pt = jnp.asarray(_expand(study.P0_true, study.noise_sigma_true))
+    if study.P0_noise_states is not None:  # a punch with the noise states (issue 24)
+        Pa, Pt = (jnp.asarray(p) for p in study.P0_noise_states)
+    else:
+        Pa = jnp.asarray(_expand(study.P0_assumed, study.noise_sigma_assumed))
+        Pt = jnp.asarray(_expand(study.P0_true, study.noise_sigma_true))
     H = np.concatenate([meas.H, np.zeros(meas.H.shape[:2] + (3,))], axis=2)
     eye = jnp.eye(n + 3)[None]
     zq = jnp.zeros((1, nx, nx))

@@ -134,6 +134,7 @@ class Study:
     pdot_step_s: float = 3600.0
     noise_model: str = "exact"
     noise_model_note: str = ""
+    P0_noise_states: tuple | None = None  # (assumed, true) (n + 3, n + 3) from a punch file
     noise_step_s: float = 3600.0
     user_gain_spec: str = ""
     trajectory_hash: str = ""

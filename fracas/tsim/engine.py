@@ -6,9 +6,11 @@ For each mission (one lane of a vmapped block of :attr:`TsimPlan.block` missions
 1. **Sample the real world** (CSAMP, RNUM): δX₀ = L₀ z over the augmented state (injection
    state, mass and every parameter, :attr:`TsimPlan.init_factor`); the trajectory's
    parameters (:attr:`TsimPlan.dyn_labels`) take their sampled values in the real world's
-   ``Params``; the Gauss-Markov thrust errors are drawn on the hold grid (NOISE-1, exact,
-   started stationary) and held constant over each cell (P-C3), the integrator restarting
-   at every node so a realization does not depend on the step size.
+   ``Params``; the Gauss-Markov thrust errors are drawn on the hold grid as their exact means over
+   each cell (NOISE-1, jointly with the node values, started stationary;
+   :func:`fracas.tsim.sampling.gauss_markov_cell_means`, issue 24) and held constant over
+   the cell (P-C3), the integrator restarting at every node so a realization does not
+   depend on the step size.
 2. **Fly to each maneuver** with the real world (SETUP(real)): phase by phase, in chunks of
    :data:`CHUNK` grid cells (one compiled program for every phase and chunk).
 3. **Estimate by sampling** (P-C1, independent): δX̂ = (X_actual − X_ref) + n, n = L_k z
@@ -124,7 +126,7 @@ def _programs(static, dyn_labels: tuple, ctrl_labels: tuple, final_names: tuple,
         def one(i):
             key = smp.mission_key(seed, i)
             dx0 = smp.sample_normal(smp.stream_key(key, smp.STREAM_INITIAL), init_factor)
-            eta = smp.gauss_markov(smp.stream_key(key, smp.STREAM_NOISE), sigma, tau, dt)
+            eta = smp.gauss_markov_cell_means(smp.stream_key(key, smp.STREAM_NOISE), sigma, tau, dt)
             kn = [smp.sample_normal(smp.stream_key(key, smp.STREAM_KNOWLEDGE, j), f) for j, f in enumerate(kfacs)]
             ek = [smp.stream_key(key, smp.STREAM_EXECUTION, j) for j in range(len(kfacs))]
             return dx0, eta, kn, ek

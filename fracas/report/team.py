@@ -270,7 +270,8 @@ def process_noise_line(at) -> str:
         return ""
     how = str(at.get("process_noise", ""))
     if how in ("grid", "interval") and sig.size == 3 and np.any(sig > 0):
-        how = f"DYNO {how}"  # FRACAS's effective Q̃: approximate (docs/process_noise.md)
+        # FRACAS's effective Q̃, approximate (docs/team_results.md); as short as the old names
+        how = {"grid": "DYNO", "interval": "DYNO int"}[how]
     if how == "pdot":
         lo, hi = at.get("pdot_step_min_s"), at.get("pdot_step_max_s")
         how = "PDOT" + (f" steps {float(lo):.3g}-{float(hi):.3g} s" if lo is not None else "")
@@ -420,6 +421,8 @@ def print_team(
         if gencov:
             _num_col(ft, "true")
         for i, lab in enumerate(labels):
+            if roles[i] == "noise_state":  # stationary, never estimated: in --verbose's tables
+                continue
             f, u = _unit(units[i], vu)
             ft.add_row(escape(lab), escape(u), *(_fmt(h["sigma"][-1][i] * f) for _w, h in hist))
         con.print(ft)

@@ -87,6 +87,9 @@ def _predict_exact(res, k: int, t_out: np.ndarray, sub, phis: np.ndarray, prim):
     study = res.study
     nx, n = study.nx, study.layout.n
     ex = exact_noise(study, t_out, sub.states[0], sub.states, list(prim))
+    if not (np.all(np.isfinite(ex.gamma_assumed)) and np.all(np.isfinite(ex.Q_assumed))):
+        nan = np.full((n, n), np.nan)  # the integration through the pieces stopped
+        return nan, (nan.copy() if res.Pt_plus is not None else None), RunStatus.OUTSIDE_TRAJECTORY
     zero = np.zeros((len(t_out), nx, nx))
     wa, wt = white_noise(study, t_out, sub.states[0]) if study.has_white_noise else (zero, zero)
     Pa, Pt = res.Pa_plus[k], (res.Pt_plus[k] if res.Pt_plus is not None else None)
@@ -104,9 +107,6 @@ def _predict_exact(res, k: int, t_out: np.ndarray, sub, phis: np.ndarray, prim):
             Pa = P
         else:
             Pt = P
-    if not (np.all(np.isfinite(Pa))):
-        nan = np.full((n, n), np.nan)
-        return nan, (nan.copy() if Pt is not None else None), RunStatus.OUTSIDE_TRAJECTORY
     return Pa[:n, :n], (Pt[:n, :n] if Pt is not None else None), RunStatus.OK
 
 

@@ -246,6 +246,12 @@ def team_product(
     from fracas.team.transitions import noise_settings
 
     sett.update(noise_settings(st, res.ref))
+    if sett.get("process_noise") == "exact" and st.has_noise:  # the exact model's pieces (issue 24)
+        from fracas.filters.gauss_markov import GM_NODES
+        from fracas.team.gm_exact import piece_step
+
+        sett["gm_piece_step_s"] = float(piece_step(st, res.ref.states, res.ref.primary))
+        sett["gm_nodes_per_piece"] = int(GM_NODES)
     control = None
     if res.control is not None:
         pc0 = st.P0_control if st.P0_control is not None else st.P0_true

@@ -408,13 +408,7 @@ def noise_settings(study: Study, ref) -> dict:
         return {"process_noise": "pdot", **white}
     if study.noise_model_note:
         white["process_noise_note"] = study.noise_model_note
-    if study.noise_model == "exact":
-        if study.has_noise:
-            from fracas.filters.gauss_markov import GM_NODES
-            from fracas.team.gm_exact import piece_step
-
-            white["gm_piece_step_s"] = float(piece_step(study, ref.states, ref.primary))
-            white["gm_nodes_per_piece"] = int(GM_NODES)
+    if study.noise_model == "exact":  # its pieces: fracas.team.result adds gm_piece_step_s
         return {"process_noise": "exact", **white}
     if study.noise_model == "interval":
         return {"process_noise": "interval", **white}

@@ -37,9 +37,11 @@ DATA = Path(__file__).resolve().parents[1] / "data"
 DECK = DATA / "tsim_small.toml"
 
 
-# TEAM's thrust-noise model (DYNO on fixed cells) and TSIM's exact Gauss-Markov process differ
-# (test_gauss_markov_noise_in_the_loop_against_the_integrated_process), so the TEAM
-# comparisons fly without thrust noise; the clean-up's propellant is booked, not flown
+# TEAM's guidance events run DYNO's thrust-noise model (the exact one does not carry the
+# noise states through guidance yet: issue 24), which TSIM's exact Gauss-Markov process does
+# not match, so the TEAM comparisons with maneuvers fly without thrust noise (thrust noise
+# alone against TEAM's exact model: test_gauss_markov_noise_in_the_loop_against_the_
+# integrated_process_and_team); the clean-up's propellant is booked, not flown
 # (TEAM's impulsive corrections change the velocity only).
 NO_NOISE = (
     'impulse_propellant = "booked"\n[insim.team_changes]\n"thrust_noise.proportionality.sigma" = 0.0\n'
@@ -236,17 +238,59 @@ def test_nonlinear_design_converges_where_linear_leaves_a_miss(base):
             assert miss <= 0.1 + 1e-9
 
 
-def test_gauss_markov_noise_in_the_loop_against_the_integrated_process(base):
-    """NOISE in the loop: thrust noise only (σ 1 %, 0.3°, 0.3°; τ 2 d, held over τ/10 cells),
-    no maneuvers, over the first thrust arc (2.5 d).  Reference: the integrated Gauss-Markov
-    process, var δv = (a σ)² 2τ² (T/τ − 1 + e^{−T/τ}) per component (proportionality along
-    the thrust, the two angles across it), a the arc's mean thrust acceleration from the
-    reference's mass flow (T = c ṁ).  Gravity changes the velocity dispersion over 2.5 days
-    by (nT)² ~ 2e-3 and the hold by ~1e-3; 4096 missions give the σ to ~0.8 % (SE), so 4 %
-    is 5 SE.  (TEAM's DYNO model of the same noise gives 0.77× this σ on its 2 h cells:
-    docs/tsim.md.)"""
+TEAM_GM = """
+mode = "team"
+title = "thrust noise only, no measurements"
+[errcon]
+process_noise = "{model}"
+[ertraj]
+deck = "{traj}"
+[filter]
+stop_days = 2.5
+[a_priori]
+position_sigma_km = [1e-6, 1e-6, 1e-6]
+velocity_sigma_km_s = [1e-12, 1e-12, 1e-12]
+[thrust_noise]
+proportionality = {{ sigma = 0.01, tau_days = 2.0 }}
+in_plane_deg = {{ sigma = 0.3, tau_days = 2.0 }}
+out_of_plane_deg = {{ sigma = 0.3, tau_days = 2.0 }}
+[[event]]
+type = "propagation"
+times_days = [2.5]
+[budget]
+enabled = false
+"""
+
+
+def _team_gm_final(tmp_path, model):
+    from fracas.build.team import build_study
+    from fracas.config.team import load_team_deck
+    from fracas.team.engine import run_study
+    from fracas.team.reference import integrate_reference
+
+    deck = tmp_path / f"team_gm_{model}.toml"
+    deck.write_text(TEAM_GM.format(model=model, traj=DATA / "team_small_traj.toml"))
+    study = build_study(load_team_deck(deck))
+    res = run_study(study, integrate_reference(study))
+    return res.Pa_plus[-1][:6, :6]
+
+
+def test_gauss_markov_noise_in_the_loop_against_the_integrated_process_and_team(base, tmp_path):
+    """NOISE in the loop: thrust noise only (σ 1 %, 0.3°, 0.3°; τ 2 d, exact cell means held
+    over τ/20 cells), no maneuvers, over the first thrust arc (2.5 d), 4096 missions.
+
+    References: (1) the integrated Gauss-Markov process, var δv = (a σ)² 2τ² (T/τ − 1 +
+    e^{−T/τ}) per component (proportionality along the thrust, the two angles across it),
+    a the arc's mean thrust acceleration from the reference's mass flow (T = c ṁ); gravity
+    changes the velocity dispersion over 2.5 days by (nT)² ~ 2e-3; 4096 missions give the σ
+    to ~0.8 % (SE), so 4 % is 5 SE.  (2) TEAM's exact Gauss-Markov model (issue 24) on the
+    same trajectory with no measurements: the 6×6 position-velocity sample covariance passes
+    the likelihood-ratio (Wishart) test against TEAM's at p > 1e-4, and every σ is within 5
+    SE (5/sqrt(2N) = 5.5 %) of TEAM's.  TEAM's DYNO model (fixed 1 h cells) of the same noise
+    fails that test (checked: the agreement is not vacuous)."""
     from fracas.dynamics.parameters import get_values
     from fracas.tsim.plan import TargetPlan
+    from fracas.tsim.statistics import covariance_test
 
     *_, plan = base
     day = 86400.0
@@ -256,13 +300,28 @@ def test_gauss_markov_noise_in_the_loop_against_the_integrated_process(base):
     p = dataclasses.replace(plan, grid_s=grid, noise_sigma=sigma, noise_tau_s=np.full(3, tau), maneuvers=())
     x_t, failed_at = engine.reference_states(p, [T])
     assert np.isnan(failed_at)
-    names = ("vx", "vy", "vz")
-    fin = TargetPlan(names, ("km/s",) * 3, T, x_t[0][3:6], np.zeros(6), 1.0, np.ones(3))
+    names = ("x", "y", "z", "vx", "vy", "vz")
+    units = ("km",) * 3 + ("km/s",) * 3
+    fin = TargetPlan(names, units, T, x_t[0][:6], np.zeros(6), 1.0, np.ones(6))
     p = dataclasses.replace(p, final=fin, x_ref=x_t, init_factor=0.0 * plan.init_factor)
-    tab, _ = _fly(p, 4096)
-    measured = np.sqrt(np.sum(np.var(tab["target_error"], axis=0)))
+    N = 4096
+    tab, _ = _fly(p, N)
+    err = tab["target_error"]
+    measured = np.sqrt(np.sum(np.var(err[:, 3:6], axis=0)))
     c = float(np.asarray(get_values(plan.params, ["exhaust_velocity_km_s"], plan.model))[0])
     m0, m1 = float(plan.x0[6]), float(x_t[0][6])
     a = c * (m0 - m1) / T / (0.5 * (m0 + m1))
     expected = a * np.sqrt(np.sum(sigma**2) * 2.0 * tau**2 * (T / tau - 1.0 + np.exp(-T / tau)))
     assert abs(measured / expected - 1.0) < 0.04, (measured, expected)
+    # against TEAM's exact model
+    S = np.cov(err, rowvar=False)
+    P_team = _team_gm_final(tmp_path, "exact")
+    stat, dof, pval = covariance_test(S, N, P_team)
+    ratio = np.sqrt(np.diag(S) / np.diag(P_team))
+    print(f"TSIM/TEAM exact sigma ratios {np.round(ratio, 4)}, Wishart p = {pval:.3g}")
+    assert pval > 1e-4, (stat, dof, pval)
+    assert np.all(np.abs(ratio - 1.0) < 5.0 / np.sqrt(2 * N)), ratio
+    P_dyno = _team_gm_final(tmp_path, "grid")
+    _, _, p_dyno = covariance_test(S, N, P_dyno)
+    print(f"TSIM/TEAM DYNO sigma ratios {np.round(np.sqrt(np.diag(S) / np.diag(P_dyno)), 4)}, p = {p_dyno:.3g}")
+    assert p_dyno < 1e-4

@@ -61,7 +61,7 @@ def predict_from(res, k: int, t_to: float):
         prim = [bodies[int(i)] for i in np.asarray(traj.primary)]
         sub = Reference(t_out, np.array(traj.x), prim, phi, theta, labels, "prediction")
     phis = augmented_transitions(study, sub)
-    if res.noise_states and study.propagation == "phi":  # exact Gauss-Markov: carry the noise states
+    if getattr(res, "noise_states", False) and study.propagation == "phi":  # exact GM: carry the noise states
         return _predict_exact(res, k, t_out, sub, phis, prim)
     if study.noise_model == "interval":
         Qa, Qt = interval_noise(study, t_out, sub.states, prim, phi)

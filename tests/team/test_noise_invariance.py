@@ -1,6 +1,8 @@
 """Diagnostic events must not change the answer (issue 9 item 8; fracas.team.transitions).
 
-PHI mode's fixed-cell thrust-noise model (``errcon.process_noise = "grid"``, the default)
+PHI mode's fixed-cell thrust-noise model (``errcon.process_noise = "grid"``, the default
+before issue 24, now a named DYNO option chosen explicitly here; the exact default has its
+own invariance test in tests/team/test_gauss_markov_exact.py)
 computes DYNO's Q̃ on fixed noise cells and maps it to the event times, so adding
 eigenvector, prediction and print (propagation) events leaves every covariance at the
 common schedule times unchanged up to round-off, both with an in-line reference and with
@@ -31,7 +33,16 @@ from fracas.pipeline import stm_product
 from fracas.team.engine import run_study
 from fracas.team.reference import integrate_reference, reference_from_product
 from fracas.team.transitions import noise_cell_step, noise_settings
-from tests.team.test_team_engine import SMALL, dumps, pos_rss, scaled_diff, small_dict, study_of
+from tests.team.test_team_engine import SMALL, dumps, pos_rss, scaled_diff, study_of
+from tests.team.test_team_engine import small_dict as _small_dict_default
+
+
+def small_dict() -> dict:
+    """team_small.toml with DYNO's fixed-cell model chosen (the model this module tests)."""
+    d = _small_dict_default()
+    d.setdefault("errcon", {})["process_noise"] = "grid"
+    return d
+
 
 pytestmark = pytest.mark.slow  # reference runs of the noise models (~4 min cold): the slow subset
 
@@ -113,10 +124,11 @@ def files():
 
 
 def test_grid_is_the_default_and_its_cells():
-    """The default model is "grid"; the cell step is the smallest multiple of
+    """The grid model (this module's decks choose it; the default is "exact"); the cell step is the smallest multiple of
     noise_step_hours on the deck's [stm] grid (team_small: 1 h noise step, 2 h grid)."""
     study = study_of(small_dict())
     assert study.noise_model == "grid" and study.noise_step_s == 7200.0
+    assert study_of(_small_dict_default()).noise_model == "exact"  # the default since issue 24
     assert noise_cell_step(3600.0, 0.0) == 3600.0  # no STM grid: the noise step itself
     assert noise_cell_step(3600.0, 1800.0) == 3600.0  # a finer grid that divides it
     assert noise_cell_step(3600.0, 5400.0, [86400.0]) == 10800.0  # 1.5 h grid -> 3 h cells

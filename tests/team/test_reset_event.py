@@ -74,13 +74,15 @@ def test_true_covariance_after_reset_uses_the_reset_filters_gain(runs):
         if not np.any(used):
             continue
         H = meas.H[k][used]
+        n_all = rr.Pa_minus.shape[-1]  # the exact model's noise states follow (issue 24)
+        H = np.concatenate([H, np.zeros((H.shape[0], n_all - H.shape[1]))], axis=1)
         Ra = meas.R_assumed[k][np.ix_(used, used)]
         Rt = meas.R_true[k][np.ix_(used, used)]
         Pa, Pt = rr.Pa_minus[k], rr.Pt_minus[k]
         A = Pa @ H.T
-        K = np.zeros((lay.n, H.shape[0]))
+        K = np.zeros((n_all, H.shape[0]))
         K[: lay.n_est] = np.linalg.solve(H @ A + Ra, A[: lay.n_est].T).T
-        IKH = np.eye(lay.n) - K @ H
+        IKH = np.eye(n_all) - K @ H
         Pt_ref = IKH @ Pt @ IKH.T + K @ Rt @ K.T
         scale = np.max(np.abs(np.diag(Pt_ref)))
         assert np.max(np.abs(rr.Pt_plus[k] - Pt_ref)) <= 1e-9 * scale, k

@@ -392,12 +392,6 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
 
     gain = load_user_gain(deck.filter.user_gain, src) if deck.filter.type == "user" else None
     noise_model, noise_note = deck.errcon.process_noise, ""
-    has_gm = bool(np.any(num["noise_sigma_assumed"] > 0) or (gen is not None and np.any(num["noise_sigma_true"] > 0)))
-    if noise_model == "exact" and has_gm and deck.errcon.propagation == "phi" and guid:
-        # guidance events propagate control covariances on the study's own layout; they do
-        # not carry the noise states yet (issue 24): DYNO on fixed cells, said aloud
-        noise_model = "grid"
-        noise_note = "exact Gauss-Markov model not yet available with guidance events: FRACAS DYNO on fixed cells used"
     problem = dataclasses.replace(
         problem, param_labels=tuple(lab for lab, d in zip(labels, dynamic) if d), sensitivities=True
     )
@@ -438,6 +432,9 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
             (
                 np.array(punched["assumed_with_noise_states"], dtype=np.float64),
                 np.array(punched.get("true_with_noise_states", punched["assumed_with_noise_states"]), np.float64),
+                None
+                if "control_with_noise_states" not in punched or deck.control is not None
+                else np.array(punched["control_with_noise_states"], np.float64),
             )
             if punched is not None and "assumed_with_noise_states" in punched
             else None

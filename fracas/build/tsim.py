@@ -164,7 +164,9 @@ def build_plan(cfg, case, team) -> TsimPlan:
             sig = np.concatenate([s.knowledge_position_sigma_km, s.knowledge_velocity_sigma_km_s])
             pk[:6, :6] = np.diag(sig**2)
         else:
-            pk = np.array(hist.P_plus[ev.index], dtype=np.float64)
+            # over the study's states: the exact model's noise states (issue 24) are never
+            # estimated and the law's columns for them are zero
+            pk = np.array(hist.P_plus[ev.index], dtype=np.float64)[:n, :n]
         try:
             kfac = covariance_factor(k * k * pk, method)
         except ValueError as exc:
@@ -188,7 +190,7 @@ def build_plan(cfg, case, team) -> TsimPlan:
             ManeuverPlan(
                 name=g.name, type=g.type, time_s=float(g.time_s),
                 law=s.law if s is not None else "linear", max_iterations=s.max_iterations if s is not None else 8,
-                target=tp, gamma=np.asarray(ev.gamma, float), knowledge_factor=kfac, control_labels=ctrl,
+                target=tp, gamma=np.asarray(ev.gamma, float)[:, :n], knowledge_factor=kfac, control_labels=ctrl,
                 control_units=units_u, k_pinv=k_pinv, kk=kk, dv_jacobian=dv_jac,
                 sigma_p=k * g.sigma_p, sigma_pointing_rad=k * g.sigma_pointing_rad, sigma_res_km_s=k * g.sigma_res_km_s,
                 team={

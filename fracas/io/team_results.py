@@ -456,6 +456,8 @@ def _write_punch(path: str | os.PathLike, res: TeamProduct, indices: list[int] |
                 write(g, "assumed_with_noise_states", res.assumed.P_plus[k], unit)
                 if res.true is not None:
                     write(g, "true_with_noise_states", res.true.P_plus[k], unit)
+                if res.control is not None:
+                    write(g, "control_with_noise_states", res.control.P_plus[k], unit)
         write_provenance(f, res.provenance)
 
 
@@ -504,11 +506,18 @@ def read_punch(path: str | os.PathLike, source: str = "<deck>", *, verify: bool 
                 out["true"] = c.num(f"{k}/true", (n, n), finite=True)
             if "control" in f[k]:
                 out["control"] = c.num(f"{k}/control", (n, n), finite=True)
-            for which in ("assumed", "true"):
+            for which in ("assumed", "true", "control"):
                 name = f"{which}_with_noise_states"
                 if name in f[k]:
                     out[name] = c.num(f"{k}/{name}", (n + 3, n + 3), finite=True)
-            for which in ("assumed", "true", "control", "assumed_with_noise_states", "true_with_noise_states"):
+            for which in (
+                "assumed",
+                "true",
+                "control",
+                "assumed_with_noise_states",
+                "true_with_noise_states",
+                "control_with_noise_states",
+            ):
                 if which in out and not np.allclose(out[which], out[which].T, rtol=1e-10, atol=0.0):
                     raise c.fail(f"{k}/{which}", "not symmetric, expected a covariance matrix")
             return out

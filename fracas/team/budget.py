@@ -76,12 +76,20 @@ def budget_sources(study: Study, meas) -> list[dict]:
     out.append({"name": "a-priori state", "P0t": _block(P0t, state), "P0c": zero if separate else _block(P0c, state)})
     if separate:
         out.append({"name": "injection dispersion", "P0t": zero, "P0c": _block(P0c, state)})
+    eta = list(range(n - 3, n)) if study.gm_states else []  # the exact model's noise states
     for i, lab in enumerate(study.labels):
         idx = [nx + i]
+        if nx + i in eta:
+            continue
         if P0t[nx + i, nx + i] > 0 or P0c[nx + i, nx + i] > 0:
             out.append({"name": lab, "P0t": _block(P0t, idx), "P0c": _block(P0c, idx)})
-    rt = P0t - sum(s["P0t"] for s in out)
-    rc = P0c - sum(s["P0c"] for s in out)
+    eta_t, eta_c = zero.copy(), zero.copy()
+    if eta:  # their block and their correlations with the rest (punched) are thrust noise
+        rest = [i for i in range(n) if i not in eta]
+        eta_t = P0t - _block(P0t, rest)
+        eta_c = P0c - _block(P0c, rest)
+    rt = P0t - sum(s["P0t"] for s in out) - eta_t
+    rc = P0c - sum(s["P0c"] for s in out) - eta_c
     if np.any(rt != 0) or np.any(rc != 0):
         out.append({"name": "a-priori correlations", "P0t": rt, "P0c": rc})
     for s in out:
@@ -100,8 +108,8 @@ def budget_sources(study: Study, meas) -> list[dict]:
         out.append(
             {
                 "name": "process noise" if white else "thrust noise",
-                "P0t": zero,
-                "P0c": zero,
+                "P0t": eta_t,
+                "P0c": eta_c,
                 "thrust": True,
                 "kind": None,
                 "resolution": False,
@@ -137,9 +145,9 @@ def error_budget(
 ) -> ErrorBudget:
     """One true-side run per source (module docstring); ``full_outs``: the full run's
     filter outputs, ``guidance_run``: its :class:`~fracas.team.guidance.GuidanceRun`;
-    ``augmented``: the exact Gauss-Markov model's inputs (``run_filter``'s ``augmented``;
-    no guidance): the noise states' stationary a priori then belongs to the thrust-noise
-    source, and every other source's a priori gets zero noise-state rows."""
+    ``augmented``: the exact Gauss-Markov model's inputs (``run_filter``'s ``augmented``),
+    with ``study`` its augmented view (fracas.team.gm_exact.augmented_view): the noise
+    states' a priori belongs to the thrust-noise source (:func:`budget_sources`)."""
     from fracas.team.guidance import run_guidance
     from fracas.team.scan import run_filter
 
@@ -167,25 +175,17 @@ def error_budget(
         qt = Qt if src["thrust"] else np.zeros_like(Qt)
         ms = dataclasses.replace(meas, R_true=_mask_r(meas, src["kind"]))
         aug = None
-        if augmented is not None:
-            n = study.layout.n
-            p0t = np.zeros((n + 3, n + 3))
-            p0t[:n, :n] = src["P0t"]
-            if src["thrust"]:  # the noise states' a priori (and, punched, their correlations)
-                if study.P0_noise_states is not None:
-                    p0t = np.array(study.P0_noise_states[1 if study.gencov else 0], np.float64)
-                    p0t[:n, :n] = src["P0t"]
-                else:
-                    p0t[n:, n:] = np.diag(np.asarray(sig_t, np.float64) ** 2)
+        if augmented is not None:  # the exact model: ``study`` is its augmented view (n + 3)
             phit = augmented.get("phi_true")
-            aug = dict(augmented, P0_true=p0t, phi_true=phi_aug if phit is None else phit)
+            aug = dict(augmented, phi_true=phi_aug if phit is None else phit)
 
         def filt(xa, xt, st=st, qt=qt, ms=ms, aug=aug):
             return run_filter(st, phi_aug, Qa, qt, ms, xa, xt, host=False, augmented=aug)
 
         if guidance_run is not None:
+            phi_c = aug["phi_true"] if aug is not None else phi_aug  # the control covariance's (true) transitions
             gr = run_guidance(
-                st, phi_aug, qt, filt, span, assumed_exec=guidance_run.Xa, P0_control=src["P0c"], summary=False
+                st, phi_c, qt, filt, span, assumed_exec=guidance_run.Xa, P0_control=src["P0c"], summary=False
             )
             _, _, vals = budget_outputs(st, gr.outs[3], gr.outcomes)
         else:

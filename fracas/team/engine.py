@@ -25,7 +25,15 @@ import time
 import numpy as np
 
 from fracas.filters.covariance import Layout
-from fracas.team.gm_exact import augment_noise, augment_P0, augment_transitions, exact_noise, pad_H, uses_exact
+from fracas.team.gm_exact import (
+    augment_noise,
+    augment_P0,
+    augment_transitions,
+    augmented_view,
+    exact_noise,
+    pad_H,
+    uses_exact,
+)
 from fracas.team.measure import assemble_measurements
 from fracas.team.pdot import run_pdot
 from fracas.team.reference import Reference
@@ -95,13 +103,33 @@ def _P0(study: Study, which: int) -> np.ndarray:
     return augment_P0(P0, sig)
 
 
-def _run_exact(study: Study, ref: Reference, meas, tm: dict, t1: float) -> TeamResult:
-    """The PHI run with the noise states augmented (exact Gauss-Markov thrust noise)."""
+def _run_exact(study: Study, ref: Reference, meas, tm: dict, t1: float, stage, product=None) -> TeamResult:
+    """The PHI run with the noise states augmented (exact Gauss-Markov thrust noise).
+
+    Guidance events and the error budget run on the study's augmented view
+    (fracas.team.gm_exact.augmented_view): their n x n algebra then carries the noise
+    states, with the exact Gamma, E and Q between any two times (fracas.team.guidance)."""
     got = exact_inputs(study, ref)
-    aug = dict(got["augmented"], H=pad_H(meas.H))
+    view = augmented_view(study, got["augmented"]["P0_assumed"], got["augmented"]["P0_true"])
+    phi_t = got["augmented"]["phi_true"]
+    aug = {"H": pad_H(meas.H), "phi_true": phi_t}
     tm["noise_transitions_s"] = time.perf_counter() - t1
     t2 = time.perf_counter()
-    Pa_m, Pa_p, Pt_m, Pt_p, sig = run_filter(study, got["phi"], got["Qa"], got["Qt"], meas, augmented=aug)
+
+    def filt(xa, xt, host=True):
+        return run_filter(view, got["phi"], got["Qa"], got["Qt"], meas, xa, xt, host=host, augmented=aug)
+
+    grun = span = None
+    if study.guidance:
+        from fracas.team.guidance import ReferenceSpan, run_guidance
+
+        span = ReferenceSpan(view, product if product is not None else getattr(ref, "product", None))
+        stage("guidance events")
+        grun = run_guidance(view, got["phi"] if phi_t is None else phi_t, got["Qt"], filt, span)
+        outs = grun.outs
+    else:
+        outs = filt(None, None)
+    Pa_m, Pa_p, Pt_m, Pt_p, sig = outs
     tm["filter_s"] = time.perf_counter() - t2
     tm["gm_pieces"] = got["pieces"]
     res = TeamResult(
@@ -117,12 +145,14 @@ def _run_exact(study: Study, ref: Reference, meas, tm: dict, t1: float) -> TeamR
         sig,
         noise_states=True,
     )
+    if grun is not None:
+        res.control, res.control_epoch, res.guidance = grun.control, grun.control_epoch, grun.outcomes
     if study.budget:
         from fracas.team.budget import error_budget
 
+        stage("error budget")
         t3 = time.perf_counter()
-        outs = (Pa_m, Pa_p, Pt_m, Pt_p, sig)
-        res.budget = error_budget(study, got["phi"], got["Qa"], got["Qt"], meas, outs, augmented=aug)
+        res.budget = error_budget(view, got["phi"], got["Qa"], got["Qt"], meas, outs, grun, span, augmented=aug)
         tm["budget_s"] = time.perf_counter() - t3
     return res
 
@@ -148,7 +178,7 @@ def run_study(study: Study, ref: Reference, progress=None, product=None) -> Team
         return res
     stage("process noise and transitions")
     if uses_exact(study):
-        res = _run_exact(study, ref, meas, tm, t1)
+        res = _run_exact(study, ref, meas, tm, t1, stage, product)
         finish(res, tm)
         return res
     Qa, Qt = process_noise(study, ref)

@@ -43,6 +43,7 @@ __all__ = [
     "augment_noise",
     "augment_P0",
     "pad_H",
+    "augmented_view",
 ]
 
 #: Longest piece as a fraction of the orbital time scale 1/omega (omega^2 = mu / r^3 about
@@ -162,6 +163,39 @@ def exact_noise(study: Study, t: np.ndarray, x0: np.ndarray, states, primary) ->
                 _, gam[i], E[i], Q[i] = compose(piece_phi[sl], gam_p[sl], E_p[sl], Q_p[sl])
         out += [gam, E, Q]
     return ExactNoise(*out, M, step)
+
+
+def augmented_view(study: Study, P0_assumed: np.ndarray, P0_true: np.ndarray) -> Study:
+    """The study with the three noise states appended as its own (``gm_states``): layout
+    (ignore block + 3), labels, units, roles ``noise_state``, dynamic False, the augmented a
+    priori and control a priori (eta stationary at the true sigma).  What guidance events
+    and the error budget run on, so their n x n algebra carries the noise states."""
+    import dataclasses
+
+    from fracas.filters.covariance import Layout
+
+    L = study.layout
+    labels = ["eta_proportionality", "eta_in_plane_rad", "eta_out_of_plane_rad"]
+    pc = study.P0_control if study.P0_control is not None else study.P0_true
+    pc_aug = augment_P0(pc, study.noise_sigma_true if study.gencov else study.noise_sigma_assumed)
+    if study.P0_noise_states is not None:  # punched with the noise states
+        got = study.P0_noise_states[2] if len(study.P0_noise_states) > 2 else None
+        if got is not None:
+            pc_aug = np.array(got)
+        elif study.P0_control is None:
+            pc_aug = np.array(P0_true)
+    return dataclasses.replace(
+        study,
+        layout=Layout(L.nx, L.ns, L.nu, L.nv, L.nw + 3),
+        labels=list(study.labels) + labels,
+        roles=list(study.roles) + ["noise_state"] * 3,
+        units=list(study.units) + ["1", "rad", "rad"],
+        dynamic=np.concatenate([np.asarray(study.dynamic, bool), np.zeros(3, bool)]),
+        P0_assumed=np.asarray(P0_assumed),
+        P0_true=np.asarray(P0_true),
+        P0_control=pc_aug,
+        gm_states=True,
+    )
 
 
 def augment_transitions(phi_aug: np.ndarray, gamma: np.ndarray, E: np.ndarray, nx: int) -> np.ndarray:

@@ -151,6 +151,37 @@ def augment(study: Study, phi7: np.ndarray, theta: np.ndarray) -> np.ndarray:
     return out
 
 
+def _gm_blocks(study: Study, span: ReferenceSpan, t_to: float, t_from: float):
+    """The exact model's true-side (Gamma (nx, 3), E (3,), Q (nx + 3, nx + 3)) from t_from
+    to t_to (fracas.team.gm_exact; ``study.gm_states``), memoized on the span."""
+    from fracas.team.gm_exact import exact_noise
+
+    key = ("gm", float(t_to), float(t_from), tuple(study.noise_sigma_true), tuple(study.noise_tau_true))
+    if key not in span.memo:
+        t = np.array([t_from, t_to], dtype=np.float64)
+        x0, b0 = span.state(t_from)
+        x1, b1 = span.state(t_to)
+        ex = exact_noise(study, t, x0, np.array([x0, x1]), [b0, b1])
+        g, e, q = (
+            (ex.gamma_true, ex.E_true, ex.Q_true) if study.gencov else (ex.gamma_assumed, ex.E_assumed, ex.Q_assumed)
+        )
+        span.memo[key] = (g[1], e[1], q[1])
+    return span.memo[key]
+
+
+def _transition(study: Study, span: ReferenceSpan, t_to: float, t_from: float) -> np.ndarray:
+    """The augmented transition (n, n) from t_from to t_to: PROP eq. 3, and with the exact
+    Gauss-Markov model's noise states (``study.gm_states``) their true Gamma and E."""
+    phi, theta = span.transition(t_to, t_from)
+    out = augment(study, phi, theta)
+    if study.gm_states and t_to > t_from:
+        gam, e, _ = _gm_blocks(study, span, t_to, t_from)
+        n = study.layout.n
+        out[: study.nx, n - 3 :] = gam
+        out[np.arange(n - 3, n), np.arange(n - 3, n)] = e
+    return out
+
+
 def _embed(study: Study, x: np.ndarray) -> np.ndarray:
     n = study.layout.n
     out = np.zeros((n, n))
@@ -177,9 +208,8 @@ def _target_psi_uncached(study: Study, span: ReferenceSpan, g: GuidanceSpec, t_s
         x_rel = x_rel - _relative_body_state(study, body, body_f, g.target_time_s)
     mu = float(np.asarray(get_values(study.problem.params, [f"mu[{body}]"], study.problem.model))[0])
     a_t = np.asarray(target_jacobian(tuple(g.targets), x_rel, float(g.target_time_s), mu))
-    phi, theta = span.transition(g.target_time_s, t_s)
     nx = study.nx
-    return a_t[:, :nx] @ augment(study, phi, theta)[:nx, :], body
+    return a_t[:, :nx] @ _transition(study, span, g.target_time_s, t_s)[:nx, :], body
 
 
 def _post(p_c, p_k, g_mat, mode, nx, reset="state"):
@@ -238,8 +268,24 @@ def _thrust_at(study: Study, t_s: float, x: np.ndarray, body: str) -> tuple[floa
 
 
 def _noise_between(study: Study, span: ReferenceSpan, t_a: float, t_b: float) -> np.ndarray:
-    """True DYNO Q̃ (nx, nx) accumulated from t_a to t_b, split at the thrust switches."""
+    """True DYNO Q̃ (nx, nx) accumulated from t_a to t_b, split at the thrust switches; with
+    the exact model's noise states (``study.gm_states``) the exact Q (n, n) on the state and
+    noise-state blocks, plus the white noise."""
     nx = study.nx
+    if study.gm_states:
+        n = study.layout.n
+        out = np.zeros((n, n))
+        if t_b > t_a:
+            _, _, q = _gm_blocks(study, span, t_b, t_a)
+            sel = np.r_[np.arange(nx), np.arange(n - 3, n)]
+            out[np.ix_(sel, sel)] = q
+            if study.has_white_noise:
+                from fracas.team.transitions import white_noise
+
+                x0, _ = span.state(t_a)
+                wa, wt = white_noise(study, np.array([t_a, t_b]), x0)
+                out[:nx, :nx] += (wt if study.gencov else wa)[1]
+        return out
     if not study.has_process_noise or t_b <= t_a:
         return np.zeros((nx, nx))
     cuts = [t_a] + [s for s in study.thrust_switches_s if t_a + EPS_T < s < t_b - EPS_T] + [t_b]
@@ -325,8 +371,7 @@ def _low_thrust(study, span, g, k, p_c, p_k, summary=True):
     if key not in span.memo:
         span.memo[key] = np.asarray(control_sensitivity(study.problem, t_i, t_c, list(g.control_labels))[0])
     s7 = span.memo[key]
-    phi, theta = span.transition(t_c, t_i)
-    phi_aug = augment(study, phi, theta)
+    phi_aug = _transition(study, span, t_c, t_i)
     psi_c, body = _target_psi(study, span, g, t_c)
     k_mat = psi_c[:, :nx] @ s7[:nx]
     lam = psi_c @ phi_aug
@@ -451,7 +496,11 @@ def run_guidance(
         P = state["P"]
         for j in range(state["cursor"] + 1, k + 1):
             P = phi_aug[j] @ P @ phi_aug[j].T
-            P[:nx, :nx] += Qt[j] + Xc[j]
+            if Qt.shape[-1] == n:  # the exact model's Q covers the noise states too
+                P = P + Qt[j]
+                P[:nx, :nx] += Xc[j]
+            else:
+                P[:nx, :nx] += Qt[j] + Xc[j]
             P = _sym(P)
             control[j] = P
             epoch[j] = state["epoch"]

@@ -255,6 +255,8 @@ def team_product(
     control = None
     if res.control is not None:
         pc0 = st.P0_control if st.P0_control is not None else st.P0_true
+        if res.control.shape[-1] > pc0.shape[0]:  # the exact model's noise states: control[0] is its a priori
+            pc0 = res.control[0]
         sg = np.sqrt(np.clip(np.diagonal(res.control, axis1=1, axis2=2), 0.0, None))
         control = ControlHistory(res.control, sg, np.asarray(res.control_epoch, dtype=np.int64), np.asarray(pc0))
     return TeamProduct(

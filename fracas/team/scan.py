@@ -174,6 +174,9 @@ def run_filter(study: Study, phi_aug, Qa, Qt, meas, Xa=None, Xt=None, host: bool
     Kp = bucket(K)
     Xa = np.zeros_like(Qa) if Xa is None else Xa
     Xt = np.zeros_like(Qt) if Xt is None else Xt
+    if Xa.shape[-1] < Qa.shape[-1]:  # x-block execution errors beside a full-size Q (noise states)
+        d = Qa.shape[-1] - Xa.shape[-1]
+        Xa, Xt = (np.pad(np.asarray(X), ((0, 0), (0, d), (0, d))) for X in (Xa, Xt))
     flag, rcov = reset_arrays(study, Kp)
     aug = augmented or {}
     layout = aug.get("layout", study.layout)

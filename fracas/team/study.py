@@ -134,7 +134,8 @@ class Study:
     pdot_step_s: float = 3600.0
     noise_model: str = "exact"
     noise_model_note: str = ""
-    P0_noise_states: tuple | None = None  # (assumed, true) (n + 3, n + 3) from a punch file
+    P0_noise_states: tuple | None = None  # (assumed, true, control or None) (n + 3, n + 3), punched
+    gm_states: bool = False  # the last three states are the exact model's eta (fracas.team.gm_exact.augmented_view)
     noise_step_s: float = 3600.0
     user_gain_spec: str = ""
     trajectory_hash: str = ""

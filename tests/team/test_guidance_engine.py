@@ -131,11 +131,12 @@ def test_impulsive_event_against_digest_formulas(case_ref):
     p_k = res.Pt_minus[k]
     # P_c before the event: the control history just before k, propagated one interval
     pc_prev = res.control[k - 1]
-    from fracas.team.transitions import augmented_transitions
+    from tests.team.test_team_engine import event_inputs
 
-    phi = augmented_transitions(st, res.ref)[k]
-    p_c = phi @ pc_prev @ phi.T
-    p_c[:nx, :nx] += res.Q_true[k]
+    # the engine's full-size inputs: with the exact Gauss-Markov model (issue 24) the noise
+    # states are part of the control covariance, their Q and Gamma too
+    _, phit, _, Qt, *_ = event_inputs(st, res.ref, res.meas)
+    p_c = phit[k] @ pc_prev @ phit[k].T + Qt[k]
     psi = g.psi
     gamma = np.linalg.solve(psi[:, 3:6], psi[:, :nx])
     gamma = np.concatenate([gamma, np.zeros((3, psi.shape[1] - nx))], axis=1)
@@ -241,10 +242,13 @@ def test_control_covariance_punched_and_reloaded(case_ref, tmp_path):
     p = tmp_path / "punch.h5"
     write_punch(p, prod, [k])
     punched = read_punch(p)
-    np.testing.assert_array_equal(punched["control"], res.control[k])
+    n = res.study.layout.n  # the exact model's noise states follow (issue 24), punched beside
+    np.testing.assert_array_equal(punched["control"], res.control[k][:n, :n])
+    np.testing.assert_array_equal(punched["control_with_noise_states"], res.control[k])
     deck = case.deck.model_copy(update={"control": None})
     study = build_case(deck, punched).study
-    np.testing.assert_array_equal(study.P0_control, res.control[k])
+    np.testing.assert_array_equal(study.P0_control, res.control[k][:n, :n])
+    np.testing.assert_array_equal(study.P0_noise_states[2], res.control[k])
 
 
 @pytest.mark.parametrize("model, sign", [("orthogonal", -1.0), ("tsim", 1.0)])
@@ -258,11 +262,10 @@ def test_estimate_models_and_reset_options(case_ref, model, sign):
     res = run_study(st, ref, product=product)
     g = res.guidance[0]
     k, nx = g.index, st.nx
-    from fracas.team.transitions import augmented_transitions
+    from tests.team.test_team_engine import event_inputs
 
-    phi = augmented_transitions(st, res.ref)[k]
-    p_c = phi @ res.control[k - 1] @ phi.T
-    p_c[:nx, :nx] += res.Q_true[k]
+    _, phit, _, Qt, *_ = event_inputs(st, res.ref, res.meas)  # full size: the noise states too
+    p_c = phit[k] @ res.control[k - 1] @ phit[k].T + Qt[k]
     p_k = res.Pt_minus[k]
     gamma = g.gamma
     want = gamma @ (p_c + sign * p_k) @ gamma.T

@@ -287,21 +287,6 @@ def _setup_for(gkey: str, study, stm: str | None):
     return got
 
 
-def _exact_gm(base: TeamDeck, fields) -> bool:
-    """Whether the sweep's studies run the exact Gauss-Markov model (PHI, "exact", thrust
-    noise in the base deck or swept): those run one by one (the batched path carries no
-    noise states; fracas.team.batch)."""
-    if base.errcon.propagation != "phi" or base.errcon.process_noise != "exact":
-        return False
-    if any(str(f).startswith(("thrust_noise.", "gencov.thrust_noise.")) for f in fields):
-        return True
-    tn = [base.thrust_noise] + ([base.gencov.thrust_noise] if base.gencov is not None else [])
-    return any(c is not None and getattr(getattr(c, n, None), "sigma", 0.0) > 0 for c in tn for n in _GM_FIELDS)
-
-
-_GM_FIELDS = ("proportionality", "in_plane_deg", "out_of_plane_deg")
-
-
 def run_group(
     base: TeamDeck,
     items: list[tuple[int, tuple, str]],
@@ -542,7 +527,6 @@ def run_sweep(
 
     # guidance and reset studies are not batched (fracas.team.batch.prepare): one by one from the start
     batchable = not base.guidance and not any(e.type == "reset" for e in base.event)
-    batchable = batchable and not _exact_gm(base, fields)
     group_of = _groups(studies, fields) if (batch and res_dir is None and batchable) else {}
     from fracas.team.batch import MAX_BATCH
 

@@ -40,27 +40,25 @@ table = "{table}"
 
 @pytest.fixture(scope="module")
 def study_dir(tmp_path_factory):
-    """team_small with FRACAS DYNO's fixed-cell thrust noise chosen: the batched path these
-    tests exercise carries no noise states, so a sweep of a deck with the exact model (the
-    default) runs its studies one by one (test_exact_model_sweeps_run_one_by_one)."""
     d = tmp_path_factory.mktemp("sweep")
     for name in ("team_small.toml", "team_small_traj.toml"):
         shutil.copy(DATA / name, d / name)
-    with open(d / "team_small.toml", "a", encoding="utf-8") as f:
-        f.write('\n[errcon]\nprocess_noise = "grid"\n')
     return d
 
 
-def test_exact_model_sweeps_run_one_by_one():
-    """The exact Gauss-Markov model (issue 24) with thrust noise, or a swept thrust-noise
-    field, is not batched; DYNO's grid and a deck without noise fields are."""
-    from fracas.sweep import _exact_gm
+def test_the_studies_run_the_exact_model():
+    """These sweeps batch the default exact Gauss-Markov model (issue 24: the noise states
+    with Gamma and E shared by the group, Q = sum_i sigma_i^2 Q_i per study), so the
+    batched-vs-run_team comparisons below check it; a group needs one set of tau."""
+    from fracas.team.batch import structure_mismatch
 
-    exact = load_team_deck(DATA / "team_small.toml")
-    assert exact.errcon.process_noise == "exact" and _exact_gm(exact, [FIELD])
-    assert _exact_gm(exact, ["filter.stop_days"])  # the deck's own thrust noise
-    grid = vary(exact, "errcon.process_noise", "grid")
-    assert not _exact_gm(grid, [FIELD])
+    base = load_team_deck(DATA / "team_small.toml")
+    a = pipeline.load_team(base).study
+    assert a.noise_model == "exact" and a.has_noise
+    b = pipeline.load_team(vary(base, "thrust_noise.in_plane_deg.tau_days", 3.0)).study
+    assert structure_mismatch(a, b) == "noise correlation times"
+    c = pipeline.load_team(vary(base, FIELD, 0.03)).study
+    assert structure_mismatch(a, c) is None
 
 
 def make_deck(d: Path, values, table="sweep.h5", name="sweep.toml", extra="", study="team_small.toml") -> SweepDeck:

@@ -21,6 +21,7 @@ Core module: arrays in, arrays out; no deck, no file.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from functools import partial
 from types import SimpleNamespace
@@ -31,6 +32,7 @@ import numpy as np
 
 from fracas import _jax  # noqa: F401
 from fracas.filters.process_noise import dyno_q
+from fracas.team.gm_exact import augment_noise, augment_transitions, augmented_P0, exact_noise, pad_H
 from fracas.team.measure import MeasurementSet, assemble_measurements
 from fracas.team.reference import Reference
 from fracas.team.scan import filter_scan
@@ -79,6 +81,7 @@ class BatchSetup:
     meas: MeasurementSet
     phi_aug: np.ndarray
     _nodes: dict | None = field(default=None, repr=False)
+    exact: dict | None = None  # the exact Gauss-Markov model's shared inputs (:func:`_exact_setup`)
     _white: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -92,9 +95,30 @@ def prepare(study: Study, ref: Reference) -> BatchSetup:
     scan does not do; such studies run one by one)."""
     if study.propagation != "phi" or study.filter_kind == "user" or study.guidance or study.resets:
         raise ValueError("batched studies need PHI propagation, a built-in gain, no guidance and no reset events")
+    meas = assemble_measurements(study, ref)
+    phi = augmented_transitions(study, ref)
     if study.noise_model == "exact" and study.has_noise:
-        raise ValueError("batched studies need DYNO thrust noise (the exact model carries noise states)")
-    return BatchSetup(study, ref, assemble_measurements(study, ref), augmented_transitions(study, ref))
+        if study.gencov and not np.array_equal(study.noise_tau_assumed, study.noise_tau_true):
+            raise ValueError("batched exact Gauss-Markov studies need equal assumed and true tau")
+        ex = _exact_setup(study, ref)
+        phi = augment_transitions(phi, ex["gamma"], ex["E"], study.nx)
+        return BatchSetup(study, ref, meas, phi, exact=ex)
+    return BatchSetup(study, ref, meas, phi)
+
+
+def _exact_setup(study: Study, ref: Reference) -> dict:
+    """The exact model's shared part (fracas.team.gm_exact): Gamma and E (they depend on tau
+    only) and the noise Q of each component at unit sigma, (3, K, nx + 3, nx + 3): a study's
+    Q is sum_i sigma_i^2 Q_i (the components are independent)."""
+    t = np.asarray(ref.times_s, np.float64)
+    units = []
+    for i in range(3):
+        e = np.zeros(3)
+        e[i] = 1.0
+        st = dataclasses.replace(study, noise_sigma_assumed=e, noise_sigma_true=e)
+        ex = exact_noise(st, t, np.asarray(ref.states)[0], ref.states, ref.primary)
+        units.append(ex.Q_assumed)
+    return {"gamma": ex.gamma_assumed, "E": ex.E_assumed, "Q_unit": np.array(units)}
 
 
 def structure_mismatch(a: Study, b: Study) -> str | None:
@@ -140,6 +164,17 @@ def structure_mismatch(a: Study, b: Study) -> str | None:
         ),
         ("stations", a.stations == b.stations),
         ("shapes", a.P0_assumed.shape == b.P0_assumed.shape and a.true_sigma.shape == b.true_sigma.shape),
+        (  # the exact Gauss-Markov model: Gamma and E depend on tau (fracas.team.gm_exact)
+            "noise correlation times",
+            a.noise_model != "exact"
+            or (
+                np.array_equal(a.noise_tau_assumed, b.noise_tau_assumed)
+                and np.array_equal(a.noise_tau_true, b.noise_tau_true)
+                and a.has_noise == b.has_noise
+                and a.P0_noise_states is None
+                and b.P0_noise_states is None
+            ),
+        ),
         ("user gain", a.user_gain is None and b.user_gain is None),
     ]
     bad = [name for name, ok in checks if not ok]
@@ -217,6 +252,15 @@ def batch_noise(setup: BatchSetup, studies: list[Study]) -> tuple[np.ndarray, np
     Qa, Qt = np.zeros((B, K, nx, nx)), np.zeros((B, K, nx, nx))
     if K >= 2:
         _add_white(setup, studies, Qa, Qt)
+    if setup.exact is not None:  # full size: sum_i sigma_i^2 Q_i on [x, eta], white on x
+        n = setup.study.layout.n
+        qu = setup.exact["Q_unit"]
+        out = []
+        for Qw, which in ((Qa, "assumed"), (Qt, "true")):
+            sig = np.array([getattr(s, f"noise_sigma_{which}") if s.gencov else s.noise_sigma_assumed for s in studies])
+            gm = np.einsum("bi,ikpq->bkpq", sig**2, qu)
+            out.append(np.array([augment_noise(gm[b], Qw[b], n) for b in range(B)]))
+        return out[0], out[1]
     noisy = [i for i, s in enumerate(studies) if s.has_noise]
     if not noisy or K < 2:
         return Qa, Qt
@@ -325,14 +369,14 @@ def run_batch(setup: BatchSetup, P0a, P0t, Qa, Qt, Ra, Rt, pad_to: int = 1) -> t
         _pad_events(setup.phi_aug, Kp, True),
         pad_b(_pad_events(Qa, Kp, False)),
         pad_b(_pad_events(Qt, Kp, False)),
-        _pad_events(setup.meas.H, Kp, False),
+        _pad_events(setup.meas.H if setup.exact is None else pad_H(setup.meas.H), Kp, False),
         pad_b(_pad_events(Ra, Kp, True)),
         pad_b(_pad_events(Rt, Kp, True)),
     ]
     Pa, Pt = _final(
         *(jnp.asarray(a) for a in args),
         jnp.asarray(K - 1),
-        layout=st.layout,
+        layout=st.layout if setup.exact is None else st.layout._replace(nw=st.layout.nw + 3),
         kind=st.filter_kind,
         gencov=st.gencov,
         square_root=st.square_root,
@@ -353,8 +397,12 @@ def final_covariances(
         part = studies[i : i + max_batch]
         Qa, Qt = batch_noise(setup, part)
         Ra, Rt = batch_R(setup, part)
-        P0a = np.array([s.P0_assumed for s in part])
-        P0t = np.array([s.P0_true for s in part])
+        if setup.exact is not None:  # the noise states appended (stationary, or punched)
+            P0a = np.array([augmented_P0(s, 0) for s in part])
+            P0t = np.array([augmented_P0(s, 1) for s in part])
+        else:
+            P0a = np.array([s.P0_assumed for s in part])
+            P0t = np.array([s.P0_true for s in part])
         Pa, Pt = run_batch(setup, P0a, P0t, Qa, Qt, Ra, Rt, pad_to=min(pad_to, max_batch))
         outs_a.append(Pa)
         outs_t.append(Pt)

@@ -27,8 +27,8 @@ import numpy as np
 from fracas.filters.covariance import Layout
 from fracas.team.gm_exact import (
     augment_noise,
-    augment_P0,
     augment_transitions,
+    augmented_P0,
     augmented_view,
     exact_noise,
     pad_H,
@@ -85,22 +85,13 @@ def exact_inputs(study: Study, ref: Reference) -> dict:
         "Qt_x": ex.Q_true[:, :nx, :nx] + wt,
         "augmented": {
             "layout": Layout(L.nx, L.ns, L.nu, L.nv, L.nw + 3),
-            "P0_assumed": _P0(study, 0),
-            "P0_true": _P0(study, 1),
+            "P0_assumed": augmented_P0(study, 0),
+            "P0_true": augmented_P0(study, 1),
             "phi_true": phi_t,
         },
         "pieces": ex.pieces,
         "piece_step_s": ex.piece_step_s,
     }
-
-
-def _P0(study: Study, which: int) -> np.ndarray:
-    """The a priori over n + 3 states: punched with its noise states when the punch file has
-    them, else the study's with the noise states appended stationary and uncorrelated."""
-    if study.P0_noise_states is not None:
-        return np.asarray(study.P0_noise_states[which], np.float64)
-    P0, sig = (study.P0_assumed, study.noise_sigma_assumed) if which == 0 else (study.P0_true, study.noise_sigma_true)
-    return augment_P0(P0, sig)
 
 
 def _run_exact(study: Study, ref: Reference, meas, tm: dict, t1: float, stage, product=None) -> TeamResult:

@@ -44,6 +44,7 @@ __all__ = [
     "augment_P0",
     "pad_H",
     "augmented_view",
+    "augmented_P0",
 ]
 
 #: Longest piece as a fraction of the orbital time scale 1/omega (omega^2 = mu / r^3 about
@@ -221,6 +222,16 @@ def augment_noise(Q_gm: np.ndarray, Q_white: np.ndarray, n: int) -> np.ndarray:
     out[:, sel[:, None], sel[None, :]] = Q_gm
     out[:, :nx, :nx] += Q_white
     return out
+
+
+def augmented_P0(study: Study, which: int) -> np.ndarray:
+    """The study's a priori over n + 3 states (``which`` 0 assumed, 1 true): punched with
+    its noise states when the punch file has them, else the noise states appended
+    stationary and uncorrelated."""
+    if study.P0_noise_states is not None:
+        return np.asarray(study.P0_noise_states[which], np.float64)
+    P0, sig = (study.P0_assumed, study.noise_sigma_assumed) if which == 0 else (study.P0_true, study.noise_sigma_true)
+    return augment_P0(P0, sig)
 
 
 def augment_P0(P0: np.ndarray, sigma: np.ndarray) -> np.ndarray:

@@ -289,7 +289,8 @@ def run_tsim(
         title=cfg.title or team.title,
         source=str(cfg.source_path),
         epoch_et_s=float(plan.epoch_et_s),
-        labels=list(team.labels),
+        # TSIM's augmented state: TEAM's without the exact model's noise states (issue 24)
+        labels=[lab for lab, role in zip(team.labels, team.roles) if role != "noise_state"],
         n_state=int(plan.nx),
         maneuvers=mans,
         final_target_names=list(plan.final.names),

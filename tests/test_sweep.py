@@ -188,6 +188,7 @@ def _expected(base, value, tmp_path):
 
 
 @pytest.mark.slow  # ~90 s of a cold make test (four single-study sweeps compiled and run; issue 22)
+@pytest.mark.slow  # shares the in-process sweep fixture with the resume test (issue 24)
 def test_serial_sweep_equals_the_studies_run_one_by_one(serial, one_by_one, study_dir, tmp_path):
     cfg, res, _ = serial
     assert [r["status"] for r in res.rows] == ["ok"] * 4 and res.ran == [0, 1, 2, 3]
@@ -339,6 +340,7 @@ def test_killed_sweep_restarts_without_redoing_finished_studies(lean, study_dir,
     assert _numbers(read_sweep_table(table).rows()) == _numbers(lean.rows)
 
 
+@pytest.mark.slow  # its module fixture (the in-process sweep): ~76 s of a cold make test (issue 24)
 def test_resume_runs_only_the_missing_studies(serial, study_dir, monkeypatch):
     cfg, res0, _ = serial
     half = make_deck(study_dir, VALUES, table="resume.h5", name="resume.toml")

@@ -40,12 +40,16 @@ def test_near_linear_example_agrees_with_team(tmp_path):
 
 
 def test_full_errors_example_is_flagged(tmp_path):
-    """earth_mars_tsim_noise.toml with 512 missions: the final target and the low-thrust
-    correction are flagged (the clean-up's propellant and the thrust noise, docs/tsim.md),
-    while the impulsive clean-up's own correction still agrees with TEAM."""
+    """earth_mars_tsim_noise.toml with 512 missions: the low-thrust correction is flagged (the
+    clean-up's propellant, which TEAM books instead of flying: docs/tsim.md), while the
+    impulsive clean-up's own correction agrees with TEAM.  Since issue 24 TEAM's thrust noise
+    is exact, and the final target, which its DYNO noise model used to flag too, agrees
+    (σ ratios 1.05-1.08 measured; printed, not asserted: at 2.5 SE it is no test)."""
     prod, _ = run_tsim(_deck("earth_mars_tsim_noise.toml", 512), tmp_path / "full.h5")
     verdict = {row["output"]: row for row in prod.consistency}
-    assert verdict["target"]["verdict"] != "consistent"
+    for row in prod.consistency:
+        print(row["output"], row["verdict"], np.round(np.asarray(row["ratio"], float), 3) if row["ratio"] else "")
+    assert verdict["correction lt1"]["verdict"] == "nonlinear"
     assert verdict["mean |dv| [lt1]"]["verdict"] == "nonlinear"
     assert "nonlinear" in verdict["mean |dv| [lt1]"]["message"]
     assert verdict["correction tcm1"]["verdict"] == "consistent", verdict["correction tcm1"]["message"]

@@ -391,7 +391,6 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
         sched.predict_to_s.pop(0, None)
 
     gain = load_user_gain(deck.filter.user_gain, src) if deck.filter.type == "user" else None
-    noise_model, noise_note = deck.errcon.process_noise, ""
     problem = dataclasses.replace(
         problem, param_labels=tuple(lab for lab, d in zip(labels, dynamic) if d), sensitivities=True
     )
@@ -426,8 +425,7 @@ def build_case(deck: TeamDeck, punched: dict | None = None) -> TeamCase:
         thrust_switches_s=thrust_switch_times(tdeck),
         trajectory_end_s=dur,
         pdot_step_s=deck.ertraj.pdot_step_hours * 3600.0,
-        noise_model=noise_model,
-        noise_model_note=noise_note,
+        noise_model=deck.errcon.process_noise,
         P0_noise_states=(
             (
                 np.array(punched["assumed_with_noise_states"], dtype=np.float64),

@@ -275,9 +275,7 @@ def process_noise_line(at) -> str:
     if how == "pdot":
         lo, hi = at.get("pdot_step_min_s"), at.get("pdot_step_max_s")
         how = "PDOT" + (f" steps {float(lo):.3g}-{float(hi):.3g} s" if lo is not None else "")
-    line = f"noise ({how}) " + "; ".join(parts)
-    note = str(at.get("process_noise_note", "") or "")
-    return line + (f"\nnote: {note}" if note else "")
+    return f"noise ({how}) " + "; ".join(parts)
 
 
 def print_team(

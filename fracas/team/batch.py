@@ -21,7 +21,6 @@ Core module: arrays in, arrays out; no deck, no file.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from functools import partial
 from types import SimpleNamespace
@@ -32,7 +31,14 @@ import numpy as np
 
 from fracas import _jax  # noqa: F401
 from fracas.filters.process_noise import dyno_q
-from fracas.team.gm_exact import augment_noise, augment_transitions, augmented_P0, exact_noise, pad_H
+from fracas.team.gm_exact import (
+    augment_noise,
+    augment_transitions,
+    augmented_P0,
+    exact_pieces,
+    interval_blocks,
+    pad_H,
+)
 from fracas.team.measure import MeasurementSet, assemble_measurements
 from fracas.team.reference import Reference
 from fracas.team.scan import filter_scan
@@ -111,14 +117,11 @@ def _exact_setup(study: Study, ref: Reference) -> dict:
     only) and the noise Q of each component at unit sigma, (3, K, nx + 3, nx + 3): a study's
     Q is sum_i sigma_i^2 Q_i (the components are independent)."""
     t = np.asarray(ref.times_s, np.float64)
-    units = []
-    for i in range(3):
-        e = np.zeros(3)
-        e[i] = 1.0
-        st = dataclasses.replace(study, noise_sigma_assumed=e, noise_sigma_true=e)
-        ex = exact_noise(st, t, np.asarray(ref.states)[0], ref.states, ref.primary)
-        units.append(ex.Q_assumed)
-    return {"gamma": ex.gamma_assumed, "E": ex.E_assumed, "Q_unit": np.array(units)}
+    pc = exact_pieces(study, t, np.asarray(ref.states)[0], ref.states, ref.primary)  # one integration
+    tau = study.noise_tau_assumed
+    gamma, E, _ = interval_blocks(pc, np.zeros(3), tau)
+    units = [interval_blocks(pc, np.eye(3)[i], tau)[2] for i in range(3)]
+    return {"gamma": gamma, "E": E, "Q_unit": np.array(units)}
 
 
 def structure_mismatch(a: Study, b: Study) -> str | None:

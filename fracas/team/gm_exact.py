@@ -27,9 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracas.filters.gauss_markov import GM_NODES, compose, piece_nodes, piece_noise
-from fracas.integrate.propagate import propagate_with_sensitivities
 from fracas.team.study import Study
-from fracas.team.transitions import TIME_MERGE_S, bucket, noise_partials
+from fracas.team.transitions import TIME_MERGE_S, noise_partials, reference_through_nodes
 
 __all__ = [
     "GM_PIECE_OMEGA",
@@ -39,6 +38,8 @@ __all__ = [
     "uses_exact",
     "piece_step",
     "exact_noise",
+    "exact_pieces",
+    "interval_blocks",
     "augment_transitions",
     "augment_noise",
     "augment_P0",
@@ -115,55 +116,61 @@ class ExactNoise:
     piece_step_s: float
 
 
-def exact_noise(study: Study, t: np.ndarray, x0: np.ndarray, states, primary) -> ExactNoise:
-    """The exact Gauss-Markov blocks over every interval of ``t`` (s, increasing): ``x0``
-    (7,), the reference state at t[0], is integrated with its STM through the Gauss nodes
-    of every piece (NaN where that integration fails).  ``states`` (j, 7) / ``primary``
-    (j names): reference states along the span, which bound the piece step."""
+@dataclass
+class ExactPieces:
+    """What the exact blocks need, for any sigma and tau: the pieces' lengths L (M,) (s),
+    G (M, n, nx, 3) = Phi(piece end, node) h(node), Phi over each piece (M, nx, nx), and the
+    piece index of every time of ``t`` (its U index); step_s: the pieces' grid step."""
+
+    L: np.ndarray
+    G: np.ndarray
+    piece_phi: np.ndarray
+    where: np.ndarray
+    step_s: float
+
+
+def exact_pieces(study: Study, t: np.ndarray, x0: np.ndarray, states, primary) -> ExactPieces | None:
+    """One integration of the reference from ``x0`` (7,) at t[0] through the Gauss nodes of
+    every piece of ``t``'s span (``states`` (j, 7) / ``primary`` names along the span bound
+    the piece step); None for a span of less than two times."""
     t = np.asarray(t, np.float64)
-    K, nx, k = len(t), study.nx, 3
-    pr = study.problem
     step = piece_step(study, states, primary)
-    zero = (np.zeros((K, nx, k)), np.ones((K, k)), np.zeros((K, nx + k, nx + k)))
-    if K < 2 or t[-1] <= t[0]:
-        return ExactNoise(*zero, *(a.copy() for a in zero), 0, step)
+    if len(t) < 2 or t[-1] <= t[0]:
+        return ExactPieces(np.zeros(0), np.zeros((0, GM_NODES, study.nx, 3)), np.zeros((0, study.nx, study.nx)),
+                           np.zeros(len(t), int), step)  # fmt: skip
     U = _edges(study, t, step)
-    M = len(U) - 1
     nodes, L = piece_nodes(U[:-1], U[1:])
-    nn = GM_NODES + 1
-    V = np.concatenate([U[:1], np.concatenate([nodes, U[1:, None]], axis=1).ravel()])
-    nv = len(V)
-    Vp = np.concatenate([V, np.repeat(V[-1:], bucket(nv) - nv)])  # a few sizes share one compile
-    traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, x0, Vp, ())
-    stp = np.asarray(sens.stm_step)[:nv, :nx, :nx]
-    xs = np.asarray(traj.x)[:nv]
-    prim = np.asarray(traj.primary)[:nv].astype(np.int32)
-    st = stp[1:].reshape(M, nn, nx, nx)  # st[p, j]: Phi over the j-th sub-step of piece p
-    phi_end = np.empty((M, GM_NODES, nx, nx))
-    acc = np.broadcast_to(np.eye(nx), (M, nx, nx)).copy()
-    for j in range(GM_NODES - 1, -1, -1):  # Phi(end, node j) = Phi(end, node j+1) Phi(node j+1, node j)
-        acc = acc @ st[:, j + 1]
-        phi_end[:, j] = acc
-    piece_phi = acc @ st[:, 0]
-    sel = np.ones((M, nn), bool)
-    sel[:, -1] = False  # the nodes, not the piece ends
-    idx = 1 + np.flatnonzero(sel.ravel())
-    h = noise_partials(study, V[idx], xs[idx], prim[idx]).reshape(M, GM_NODES, nx, k)
+    phi_end, piece_phi, xs, prim = reference_through_nodes(study, x0, U, nodes)
+    M, n = nodes.shape
+    h = noise_partials(study, nodes.ravel(), xs.reshape(-1, 7), prim.ravel()).reshape(M, n, study.nx, 3)
     G = np.einsum("mjab,mjbi->mjai", phi_end, h)
     where = np.abs(U[None, :] - t[:, None]).argmin(axis=1)  # t are edges (merged within TIME_MERGE_S)
-    out = []
-    for sig, tau in (
-        (study.noise_sigma_assumed, study.noise_tau_assumed),
-        (study.noise_sigma_true, study.noise_tau_true),
-    ):
-        gam_p, E_p, Q_p = piece_noise(G, L, sig, tau)
-        gam, E, Q = (a.copy() for a in zero)
-        for i in range(1, K):
-            sl = slice(int(where[i - 1]), int(where[i]))
-            if sl.stop > sl.start:
-                _, gam[i], E[i], Q[i] = compose(piece_phi[sl], gam_p[sl], E_p[sl], Q_p[sl])
-        out += [gam, E, Q]
-    return ExactNoise(*out, M, step)
+    return ExactPieces(L, G, piece_phi, where, step)
+
+
+def interval_blocks(pieces: ExactPieces, sigma, tau_s):
+    """Gamma (K, nx, 3), E (K, 3), Q (K, nx + 3, nx + 3) over each interval of the span's
+    times (element 0: none) for noise levels ``sigma`` (3,) and ``tau_s`` (3,) s."""
+    K, nx, k = len(pieces.where), pieces.G.shape[2], 3
+    gam, E, Q = np.zeros((K, nx, k)), np.ones((K, k)), np.zeros((K, nx + k, nx + k))
+    if len(pieces.L) == 0:
+        return gam, E, Q
+    gam_p, E_p, Q_p = piece_noise(pieces.G, pieces.L, sigma, tau_s)
+    w = pieces.where
+    for i in range(1, K):
+        sl = slice(int(w[i - 1]), int(w[i]))
+        if sl.stop > sl.start:
+            _, gam[i], E[i], Q[i] = compose(pieces.piece_phi[sl], gam_p[sl], E_p[sl], Q_p[sl])
+    return gam, E, Q
+
+
+def exact_noise(study: Study, t: np.ndarray, x0: np.ndarray, states, primary) -> ExactNoise:
+    """The exact Gauss-Markov blocks over every interval of ``t`` (s, increasing), assumed and
+    true levels: :func:`exact_pieces` (one integration) then :func:`interval_blocks`."""
+    pc = exact_pieces(study, t, x0, states, primary)
+    a = interval_blocks(pc, study.noise_sigma_assumed, study.noise_tau_assumed)
+    b = interval_blocks(pc, study.noise_sigma_true, study.noise_tau_true)
+    return ExactNoise(*a, *b, len(pc.L), pc.step_s)
 
 
 def augmented_view(study: Study, P0_assumed: np.ndarray, P0_true: np.ndarray) -> Study:

@@ -92,21 +92,15 @@ def _predict_exact(res, k: int, t_out: np.ndarray, sub, phis: np.ndarray, prim):
         return nan, (nan.copy() if res.Pt_plus is not None else None), RunStatus.OUTSIDE_TRAJECTORY
     zero = np.zeros((len(t_out), nx, nx))
     wa, wt = white_noise(study, t_out, sub.states[0]) if study.has_white_noise else (zero, zero)
-    Pa, Pt = res.Pa_plus[k], (res.Pt_plus[k] if res.Pt_plus is not None else None)
-    for P, gam, E, Q, W, name in (
-        (Pa, ex.gamma_assumed, ex.E_assumed, ex.Q_assumed, wa, "a"),
-        (Pt, ex.gamma_true, ex.E_true, ex.Q_true, wt, "t"),
-    ):
-        if P is None:
-            continue
-        ph = augment_transitions(phis, gam, E, nx)
-        Qf = augment_noise(Q, W + zero, n)
+
+    def mapped(P, gam, E, Q, W):
+        ph, Qf = augment_transitions(phis, gam, E, nx), augment_noise(Q, W + zero, n)
         for j in range(1, len(t_out)):
             P = np.asarray(cov.time_update(P, ph[j], Qf[j]))
-        if name == "a":
-            Pa = P
-        else:
-            Pt = P
+        return P
+
+    Pa = mapped(res.Pa_plus[k], ex.gamma_assumed, ex.E_assumed, ex.Q_assumed, wa)
+    Pt = None if res.Pt_plus is None else mapped(res.Pt_plus[k], ex.gamma_true, ex.E_true, ex.Q_true, wt)
     return Pa[:n, :n], (Pt[:n, :n] if Pt is not None else None), RunStatus.OK
 
 

@@ -92,8 +92,7 @@ class Study:
     pdot_step_s: the largest RK4 step of PDOT propagation (s); noise_model: PHI mode's
     thrust-noise model, "exact" (the noise states augmented; fracas.team.gm_exact),
     "grid" (DYNO on fixed cells of noise_step_s, s) or "interval" (FRACAS's DYNO per
-    schedule interval; fracas.team.transitions); noise_model_note: why the deck's model
-    was replaced (the exact model with guidance events or an error budget), else ""; resets: (t_s, six
+    schedule interval; fracas.team.transitions); resets: (t_s, six
     sigmas km, km/s) of the assumed-covariance reset events; source: where the study came
     from (a deck path, for messages); user_gain_spec: the "module:function" of a user gain;
     white_q_assumed / white_q_true (km^2/s^3), white_direction_* ("full", "crosstrack",
@@ -133,7 +132,6 @@ class Study:
     trajectory_end_s: float = 0.0
     pdot_step_s: float = 3600.0
     noise_model: str = "exact"
-    noise_model_note: str = ""
     P0_noise_states: tuple | None = None  # (assumed, true, control or None) (n + 3, n + 3), punched
     gm_states: bool = False  # the last three states are the exact model's eta (fracas.team.gm_exact.augmented_view)
     noise_step_s: float = 3600.0

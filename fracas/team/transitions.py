@@ -88,6 +88,7 @@ __all__ = [
     "white_unit_noise",
     "WHITE_NODES",
     "EPS_T",
+    "reference_through_nodes",
 ]
 
 EPS_T = 1e-3  # s: interval ends are evaluated this far inside the interval (one-sided at thrust switches)
@@ -406,8 +407,6 @@ def noise_settings(study: Study, ref) -> dict:
         if h.size:
             white["pdot_step_min_s"], white["pdot_step_max_s"] = float(h.min()), float(h.max())
         return {"process_noise": "pdot", **white}
-    if study.noise_model_note:
-        white["process_noise_note"] = study.noise_model_note
     if study.noise_model == "exact":  # its pieces: fracas.team.result adds gm_piece_step_s
         return {"process_noise": "exact", **white}
     if study.noise_model == "interval":
@@ -452,6 +451,33 @@ def _white_pieces(phi_end, D, w):
     return jax.vmap(white_q_nodes, in_axes=(0, 0, 0, None))(phi_end, D, w, jnp.float64(1.0))
 
 
+def reference_through_nodes(study: Study, x0: np.ndarray, U: np.ndarray, nodes: np.ndarray):
+    """The reference integrated once from ``x0`` (7,) at U[0] through the pieces [U_p, U_p+1]
+    and their interior ``nodes`` (M, n) (quadrature nodes; M = len(U) - 1), with its STM:
+    (phi_end (M, n, nx, nx) Phi(U_p+1, node j), piece_phi (M, nx, nx) Phi(U_p+1, U_p), states
+    (M, n, 7) and primary indices (M, n) at the nodes; NaN where the integration fails).
+    Shared by white acceleration noise and the exact Gauss-Markov model (fracas.team.gm_exact)."""
+    nx = study.nx
+    M, n = nodes.shape
+    V = np.concatenate([U[:1], np.concatenate([nodes, U[1:, None]], axis=1).ravel()])  # node..., piece end
+    pr = study.problem
+    nv = len(V)
+    Vp = np.concatenate([V, np.repeat(V[-1:], bucket(nv) - nv)])  # a few sizes share one compile
+    traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, x0, Vp, ())
+    step = np.asarray(sens.stm_step)[:nv, :nx, :nx]
+    nn = n + 1
+    st = step[1:].reshape(M, nn, nx, nx)  # st[p, j]: Phi over the j-th sub-step of piece p
+    phi_end = np.empty((M, n, nx, nx))
+    acc = np.broadcast_to(np.eye(nx), (M, nx, nx)).copy()
+    for j in range(n - 1, -1, -1):  # Phi(end, node j) = Phi(end, node j+1) Phi(node j+1, node j)
+        acc = acc @ st[:, j + 1]
+        phi_end[:, j] = acc
+    piece_phi = acc @ st[:, 0]
+    xs = np.asarray(traj.x)[1:nv].reshape(M, nn, 7)[:, :n]
+    prim = np.asarray(traj.primary)[1:nv].reshape(M, nn)[:, :n].astype(np.int32)
+    return phi_end, piece_phi, xs, prim
+
+
 def white_unit_noise(study: Study, t: np.ndarray, x0: np.ndarray, directions) -> dict[str, np.ndarray]:
     """The white-acceleration noise of unit spectral density (q = 1 km^2/s^3) over each
     interval (t_{k-1}, t_k] of ``t`` (element 0 zero), for each name in ``directions``:
@@ -471,22 +497,7 @@ def white_unit_noise(study: Study, t: np.ndarray, x0: np.ndarray, directions) ->
     U = _union(cells, t)
     M = len(U)
     nodes, w = gauss_legendre(WHITE_NODES, U[:-1], U[1:])
-    V = np.concatenate([U[:1], np.concatenate([nodes, U[1:, None]], axis=1).ravel()])  # node..., piece end
-    pr = study.problem
-    nv = len(V)
-    Vp = np.concatenate([V, np.repeat(V[-1:], bucket(nv) - nv)])  # a few sizes share one compile
-    traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, x0, Vp, ())
-    step = np.asarray(sens.stm_step)[:nv, :nx, :nx]
-    xs = np.asarray(traj.x)[:nv]
-    nn = WHITE_NODES + 1
-    st = step[1:].reshape(M - 1, nn, nx, nx)  # st[p, j]: Phi over the j-th sub-step of piece p
-    phi_end = np.empty((M - 1, WHITE_NODES, nx, nx))
-    acc = np.broadcast_to(np.eye(nx), (M - 1, nx, nx)).copy()
-    for j in range(WHITE_NODES - 1, -1, -1):  # Phi(end, node j) = Phi(end, node j+1) Phi(node j+1, node j)
-        acc = acc @ st[:, j + 1]
-        phi_end[:, j] = acc
-    piece_phi = acc @ st[:, 0]  # Phi(U_p+1, U_p)
-    xn = xs[1:].reshape(M - 1, nn, 7)[:, :WHITE_NODES]
+    phi_end, piece_phi, xn, _ = reference_through_nodes(study, x0, U, nodes)
     step_phi = np.concatenate([np.eye(nx)[None], piece_phi])
     sched = {int(np.argmin(np.abs(U - tk))): k for k, tk in enumerate(t)}
     ci = {"U": U, "step_phi": step_phi, "cell_at": {i: i - 1 for i in range(1, M)}, "sched": sched}

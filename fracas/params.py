@@ -204,6 +204,12 @@ _KINDS = (
     ),
     ParamKind("arc_bias_in_rad", INDEX_ARC, "rad", "per-arc in-plane pointing bias", 0.005, max_sigma=_PI),
     ParamKind("arc_bias_out_rad", INDEX_ARC, "rad", "per-arc out-of-plane pointing bias", 0.005, max_sigma=_PI),
+    ParamKind("arc_alpha_p1", INDEX_ARC, "rad", "arc in-plane angle's Legendre P1 coefficient", max_sigma=_PI),
+    ParamKind("arc_alpha_p2", INDEX_ARC, "rad", "arc in-plane angle's Legendre P2 coefficient", max_sigma=_PI),
+    ParamKind("arc_alpha_p3", INDEX_ARC, "rad", "arc in-plane angle's Legendre P3 coefficient", max_sigma=_PI),
+    ParamKind("arc_beta_p1", INDEX_ARC, "rad", "arc out-of-plane angle's Legendre P1 coefficient", max_sigma=_PI),
+    ParamKind("arc_beta_p2", INDEX_ARC, "rad", "arc out-of-plane angle's Legendre P2 coefficient", max_sigma=_PI),
+    ParamKind("arc_beta_p3", INDEX_ARC, "rad", "arc out-of-plane angle's Legendre P3 coefficient", max_sigma=_PI),
     # impulsive events
     ParamKind("impulse_t", INDEX_IMPULSE, "s", "time of an impulsive dV, s from the propagation epoch"),
     ParamKind("impulse_dv", INDEX_IMPULSE_AXIS, "km/s", "impulsive dV component in its impulse frame"),
@@ -341,6 +347,24 @@ _CONTROLS = (
         "arc_beta", "arc", "deg", "rad", _DEG, "arc out-of-plane angle / declination", "arc_beta", (-90.0, 90.0)
     ),
     ControlKind("arc_throttle", "arc", "1", "1", 1.0, "arc thrust level", "arc_throttle", (0.0, 1.0)),
+    ControlKind(
+        "arc_alpha_p1", "arc", "deg", "rad", _DEG, "arc in-plane angle's Legendre P1 coefficient", "arc_alpha_p1"
+    ),
+    ControlKind(
+        "arc_alpha_p2", "arc", "deg", "rad", _DEG, "arc in-plane angle's Legendre P2 coefficient", "arc_alpha_p2"
+    ),
+    ControlKind(
+        "arc_alpha_p3", "arc", "deg", "rad", _DEG, "arc in-plane angle's Legendre P3 coefficient", "arc_alpha_p3"
+    ),
+    ControlKind(
+        "arc_beta_p1", "arc", "deg", "rad", _DEG, "arc out-of-plane angle's Legendre P1 coefficient", "arc_beta_p1"
+    ),
+    ControlKind(
+        "arc_beta_p2", "arc", "deg", "rad", _DEG, "arc out-of-plane angle's Legendre P2 coefficient", "arc_beta_p2"
+    ),
+    ControlKind(
+        "arc_beta_p3", "arc", "deg", "rad", _DEG, "arc out-of-plane angle's Legendre P3 coefficient", "arc_beta_p3"
+    ),
     ControlKind("impulse_t", "impulse", "days", "s", _DAY, "time of an impulse", "impulse_t"),
     ControlKind("impulse_dv", "impulse_axis", "km/s", "km/s", 1.0, "impulse dV component (its frame)", "impulse_dv"),
 )

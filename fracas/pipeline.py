@@ -503,6 +503,9 @@ def run_tom(
         labels=case.control_names,
         target_labels=tg.names,
         value_weighted=np.array([u not in ("deg", "days") for u in case.control_units]),
+        ineq_matrix=case.ineq_matrix,
+        ineq_bound=case.ineq_bound,
+        periodic=case.periodic,
     )
     grid = None
     t1 = time.perf_counter()
@@ -541,6 +544,10 @@ def run_tom(
         try:
             if cfg.tom.optimizer == "projected_gradient":
                 res = search.projected_gradient(sp, case.settings, on_iteration)
+            elif cfg.tom.optimizer == "ipopt":
+                from fracas.tom.ipopt import solve_ipopt
+
+                res = solve_ipopt(sp, case.settings, on_iteration)
             else:
                 res = nlp.solve_nlp(sp, cfg.tom.optimizer, case.settings, on_iteration)
         except ValueError as exc:
@@ -620,8 +627,12 @@ def run_tom(
         achieved_start=start.evaluation.targets / fac_t,
         achieved=(ev.targets if ev.ok else np.full(tg.n_targets, np.nan)) / fac_t,
         initial_mass_kg=float(case.base.x0[6]),
-        start_mass_kg=float(start.evaluation.performance),
-        final_mass_kg=float(ev.performance) if ev.ok else float("nan"),
+        start_mass_kg=float(start.x_final[6]),
+        final_mass_kg=float(final.x_final[6]) if ev.ok else float("nan"),
+        performance_name=case.performance_name,
+        performance_unit=case.performance_unit,
+        performance_start=_deck_performance(case, start.evaluation.performance),
+        performance_final=_deck_performance(case, ev.performance) if ev.ok else float("nan"),
         stop_reason=reason,
         converged=converged,
         search_converged=bool(res.search_converged),
@@ -653,6 +664,12 @@ def run_tom(
         _tom_stm_file(cfg, ref_path)
     product.timing["total_s"] = time.perf_counter() - t0
     return product, out, (ref_path if ref_written else None)
+
+
+def _deck_performance(case, value: float) -> float:
+    """F in the performance's deck unit, its sign undone (F = -value when minimizing)."""
+    sign = -1.0 if (case.performance_name != "final_mass" and not case.deck.tom.maximize) else 1.0
+    return sign * float(value) / case.performance_factor
 
 
 def _tom_stm_file(cfg, ref_path: Path) -> Path:

@@ -523,6 +523,13 @@ class TomProduct:
     reference_deck: str = ""
     timing: dict[str, float] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)
+    # what was maximized: "final_mass" (kg) or a target kind ([tom] performance, its deck unit;
+    # minimized when maximize = false); its value at the start and final controls, deck units;
+    # performance_kg above then holds it per iteration in canonical units
+    performance_name: str = "final_mass"
+    performance_unit: str = "kg"
+    performance_start: float = float("nan")
+    performance_final: float = float("nan")
 
     @property
     def target_error(self) -> np.ndarray:

@@ -72,6 +72,44 @@ class TomCase:
     given_s: np.ndarray | None = None
     given_g: np.ndarray | None = None
     grid_increments: np.ndarray | None = None
+    # the arcs' switch order as linear constraints ineq_matrix @ U <= ineq_bound (None: no arc time
+    # is a control); performance: what F is (name, deck unit, canonical per deck unit)
+    ineq_matrix: np.ndarray | None = None
+    ineq_bound: np.ndarray | None = None
+    performance_name: str = "final_mass"
+    performance_unit: str = "kg"
+    performance_factor: float = 1.0
+    periodic: np.ndarray | None = None  # (M,) bool: unbounded, unlinked arc_alpha / vinf_ra controls
+
+
+def switch_order_constraints(cmap: ControlMap, params, n_arcs: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """The thrust arcs' order t_on[k] <= t_off[k] <= t_on[k+1] as rows A U <= b over the
+    controls that move an arc time (each time is affine in U: ``ControlMap.params_of``); None
+    when no arc time is a control.  Rows between two fixed times are left out (the deck's
+    validation checked them)."""
+    labels = cmap.param_labels
+    m = cmap.n_controls
+
+    def affine(name: str, k: int) -> tuple[np.ndarray, float]:
+        label = f"{name}[{k}]"
+        if label in labels:
+            i = labels.index(label)
+            return cmap.param_matrix[i].astype(float), float(cmap.param_base[i])
+        return np.zeros(m), float(np.asarray(getattr(params, name))[k])
+
+    times = []
+    for k in range(n_arcs):
+        times.append(affine("arc_t_on", k))
+        times.append(affine("arc_t_off", k))
+    rows, bounds = [], []
+    for (a0, c0), (a1, c1) in zip(times[:-1], times[1:]):
+        row = a0 - a1  # t_a - t_b <= 0  <=>  (a0 - a1) U <= c1 - c0
+        if np.any(row != 0.0):
+            rows.append(row)
+            bounds.append(c1 - c0)
+    if not rows:
+        return None
+    return np.array(rows), np.array(bounds)
 
 
 def _err(src: str, field: str, value, expected: str) -> ConfigError:
@@ -93,12 +131,30 @@ def _body_velocity(base: Problem, body: str, centre: str) -> np.ndarray:
     return np.asarray(vel[model.bodies.index(body)] - vel[model.bodies.index(centre)], float)
 
 
+_STEERING = tuple(f"arc_{a}_p{k}" for a in ("alpha", "beta") for k in (1, 2, 3))
+
+
+def _steering_control(c) -> bool:
+    """Does the control (or one of its links) move a pointing-law coefficient?"""
+    names = list(c.links) if c.links else [c.name]
+    return any(n.split("[")[0].strip() in _STEERING for n in names)
+
+
+def _wrap_deg(angle_deg: float) -> float:
+    """An angle in degrees wrapped to (-180, 180]."""
+    w = math.remainder(angle_deg, 360.0)
+    return 180.0 if w == -180.0 else w
+
+
 def build_tom(deck: TomDeck) -> TomCase:
     """Validated TOM deck -> :class:`TomCase`; ConfigError naming the field for what the
     trajectory cannot support (an arc that does not exist, a body outside the model ...)."""
     src = deck.source_path or "<deck>"
     traj = tom_trajectory_deck(deck)
     base = build_propagation(traj)
+    if any(_steering_control(c) for c in deck.control) and not base.model.steering:
+        # a pointing-law coefficient is a control: the arcs evaluate their laws at every stage
+        base = dataclasses.replace(base, model=dataclasses.replace(base.model, steering=True))
     model = base.model
     params = base.params
     n_arcs, n_imp = model.n_arcs, model.n_impulses
@@ -274,6 +330,15 @@ def build_tom(deck: TomDeck) -> TomCase:
         angle.append(t.name in _ANGLE_TARGETS)
     targets = TargetSet(tuple(t_names), tuple(body_idx), np.array(desired), np.array(tol), tuple(angle))
 
+    ts = deck.tom
+    performance = None
+    if ts.performance != "final_mass":
+        body = ts.performance_body or default_body
+        if body not in model.bodies:
+            raise _err(
+                src, "tom.performance_body", body, f"a body of the trajectory's model ({', '.join(model.bodies)})"
+            )
+        performance = (ts.performance, model.bodies.index(body), 1.0 if ts.maximize else -1.0)
     problem = TomProblem(
         model,
         params,
@@ -283,9 +348,17 @@ def build_tom(deck: TomDeck) -> TomCase:
         targets,
         fd_steps=fd,
         sensitivity_method=deck.tom.sensitivities,
+        performance=performance,
     )
-    ts = deck.tom
-    dfmax = ts.max_performance_change_kg if ts.max_performance_change_kg is not None else 0.005 * float(base.x0[6])
+    perf_unit, perf_factor = ("kg", 1.0) if performance is None else target_display(ts.performance)
+    if ts.max_performance_change_kg is not None:
+        dfmax = ts.max_performance_change_kg * perf_factor
+    elif performance is None:
+        dfmax = 0.005 * float(base.x0[6])
+    else:
+        # 0.5 % of the performance at the start (one propagation), as 0.5 % of m0 for the mass
+        f0 = problem.evaluate(u0).performance
+        dfmax = 0.005 * abs(f0) if math.isfinite(f0) and f0 != 0.0 else 1.0
     submode = {"nominal": "target", "grid": "target"}.get(ts.submode, ts.submode)
     settings = SearchSettings(
         submode=submode,
@@ -307,6 +380,16 @@ def build_tom(deck: TomDeck) -> TomCase:
         given_s = np.array(deck.smag.s, float) * tf[:, None] / factor[None, :]
         given_g = np.array(deck.smag.g, float) / factor
     grid = np.array(deck.grid.increments) * factor if deck.grid is not None else None
+    order = switch_order_constraints(cmap, params, n_arcs)
+    if order is not None and np.any(order[0] @ u0 > order[1] + 1e-6):
+        bad = np.flatnonzero(order[0] @ u0 > order[1] + 1e-6)[0]
+        raise _err(
+            src,
+            "control",
+            [n for n, a in zip(names, order[0][bad]) if a != 0.0],
+            "nominal arc times in order: each arc's start <= its end <= the next arc's start "
+            "(thrust arcs cannot invert or overlap)",
+        )
     return TomCase(
         deck=deck,
         trajectory=traj,
@@ -329,6 +412,20 @@ def build_tom(deck: TomDeck) -> TomCase:
         given_s=given_s,
         given_g=given_g,
         grid_increments=grid,
+        ineq_matrix=None if order is None else order[0],
+        ineq_bound=None if order is None else order[1],
+        performance_name=ts.performance,
+        performance_unit=perf_unit,
+        performance_factor=perf_factor,
+        periodic=np.array(
+            [
+                len(pm) == 1
+                and pm[0][1].name in ("arc_alpha", "vinf_ra")
+                and not np.isfinite(lower[j])
+                and not np.isfinite(upper[j])
+                for j, pm in enumerate(parsed)
+            ]
+        ),
     )
 
 
@@ -372,9 +469,17 @@ def reference_deck_text(case: TomCase, u) -> str:
     for k, arc in enumerate(arcs):
         arc["start_days"] = float(float(prm.arc_t_on[k]) / constants.DAY_S)
         arc["stop_days"] = float(float(prm.arc_t_off[k]) / constants.DAY_S)
-        arc["alpha_deg"] = float(math.degrees(float(prm.arc_alpha[k])))
+        arc["alpha_deg"] = _wrap_deg(math.degrees(float(prm.arc_alpha[k])))
         arc["beta_deg"] = float(math.degrees(float(prm.arc_beta[k])))
         arc["throttle"] = float(float(prm.arc_throttle[k]))
+        if prob.model.steering:
+            for angle in ("alpha", "beta"):
+                coeffs = [math.degrees(float(getattr(prm, f"arc_{angle}_p{i}")[k])) for i in (1, 2, 3)]
+                while coeffs and coeffs[-1] == 0.0:
+                    coeffs.pop()
+                arc.pop(f"{angle}_legendre_deg", None)
+                if coeffs:
+                    arc[f"{angle}_legendre_deg"] = coeffs
     imps = data.get("impulse", [])
     for k, imp in enumerate(imps):
         imp["time_days"] = float(float(prm.impulse_t[k]) / constants.DAY_S)

@@ -191,6 +191,7 @@ def build_propagation(deck: TrajectoryDeck) -> Problem:
         change_primary_at_soi=f.change_primary_at_soi,
         conic_bodies=tuple(idx(b) for b in bodies if b in f.conic_bodies),
         n_arcs=len(deck.thrust_arc),
+        steering=any(a.steered for a in deck.thrust_arc),
         n_impulses=len(deck.impulse),
         integrator=integrator_settings(ig, bool(deck.thrust_arc)),
         stop=StopCondition(
@@ -239,6 +240,12 @@ def build_propagation(deck: TrajectoryDeck) -> Problem:
             arc_throttle=[a.throttle for a in arcs],
             arc_frame=[_ARC_FRAMES[a.frame] for a in arcs],
         )
+        for angle in ("alpha", "beta"):
+            for k in range(3):
+                over[f"arc_{angle}_p{k + 1}"] = [
+                    math.radians(c[k]) if k < len(c) else 0.0
+                    for c in (getattr(a, f"{angle}_legendre_deg") for a in arcs)
+                ]
     imps = deck.impulse
     if imps:
         over.update(

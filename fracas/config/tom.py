@@ -62,7 +62,7 @@ from fracas.params import CONTROL_KINDS
 __all__ = ["TomDeck", "TomSettings", "ControlSpec", "TargetSpec", "parse_tom_deck", "load_tom_deck", "SUBMODES"]
 
 SUBMODES = ("auto", "grid", "target", "target_optimize", "optimize", "nominal")
-OPTIMIZERS = ("projected_gradient", "slsqp", "trust_constr")
+OPTIMIZERS = ("projected_gradient", "slsqp", "trust_constr", "ipopt")
 _TOM_KEYS = ("mode", "title", "trajectory", "tom", "control", "target", "smag", "grid")
 
 
@@ -76,7 +76,7 @@ class TomSettings(_Section):
     """$DATA's iteration inputs (names and recommended defaults: digest §A.2)."""
 
     submode: Literal["auto", "grid", "target", "target_optimize", "optimize", "nominal"] = "auto"
-    optimizer: Literal["projected_gradient", "slsqp", "trust_constr"] = "projected_gradient"
+    optimizer: Literal["projected_gradient", "slsqp", "trust_constr", "ipopt"] = "projected_gradient"
     sensitivities: Literal["ad", "fegs"] = "ad"
     max_iterations: PositiveInt = 100
     max_performance_change_kg: PositiveFloat | None = None
@@ -89,6 +89,11 @@ class TomSettings(_Section):
     targeting_threshold: PositiveFloat = 10.0
     optimization_threshold: PositiveFloat = 1.0
     weighting: Literal["sensitivity", "control"] = "control"
+    # what the search maximizes: the final mass, or a target kind's value about a body at the stop
+    # (e.g. "radius": Bryson & Ho's maximum-radius transfer); maximize = false minimizes it
+    performance: str = "final_mass"
+    performance_body: BodyName | None = None
+    maximize: bool = True
     departure_body: BodyName | None = None
     results: str | None = None
     reference_deck: str | None = None
@@ -97,6 +102,12 @@ class TomSettings(_Section):
 
     @model_validator(mode="after")
     def _thresholds(self) -> TomSettings:
+        if self.performance != "final_mass" and self.performance not in TARGET_KINDS:
+            raise FieldProblem(
+                "performance", self.performance, f'"final_mass" or a target kind: {", ".join(TARGET_KINDS)}'
+            )
+        if self.performance == "final_mass" and not self.maximize:
+            raise FieldProblem("maximize", self.maximize, 'true for performance = "final_mass"')
         if self.optimization_threshold >= self.targeting_threshold:
             raise FieldProblem(
                 "optimization_threshold",

@@ -455,12 +455,26 @@ class ThrustArc(_Section):
     alpha_deg: float = 0.0
     beta_deg: Annotated[float, Field(ge=-90, le=90)] = 0.0
     throttle: Annotated[float, Field(ge=0, le=1)] = 1.0
+    # pointing that varies within the arc: Legendre coefficients (P1, P2, P3) of alpha and beta in
+    # the arc's normalised time s = (2t - start - stop)/(stop - start); alpha_deg/beta_deg stay the
+    # arc's mean angles.  Up to three each; [] (the default) is constant pointing.
+    alpha_legendre_deg: Annotated[list[float], Field(max_length=3)] = []
+    beta_legendre_deg: Annotated[list[float], Field(max_length=3)] = []
 
     @model_validator(mode="after")
     def _ordered(self) -> ThrustArc:
-        if self.stop_days <= self.start_days:
-            raise FieldProblem("stop_days", self.stop_days, f"must be > start_days = {self.start_days:g}")
+        # a zero-length arc is allowed (an optimizer may switch a burn off by closing it)
+        if self.stop_days < self.start_days:
+            raise FieldProblem("stop_days", self.stop_days, f"must be >= start_days = {self.start_days:g}")
+        for name in ("alpha_legendre_deg", "beta_legendre_deg"):
+            if not all(math.isfinite(c) for c in getattr(self, name)):
+                raise FieldProblem(name, getattr(self, name), "finite numbers")
         return self
+
+    @property
+    def steered(self) -> bool:
+        """Does the pointing vary within the arc (any nonzero Legendre coefficient)?"""
+        return any(c != 0.0 for c in (*self.alpha_legendre_deg, *self.beta_legendre_deg))
 
 
 class Impulse(_Section):
@@ -1383,6 +1397,10 @@ def trajectory_hash(deck) -> str:
         dump["initial_state"]["oem"]["state"] = [*oem.r_km, *oem.v_km_s]
     else:  # a deck without [initial_state.oem] keeps the hash it had before the option existed
         dump["initial_state"].pop("oem", None)
+    for arc in dump.get("thrust_arc", []):  # constant-pointing arcs keep the hash they had before the laws
+        for key in ("alpha_legendre_deg", "beta_legendre_deg"):
+            if not arc.get(key):
+                arc.pop(key, None)
     body = json.dumps(
         dump,
         sort_keys=True,

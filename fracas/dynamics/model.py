@@ -113,7 +113,9 @@ class ForceModel:
     thrust: any thrust arcs; velocity_dependent: the acceleration depends on v (thrust
     in the velocity frame), so Nystrom needs its fourth evaluation;
     power: 'solar' (P = P0 (1 AU / r_sun)^2) or 'nuclear' (P = P0 exp(-t/tau));
-    change_primary_at_soi: switch the primary when entering/leaving a sphere of influence.
+    change_primary_at_soi: switch the primary when entering/leaving a sphere of influence;
+    steering: the arcs' pointing follows their Legendre laws (``Params.arc_alpha_p1`` ...), so
+    the angles are evaluated at every stage instead of once per step.
     """
 
     bodies: tuple[str, ...] = ("earth",)
@@ -127,6 +129,7 @@ class ForceModel:
     change_primary_at_soi: bool = False
     conic_bodies: tuple[int, ...] = ()  # bodies whose position comes from body_elements (EPHEM)
     n_arcs: int = 0
+    steering: bool = False  # pointing varies within an arc (Params.arc_alpha_p1 ...): angles per evaluation
     n_impulses: int = 0
     integrator: IntegratorSettings = field(default_factory=IntegratorSettings)
     stop: StopCondition = field(default_factory=StopCondition)
@@ -175,6 +178,15 @@ class Params(NamedTuple):
     arc_thrust_scale: np.ndarray  # (na,) per-arc proportionality (1 nominal)
     arc_bias_in_rad: np.ndarray  # (na,)
     arc_bias_out_rad: np.ndarray  # (na,)
+    # pointing that varies within an arc (``ForceModel.steering``): Legendre coefficients of the
+    # in-plane and out-of-plane angles in the arc's normalised time s in [-1, 1] (rad); the angle
+    # is arc_alpha + p1 P1(s) + p2 P2(s) + p3 P3(s), so arc_alpha stays the arc's mean angle
+    arc_alpha_p1: np.ndarray  # (na,)
+    arc_alpha_p2: np.ndarray  # (na,)
+    arc_alpha_p3: np.ndarray  # (na,)
+    arc_beta_p1: np.ndarray  # (na,)
+    arc_beta_p2: np.ndarray  # (na,)
+    arc_beta_p3: np.ndarray  # (na,)
     impulse_t: np.ndarray  # (ni,) time of each impulsive dV
     impulse_dv: np.ndarray  # (ni, 3) dV in the frame of impulse_frame
     impulse_frame: np.ndarray  # (ni,) 0 velocity frame, 1 inertial
@@ -214,6 +226,12 @@ def default_params(model: ForceModel, **overrides) -> Params:
         "arc_thrust_scale": np.ones(na, f),
         "arc_bias_in_rad": np.zeros(na, f),
         "arc_bias_out_rad": np.zeros(na, f),
+        "arc_alpha_p1": np.zeros(na, f),
+        "arc_alpha_p2": np.zeros(na, f),
+        "arc_alpha_p3": np.zeros(na, f),
+        "arc_beta_p1": np.zeros(na, f),
+        "arc_beta_p2": np.zeros(na, f),
+        "arc_beta_p3": np.zeros(na, f),
         "impulse_t": np.zeros(ni, f),
         "impulse_dv": np.zeros((ni, 3), f),
         "impulse_frame": np.zeros(ni, f),

@@ -121,6 +121,9 @@ class StepControls(NamedTuple):
     # propulsion.angles_to_unit(alpha, beta), the unit vector in the velocity frame or, for
     # inertial pointing, in ICRF
     u_angles: jax.Array | None = None
+    # the active arc's pointing law (``ForceModel.steering``; None otherwise): (8,) = arc centre
+    # (s), 2 / arc duration (1/s), then the Legendre P1..P3 coefficients of alpha and of beta (rad)
+    law: jax.Array | None = None
 
 
 def step_controls(model: ForceModel, params: Params, t_mid) -> StepControls:
@@ -133,7 +136,35 @@ def step_controls(model: ForceModel, params: Params, t_mid) -> StepControls:
     alpha = jnp.sum(on * (params.arc_alpha + params.arc_bias_in_rad)) + params.bias_in_rad
     beta = jnp.sum(on * (params.arc_beta + params.arc_bias_out_rad)) + params.bias_out_rad
     inertial = jnp.sum(on * params.arc_frame)
+    if model.steering:
+        width = params.arc_t_off - params.arc_t_on
+        # a coasting step (no arc on) gets a harmless law: centre 0, scale 0 (s = 0)
+        inv_half = jnp.sum(on * jnp.where(width > 0.0, 2.0 / jnp.where(width > 0.0, width, 1.0), 0.0))
+        coeffs = [
+            params.arc_alpha_p1,
+            params.arc_alpha_p2,
+            params.arc_alpha_p3,
+            params.arc_beta_p1,
+            params.arc_beta_p2,
+            params.arc_beta_p3,
+        ]
+        centre = jnp.sum(on * 0.5 * (params.arc_t_on + params.arc_t_off))
+        law = jnp.stack([centre, inv_half] + [jnp.sum(on * c) for c in coeffs])
+        return StepControls(factor, alpha, beta, inertial, None, law)
     return StepControls(factor, alpha, beta, inertial, propulsion.angles_to_unit(alpha, beta))
+
+
+def steered_angles(ctl: StepControls, t):
+    """(alpha, beta) (rad) of the active arc's pointing law at time t (s): the mean angles plus
+    the Legendre series in s = (t - centre) * 2 / duration, clipped to [-1, 1]
+    (P1 = s, P2 = (3s^2 - 1)/2, P3 = (5s^3 - 3s)/2)."""
+    law = ctl.law
+    s = jnp.clip((t - law[0]) * law[1], -1.0, 1.0)
+    p2 = 1.5 * s * s - 0.5
+    p3 = s * (2.5 * s * s - 1.5)
+    alpha = ctl.alpha + law[2] * s + law[3] * p2 + law[4] * p3
+    beta = ctl.beta + law[5] * s + law[6] * p2 + law[7] * p3
+    return alpha, beta
 
 
 def acting_third_bodies(model: ForceModel) -> tuple[int, ...]:
@@ -176,7 +207,11 @@ def perturbation(model: ForceModel, params: Params, t, r, v, primary, bodies_pos
             solar=model.power == "solar",
         )
         tmag = ctl.thrust_factor * propulsion.thrust_magnitude(p_kw, params.efficiency, params.exhaust_velocity_km_s)
-        u = propulsion.thrust_direction(r, v, ctl.alpha, ctl.beta, ctl.inertial, ctl.u_angles)
+        if ctl.law is not None:
+            alpha, beta = steered_angles(ctl, t)
+            u = propulsion.thrust_direction(r, v, alpha, beta, ctl.inertial)
+        else:
+            u = propulsion.thrust_direction(r, v, ctl.alpha, ctl.beta, ctl.inertial, ctl.u_angles)
         force = force + tmag * u
         mdot = -tmag / params.exhaust_velocity_km_s
     return a, force, mdot

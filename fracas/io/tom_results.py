@@ -61,6 +61,10 @@ def write_tom_results(path: str | os.PathLike, product: TomProduct) -> Path:
             g.attrs[key] = int(bool(getattr(product, key)))
         for key, val in product.timing.items():
             g.attrs[f"timing_{key}"] = float(val)
+        g.attrs["performance"] = product.performance_name
+        g.attrs["performance_unit"] = product.performance_unit
+        g.attrs["performance_start"] = float(product.performance_start)
+        g.attrs["performance_final"] = float(product.performance_final)
         c = g.create_group("controls")
         write_strings(c, "names", product.control_names)
         write_strings(c, "units", product.control_units)
@@ -162,6 +166,10 @@ def read_tom_results(path: str | os.PathLike, *, verify: bool = True) -> dict[st
                 "controls": c.num("tom/history/controls", (k, m)),
                 "targets": c.num("tom/history/targets", (k, n)),
                 "grid": None,
+                "performance_name": str(g.attrs.get("performance", "final_mass")),
+                "performance_unit": str(g.attrs.get("performance_unit", "kg")),
+                "performance_start": float(g.attrs.get("performance_start", np.nan)),
+                "performance_final": float(g.attrs.get("performance_final", np.nan)),
             }
             if "trials" in g["history"]:
                 out["trials"] = c.num("tom/history/trials", (None, 6))

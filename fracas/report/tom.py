@@ -80,6 +80,12 @@ def summary_text(res: dict, width: int = 80) -> str:
             f"{res['control_units'][j]:<5}{bound}"
         )
     lines.append("")
+    perf = res.get("performance_name", "final_mass")
+    if perf != "final_mass":
+        unit = res.get("performance_unit", "")
+        lines.append(
+            f"performance {perf} {res['performance_final']:.10g} {unit} (start {res['performance_start']:.10g} {unit})"
+        )
     lines.append(
         f"final mass {res['final_mass_kg']:.6f} kg (start {res['start_mass_kg']:.6f} kg, "
         f"initial {res['initial_mass_kg']:.3f} kg)"

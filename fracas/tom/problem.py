@@ -236,8 +236,15 @@ class TomProblem:
         targets: TargetSet,
         fd_steps: Sequence[float] | None = None,
         sensitivity_method: str = "ad",
+        performance: tuple[str, int, float] | None = None,
     ):
         self.model = model
+        # F: the final mass (None), or sign x a target kind's value about a body, (name, body, sign)
+        self.performance = performance
+        perf = () if performance is None else (performance[0],)
+        perf_body = () if performance is None else (performance[1],)
+        self._names = tuple(targets.names) + perf
+        self._bodies = tuple(targets.bodies) + perf_body
         self.params = params
         self.ephem = ephem
         self.epoch_et_s = float(epoch_et_s)
@@ -281,18 +288,16 @@ class TomProblem:
         status = int(tr.status)
         t_f, x_f, p_f = float(tr.t_final), np.asarray(tr.x_final), int(tr.primary_final)
         ok = self._ok(status) and bool(np.all(np.isfinite(x_f)))
+        n = self.targets.n_targets
         if ok:
             vals = np.asarray(
-                _targets(
-                    self.model, self.targets.names, self.targets.bodies, prm, self.ephem, self.epoch_et_s, t_f, x_f, p_f
-                )
+                _targets(self.model, self._names, self._bodies, prm, self.ephem, self.epoch_et_s, t_f, x_f, p_f)
             )
             ok = bool(np.all(np.isfinite(vals)))
         else:
-            vals = np.full(self.targets.n_targets, np.nan)
-        out = Outcome(
-            Evaluation(vals, float(x_f[6]) if ok else float("nan"), ok), t_f, x_f, p_f, status, int(tr.n_steps)
-        )
+            vals = np.full(len(self._names), np.nan)
+        perf = float(x_f[6]) if self.performance is None else self.performance[2] * float(vals[n])
+        out = Outcome(Evaluation(vals[:n], perf if ok else float("nan"), ok), t_f, x_f, p_f, status, int(tr.n_steps))
         self.n_trajectories += 1
         self.time_propagation_s += time.perf_counter() - t0
         if len(self._cache) > 256:
@@ -354,11 +359,13 @@ class TomProblem:
         _, dt, dx = (
             np.asarray(a)
             for a in _target_partials(
-                self.model, self.targets.names, self.targets.bodies, prm, self.ephem, self.epoch_et_s, t_f, x_f, p_f
+                self.model, self._names, self._bodies, prm, self.ephem, self.epoch_et_s, t_f, x_f, p_f
             )
         )
-        s_mat = dx @ x_u + np.outer(dt, t_u)
-        g_vec = x_u[6].copy()
+        s_all = dx @ x_u + np.outer(dt, t_u)
+        n = self.targets.n_targets
+        s_mat = s_all[:n]
+        g_vec = x_u[6].copy() if self.performance is None else self.performance[2] * s_all[n]
         self.time_propagation_s += time.perf_counter() - t0
         return ev, s_mat, g_vec
 
@@ -419,8 +426,8 @@ class TomProblem:
         vals = np.asarray(
             _targets_batch(
                 self.model,
-                self.targets.names,
-                self.targets.bodies,
+                self._names,
+                self._bodies,
                 self.params,
                 self.ephem,
                 self.epoch_et_s,
@@ -430,5 +437,7 @@ class TomProblem:
             )
         )
         ok &= np.all(np.isfinite(vals), axis=1) & np.all(np.isfinite(x_f), axis=1)
-        perf = np.where(ok, x_f[:, 6], np.nan)
-        return vals, perf, ok
+        n = self.targets.n_targets
+        f = x_f[:, 6] if self.performance is None else self.performance[2] * vals[:, n]
+        perf = np.where(ok, f, np.nan)
+        return vals[:, :n], perf, ok

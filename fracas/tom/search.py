@@ -164,6 +164,13 @@ class Problem:
     labels: tuple[str, ...] = ()
     target_labels: tuple[str, ...] = ()
     value_weighted: np.ndarray | None = None  # (M,) bool, see :func:`weights`
+    # linear inequality constraints ineq_matrix @ U <= ineq_bound (K, M) and (K,): the thrust arcs'
+    # switch order t_on[k] <= t_off[k] <= t_on[k+1] (None: none)
+    ineq_matrix: np.ndarray | None = None
+    ineq_bound: np.ndarray | None = None
+    # (M,) bool: unbounded angle controls (rad) that are periodic (an in-plane angle, a right
+    # ascension): the search wraps them to (-pi, pi] after each step so they cannot drift
+    periodic: np.ndarray | None = None
 
 
 @dataclass
@@ -760,6 +767,12 @@ def _validated(problem: Problem) -> Problem:
             raise ValueError(f"given_S has shape {np.shape(problem.given_S)}, expected ({n}, {m})")
         given_S = np.array(problem.given_S, dtype=float) if n else np.zeros((0, m))
         given_G = _as_vector(problem.given_G, m, "given_G")
+    ineq_matrix = ineq_bound = None
+    if problem.ineq_matrix is not None and np.size(problem.ineq_matrix):
+        ineq_matrix = np.array(problem.ineq_matrix, dtype=float).reshape(-1, m)
+        ineq_bound = _as_vector(problem.ineq_bound, ineq_matrix.shape[0], "ineq_bound")
+        if np.any(ineq_matrix @ u0 > ineq_bound + 1e-9 * (1.0 + np.abs(ineq_bound))):
+            raise ValueError("u0 violates the switch-order constraints (an arc inverted or overlapping the next)")
     return Problem(
         u0=u0,
         desired=desired,
@@ -775,7 +788,62 @@ def _validated(problem: Problem) -> Problem:
         given_G=given_G,
         labels=tuple(problem.labels),
         target_labels=tuple(problem.target_labels),
+        value_weighted=problem.value_weighted,
+        ineq_matrix=ineq_matrix,
+        ineq_bound=ineq_bound,
+        periodic=None if problem.periodic is None else np.asarray(problem.periodic, bool).reshape(m),
     )
+
+
+def wrap_periodic(u: np.ndarray, periodic: np.ndarray | None) -> np.ndarray:
+    """U with its periodic angle controls (rad) wrapped to (-pi, pi] (the same trajectory)."""
+    if periodic is None or not np.any(periodic):
+        return u
+    out = np.array(u, dtype=float, copy=True)
+    out[periodic] = -np.remainder(-out[periodic] + np.pi, 2.0 * np.pi) + np.pi
+    return out
+
+
+def feasible_point(x, lower, upper, ineq_matrix=None, ineq_bound=None) -> np.ndarray:
+    """The nearest point to x (Euclidean, control units) within the bounds and the linear
+    constraints ineq_matrix @ U <= ineq_bound (the arcs' switch order): clip(x) when that
+    already satisfies them, else the small QP solved by SciPy's SLSQP.  A trial step of the
+    projected-gradient search goes through this, so an arc can close (start = end) but never
+    invert or overlap the next one."""
+    y = np.clip(np.asarray(x, float), lower, upper)
+    if ineq_matrix is None:
+        return y
+    slack = 1e-12 * (1.0 + np.abs(ineq_bound))
+    if np.all(ineq_matrix @ y <= ineq_bound + slack):
+        return y
+    from scipy.optimize import Bounds, LinearConstraint, minimize
+
+    moved = np.flatnonzero(np.any(ineq_matrix != 0.0, axis=0))
+    scale = np.maximum(np.abs(y[moved]), 1.0)
+    a = ineq_matrix[:, moved] * scale[None, :]
+    rest = ineq_bound - ineq_matrix @ np.where(np.isin(np.arange(y.size), moved), 0.0, y)
+    z0 = y[moved] / scale
+    res = minimize(
+        lambda z: 0.5 * float((z - z0) @ (z - z0)),
+        z0,
+        jac=lambda z: z - z0,
+        method="SLSQP",
+        bounds=Bounds(lower[moved] / scale, upper[moved] / scale),
+        constraints=[LinearConstraint(a, -np.inf, rest)],
+        options={"ftol": 1e-15, "maxiter": 200},
+    )
+    y[moved] = np.clip(res.x * scale, lower[moved], upper[moved])
+    # SLSQP leaves the active rows satisfied to its tolerance: close the remaining gap exactly by
+    # pulling each violated pair to its midpoint (rows are t_a - t_b <= c with one control each side)
+    for _ in range(3):
+        viol = ineq_matrix @ y - ineq_bound
+        if np.all(viol <= slack):
+            break
+        for k in np.flatnonzero(viol > slack):
+            row = ineq_matrix[k]
+            nz = np.flatnonzero(row)
+            y[nz] -= viol[k] * row[nz] / float(row @ row)
+    return y
 
 
 def _better(a: tuple[bool, float, float], b: tuple[bool, float, float]) -> bool:
@@ -1027,6 +1095,10 @@ def projected_gradient(
             record(label, 0.0, dr, [], dropped)
             return True
 
+        def step_to(gamma: float) -> np.ndarray:
+            """STEP: U + γΔU clipped to the bounds and projected onto the arcs' switch order."""
+            return feasible_point(u + gamma * du, lower, upper, prob.ineq_matrix, prob.ineq_bound)
+
         # GENMIN on FUNCT.
         trials: list[Trial] = []
         flown: dict[float, Evaluation] = {}
@@ -1043,7 +1115,7 @@ def projected_gradient(
         )
 
         def cost(gamma: float) -> float:
-            ut = np.clip(u + gamma * du, lower, upper)
+            ut = step_to(gamma)
             evt = cnt.evaluate(ut, n)
             flown[gamma] = evt
             if not evt.ok:
@@ -1111,7 +1183,7 @@ def projected_gradient(
                 f"line search found no decrease in {len(trials)} trials (F'(0) = {dr.slope:.3e})"
             )
             return True
-        u = np.clip(u + gamma * du, lower, upper)
+        u = wrap_periodic(step_to(gamma), prob.periodic)
         ev = flown[gamma]
         tau = tau_of(ev)
         k_new = key(ev, tau)

@@ -205,7 +205,7 @@ BAD = {
     "reversed arc": (
         None,
         PROPULSION + "[[thrust_arc]]\nstart_days = 0.5\nstop_days = 0.2\n",
-        "thrust_arc[0].stop_days = 0.2: must be > start_days = 0.5",
+        "thrust_arc[0].stop_days = 0.2: must be >= start_days = 0.5",
     ),
     "arc past the end": (
         None,

@@ -1,0 +1,416 @@
+"""A third optimizer for TOM's problem: IPOPT (interior point, L-BFGS Hessian) through CasADi.
+
+Optional: needs the ``casadi`` wheel (it bundles IPOPT with MUMPS), ``pip install 'fracas[ipopt]'``;
+casadi is imported only when :func:`solve_ipopt` runs.  Not in the report (P-A9: "SQP would be an
+extension"); like :mod:`fracas.tom.nlp` it is an independent check of the projected-gradient search.
+
+The problem is :func:`fracas.tom.nlp.solve_nlp`'s, in the same scaled variables (digest §A.3):
+
+* controls Ũ = D⁻¹U, D = diag(d) from WEIGHT (:func:`~fracas.tom.search.weights`) at the start
+  point, held fixed for the whole run;
+* objective −F(U)/ΔF_max (F the final mass, kg, maximized), gradient −D G/ΔF_max;
+* equality constraints τ(U) = ΔT/ε = 0, Jacobian S̃ = E_ε⁻¹ S D (declared dense);
+* the linear inequalities ``ineq_matrix @ U <= ineq_bound`` of the problem (switch order), in Ũ
+  (A D) Ũ ≤ b, a constant sparse Jacobian with A's own nonzero pattern (casadi differentiates
+  that block itself);
+* bounds lower/d ≤ Ũ ≤ upper/d.
+
+Values and derivatives come from ``problem.sensitivities`` (``given_S``/``given_G`` at the start
+point when given) inside casadi ``Callback`` objects, cached per Ũ so that the objective, the
+constraints and their Jacobians at one point cost one call.  A trajectory that fails (``ok``
+False, P-A12) gives NaN objective and constraints (zero derivatives): IPOPT's line search treats a
+non-finite trial value as an evaluation error and cuts the step back, so it never accepts such a
+point.  Core module: arrays and callables in, arrays out; no printing (IPOPT's banner and output
+and casadi's timings and evaluation warnings are switched off).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+
+import numpy as np
+
+from fracas.tom.search import (
+    Evaluation,
+    IterationRecord,
+    Problem,
+    SearchResult,
+    SearchSettings,
+    _angle,
+    _better,
+    _clean,
+    _validated,
+    result_of,
+    weights,
+)
+
+_DEFAULT = SearchSettings()
+_SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+_INEQ_SLACK = 1e-9  # relative: A U <= b + 1e-9 (1 + |b|) counts as satisfied (as search._validated)
+
+# IPOPT options (overridable through ``options``); see :func:`solve_ipopt`.
+IPOPT_OPTIONS: dict[str, object] = {
+    "hessian_approximation": "limited-memory",
+    "tol": 1e-8,
+    "bound_relax_factor": 0.0,
+    "print_level": 0,
+    "sb": "yes",
+}
+
+
+@functools.lru_cache(maxsize=1)
+def _casadi():
+    """casadi and the three Callback classes (built once, on first use)."""
+    try:
+        import casadi as ca
+    except ImportError as exc:
+        raise ImportError("optimizer = \"ipopt\" needs casadi: pip install 'fracas[ipopt]'") from exc
+
+    class Value(ca.Callback):
+        """x (m,) -> value (rows,) of ``fn(x)[0]``; its Jacobian is ``fn(x)[1]`` (rows, m), dense."""
+
+        def __init__(self, name: str, m: int, rows: int, fn):
+            ca.Callback.__init__(self)
+            self.m, self.rows, self.fn = m, rows, fn
+            self.construct(name, {})
+
+        def get_n_in(self):
+            return 1
+
+        def get_n_out(self):
+            return 1
+
+        def get_sparsity_in(self, i):
+            return ca.Sparsity.dense(self.m, 1)
+
+        def get_sparsity_out(self, i):
+            return ca.Sparsity.dense(self.rows, 1)
+
+        def eval(self, arg):
+            return [ca.DM(self.fn(np.array(arg[0], dtype=float).reshape(-1))[0])]
+
+        def has_jacobian(self):
+            return True
+
+        def get_jacobian(self, name, inames, onames, opts):
+            self.jacobian_callback = Jacobian(name, self.m, self.rows, self.fn, opts)  # keep it alive
+            return self.jacobian_callback
+
+    class Jacobian(ca.Callback):
+        """(x, nominal value) -> d value/dx (rows, m), dense."""
+
+        def __init__(self, name: str, m: int, rows: int, fn, opts):
+            ca.Callback.__init__(self)
+            self.m, self.rows, self.fn = m, rows, fn
+            self.construct(name, opts)
+
+        def get_n_in(self):
+            return 2
+
+        def get_n_out(self):
+            return 1
+
+        def get_sparsity_in(self, i):
+            return ca.Sparsity.dense(self.m, 1) if i == 0 else ca.Sparsity.dense(self.rows, 1)
+
+        def get_sparsity_out(self, i):
+            return ca.Sparsity.dense(self.rows, self.m)
+
+        def eval(self, arg):
+            return [ca.DM(self.fn(np.array(arg[0], dtype=float).reshape(-1))[1])]
+
+    class Iteration(ca.Callback):
+        """nlpsol's ``iteration_callback``: the nlpsol outputs at each IPOPT iterate -> 0 (go on) or 1 (stop)."""
+
+        def __init__(self, nx: int, ng: int, fn):
+            ca.Callback.__init__(self)
+            self.nx, self.ng, self.fn = nx, ng, fn
+            self.construct("tom_ipopt_iteration", {})
+
+        def get_n_in(self):
+            return ca.nlpsol_n_out()
+
+        def get_n_out(self):
+            return 1
+
+        def get_name_in(self, i):
+            return ca.nlpsol_out(i)
+
+        def get_name_out(self, i):
+            return "stop"
+
+        def get_sparsity_in(self, i):
+            name = ca.nlpsol_out(i)
+            if name == "f":
+                return ca.Sparsity.scalar()
+            if name in ("x", "lam_x"):
+                return ca.Sparsity.dense(self.nx)
+            if name in ("g", "lam_g"):
+                return ca.Sparsity.dense(self.ng)
+            return ca.Sparsity(0, 0)
+
+        def eval(self, arg):
+            return [ca.DM(1.0 if self.fn(np.array(arg[0], dtype=float).reshape(-1)) else 0.0)]
+
+    return ca, Value, Iteration
+
+
+def solve_ipopt(
+    problem: Problem,
+    settings: SearchSettings = _DEFAULT,
+    on_iteration: Callable[[IterationRecord], None] | None = None,
+    options: dict | None = None,
+) -> SearchResult:
+    """Maximize the final mass subject to τ(U) = 0, the linear inequalities and the bounds with IPOPT.
+
+    IPOPT options (``IPOPT_OPTIONS`` and ``obj_scaling_factor`` below, then ``options`` on top,
+    then ``max_iter``):
+    ``hessian_approximation = "limited-memory"`` (only first derivatives exist), ``max_iter =
+    settings.max_iterations``, ``tol = 1e-8`` on IPOPT's (internally scaled) optimality error of
+    the scaled problem, ``bound_relax_factor = 0`` (IPOPT's default 1e-8 relaxation would let
+    iterates, and the answer, sit up to 1e-8·max(1, |b|) outside the bounds and the switch-order
+    inequalities: trajectories are never flown outside the bounds and an active inequality is met
+    within the 1e-9 relative slack of the feasibility rule below), ``print_level = 0`` and ``sb =
+    "yes"`` (no banner); casadi's ``print_time`` and ``show_eval_warnings`` are off.
+
+    Returned point: the best point *evaluated* (every trial, not only IPOPT's iterates) by the
+    rule of the projected-gradient search (``search._better``): a feasible point (all |τ| ≤ 1,
+    the linear inequalities met to 1e-9·(1 + |b|) and within the bounds) beats an infeasible one;
+    among feasible points the higher F, among infeasible ones the lower E = Σ τ².  With target
+    tolerances not much smaller than the solution's precision that point can be a trial inside the
+    tolerance band with a slightly higher F than IPOPT's τ = 0 optimum; ``stop_reason`` says so
+    whenever the returned point is not IPOPT's last iterate.  ``search_converged`` is IPOPT's own
+    verdict: return status Solve_Succeeded or Solved_To_Acceptable_Level (named in
+    ``stop_reason``; re-verify either).  ``first_order_optimality``: IPOPT's dual infeasibility
+    (inf_du) at its last iterate when that is the returned point, else nan.
+
+    One ``IterationRecord`` per IPOPT iteration (submode "IPOPT"; IPOPT's iteration 0, the start,
+    is not recorded): the iterate after the iteration, ``gamma``/``predicted_slope`` nan, ``du``
+    the change since the previous record, ``du1``/``du2`` zero, ``trials`` empty, ``angle_rad`` θ
+    of SIZE-6 at the point.  ``time_line_search_s`` is 0 unless ``given_S`` is used (every value
+    comes from ``sensitivities``).  An exception raised by ``sensitivities`` or ``on_iteration``
+    stops IPOPT and is re-raised here.
+
+    Scaling: ``obj_scaling_factor = 1/‖D G/ΔF_max‖∞`` at the start point (1 when that gradient
+    is zero or not finite; ``options`` may override it), so IPOPT sees an O(1) objective gradient.
+    Without it, sensitivity weighting with tight tolerances (one scaled unit = k_j tolerances of
+    target change) gives objective gradients ~1e-9 in Ũ, below IPOPT's ``tol``: it then stops as
+    soon as the targets are met (on the 2×4 projection problem with ε = 1e-8: 0.84 from the optimum,
+    like SLSQP, see :func:`~fracas.tom.nlp.solve_nlp`; with the factor, 1e-8).  IPOPT's own
+    gradient-based scaling (default) only scales *down* functions whose gradient exceeds 100 (the
+    τ rows under control weighting with tight tolerances).  Re-verify the answer regardless.
+    """
+    ca, Value, Iteration = _casadi()
+    s = settings
+    prob = _validated(problem)
+    m, n = prob.u0.size, prob.desired.size
+    desired, tol = prob.desired, prob.tolerance
+    lower, upper = prob.lower, prob.upper
+    A, b = prob.ineq_matrix, prob.ineq_bound
+    k = 0 if A is None else A.shape[0]
+    err = prob.target_error or (lambda T: T - desired)
+    t_start = time.perf_counter()
+    stats = {"n_sens": 0, "n_eval": 0, "t_sens": 0.0, "t_eval": 0.0}
+    cache: OrderedDict[bytes, tuple[Evaluation, np.ndarray, np.ndarray]] = OrderedDict()
+
+    def tau_of(ev: Evaluation) -> np.ndarray:
+        return np.asarray(err(ev.targets), dtype=float).reshape(n) / tol if ev.ok else np.full(n, math.inf)
+
+    def key(u: np.ndarray, ev: Evaluation) -> tuple[bool, float, float]:
+        if not ev.ok:
+            return (False, -math.inf, math.inf)
+        tau = tau_of(ev)
+        feasible = bool(np.all(np.abs(tau) <= 1.0)) and bool(np.all((u >= lower) & (u <= upper)))
+        if feasible and k:
+            feasible = bool(np.all(A @ u <= b + _INEQ_SLACK * (1.0 + np.abs(b))))
+        return (feasible, ev.performance, float(tau @ tau))
+
+    def call(u: np.ndarray):
+        t = time.perf_counter()
+        try:
+            ev, S, G = prob.sensitivities(u.copy())
+        finally:
+            stats["t_sens"] += time.perf_counter() - t
+            stats["n_sens"] += 1
+        S = np.array(S, dtype=float).reshape(n, m) if n else np.zeros((0, m))
+        return _clean(ev, n), S, np.array(G, dtype=float).reshape(m)
+
+    u0 = prob.u0.copy()
+    if prob.given_S is not None:
+        t = time.perf_counter()
+        ev0 = _clean(prob.evaluate(u0.copy()), n)
+        stats["t_eval"] += time.perf_counter() - t
+        stats["n_eval"] += 1
+        first = (ev0, prob.given_S, prob.given_G)
+    else:
+        first = call(u0)
+    ev0, S0, G0 = first
+    history: list[IterationRecord] = []
+
+    def finish(u, ev, reason, ok):
+        return result_of(
+            u, ev, history, reason, ok, stats["n_eval"], stats["n_sens"], stats["t_sens"], stats["t_eval"], t_start
+        )
+
+    if not ev0.ok:
+        return finish(u0, ev0, "trajectory failed at the starting controls", False)
+    d = weights(S0, tol, u0, prob.scale, prob.floor, s.weighting, prob.value_weighted)
+    dfm = s.max_performance_change
+
+    x0 = u0 / d
+    cache[x0.tobytes()] = first
+    best = {"u": u0.copy(), "ev": ev0, "key": key(u0, ev0)}
+    error: list[BaseException] = []  # the first exception raised inside a casadi callback
+
+    def at(x: np.ndarray):
+        """(Evaluation, S, G) at U = D Ũ, one `sensitivities` call per distinct Ũ (LRU of 256);
+        every new point is a candidate for the best one."""
+        key_x = x.tobytes()
+        if key_x in cache:
+            cache.move_to_end(key_x)
+            return cache[key_x]
+        u = x * d
+        out = cache[key_x] = call(u)
+        if len(cache) > 256:
+            cache.popitem(last=False)
+        k_new = key(u, out[0])
+        if _better(k_new, best["key"]):
+            best.update(u=u.copy(), ev=out[0], key=k_new)
+        return out
+
+    def guarded(fn, rows: int):
+        """fn(x) -> (value, Jacobian); NaN values / zero Jacobian for a failed trajectory, and after
+        an exception (kept for re-raising once IPOPT returns)."""
+
+        def run(x: np.ndarray):
+            if not error:
+                try:
+                    ev, S, G = at(x)
+                    if ev.ok:
+                        return fn(ev, S, G)
+                except BaseException as exc:  # noqa: B036 - re-raised after the solve
+                    error.append(exc)
+            return np.full(rows, math.nan), np.zeros((rows, m))
+
+        return run
+
+    f_cb = Value(
+        "tom_objective",
+        m,
+        1,
+        guarded(lambda ev, S, G: (np.array([-ev.performance / dfm]), (-d * G / dfm)[None, :]), 1),
+    )
+    tau_cb = (
+        Value("tom_targets", m, n, guarded(lambda ev, S, G: (tau_of(ev), S * d[None, :] / tol[:, None]), n))
+        if n
+        else None
+    )
+
+    last = {"u": u0.copy(), "calls": 0}
+
+    def iteration(x: np.ndarray) -> bool:
+        last["calls"] += 1
+        if error:
+            return True
+        if last["calls"] == 1:  # IPOPT's iteration 0: the (possibly bound-pushed) start
+            return False
+        try:
+            u = x * d
+            ev, S, G = at(x)
+            tau = tau_of(ev)
+            E = float(tau @ tau)
+            rec = IterationRecord(
+                iteration=last["calls"] - 1,
+                submode="IPOPT",
+                u=u.copy(),
+                targets=ev.targets.copy(),
+                tau=tau,
+                performance=ev.performance,
+                error_index=E,
+                error_rms=math.sqrt(E / n) if n else 0.0,
+                angle_rad=_angle(S * d[None, :] / tol[:, None], -d * G) if ev.ok else math.nan,
+                gamma=math.nan,
+                du=u - last["u"],
+                du1=np.zeros(m),
+                du2=np.zeros(m),
+                dropped=(),
+                trials=[],
+                predicted_slope=math.nan,
+                n_evaluations=stats["n_sens"] + stats["n_eval"],
+            )
+            last["u"] = u.copy()
+            history.append(rec)
+            if on_iteration is not None:
+                on_iteration(rec)
+        except BaseException as exc:  # noqa: B036 - re-raised after the solve
+            error.append(exc)
+            return True
+        return False
+
+    xs = ca.MX.sym("x", m)
+    parts, lbg, ubg = [], [], []
+    if n:
+        parts.append(tau_cb(xs))
+        lbg.append(np.zeros(n))
+        ubg.append(np.zeros(n))
+    if k:
+        rows, cols = np.nonzero(A)
+        Ad = ca.DM(ca.Sparsity.triplet(k, m, rows.tolist(), cols.tolist()), (A[rows, cols] * d[cols]).tolist())
+        parts.append(ca.mtimes(Ad, xs))
+        lbg.append(np.full(k, -np.inf))
+        ubg.append(b)
+    g = ca.vertcat(*parts) if parts else ca.MX(0, 1)
+    it_cb = Iteration(m, n + k, iteration)
+    g_max = float(np.max(np.abs(d * G0))) / dfm if m else 0.0
+    obj_scaling = 1.0 / g_max if math.isfinite(g_max) and g_max > 0 else 1.0
+    ipopt_options = {
+        **IPOPT_OPTIONS,
+        "obj_scaling_factor": obj_scaling,
+        **(options or {}),
+        "max_iter": int(s.max_iterations),
+    }
+    solver = ca.nlpsol(
+        "tom_ipopt",
+        "ipopt",
+        {"x": xs, "f": f_cb(xs), "g": g},
+        {
+            "ipopt": ipopt_options,
+            "print_time": False,
+            "show_eval_warnings": False,
+            "error_on_fail": False,
+            "iteration_callback": it_cb,
+        },
+    )
+    sol = solver(
+        x0=x0,
+        lbx=lower / d,
+        ubx=upper / d,
+        lbg=np.concatenate(lbg) if lbg else np.zeros(0),
+        ubg=np.concatenate(ubg) if ubg else np.zeros(0),
+    )
+    if error:
+        raise error[0]
+    info = solver.stats()
+    status = str(info["return_status"])
+    converged = status in _SUCCESS
+    x_end = np.array(sol["x"], dtype=float).reshape(-1)
+    ev_end = at(x_end)[0]
+    u_end = x_end * d
+    reason = f"IPOPT: {status} after {int(info['iter_count'])} iterations"
+    if np.array_equal(best["u"], u_end):
+        inf_du = info.get("iterations", {}).get("inf_du", [])
+        out = finish(u_end, ev_end, reason, converged)
+        out.first_order_optimality = float(inf_du[-1]) if len(inf_du) else math.nan
+        return out
+    feasible, f_best, e_best = best["key"]
+    f_end = ev_end.performance if ev_end.ok else math.nan
+    reason += (
+        f"; returned the best point evaluated ({'within tolerance' if feasible else 'not within tolerance'}, "
+        f"E = {e_best:.3e}, F {f_best - f_end:+.3e} kg from IPOPT's last iterate), not that iterate "
+        f"(E = {key(u_end, ev_end)[2]:.3e}, F = {f_end:.12g} kg)"
+    )
+    return finish(best["u"], best["ev"], reason, converged)

@@ -11,8 +11,8 @@ The problem is :func:`fracas.tom.nlp.solve_nlp`'s, in the same scaled variables 
 * objective −F(U)/ΔF_max (F the final mass, kg, maximized), gradient −D G/ΔF_max;
 * equality constraints τ(U) = ΔT/ε = 0, Jacobian S̃ = E_ε⁻¹ S D (declared dense);
 * the linear inequalities ``ineq_matrix @ U <= ineq_bound`` of the problem (switch order), in Ũ
-  (A D) Ũ ≤ b, a constant sparse Jacobian with A's own nonzero pattern (casadi differentiates
-  that block itself);
+  R (A D) Ũ ≤ R b with the row scaling R = diag(1/max_j |A_ij d_j|) (an O(1) gradient in Ũ), a
+  constant sparse Jacobian with A's own nonzero pattern (casadi differentiates that block itself);
 * bounds lower/d ≤ Ũ ≤ upper/d.
 
 Values and derivatives come from ``problem.sensitivities`` (``given_S``/``given_G`` at the start
@@ -180,7 +180,8 @@ def solve_ipopt(
     Returned point: the best point *evaluated* (every trial, not only IPOPT's iterates) by the
     rule of the projected-gradient search (``search._better``): a feasible point (all |τ| ≤ 1,
     the linear inequalities met to 1e-9·(1 + |b|) and within the bounds) beats an infeasible one;
-    among feasible points the higher F, among infeasible ones the lower E = Σ τ².  With target
+    among feasible points the higher F, among infeasible ones the lower E = Σ τ²; on a tie, IPOPT's
+    last iterate.  With target
     tolerances not much smaller than the solution's precision that point can be a trial inside the
     tolerance band with a slightly higher F than IPOPT's τ = 0 optimum; ``stop_reason`` says so
     whenever the returned point is not IPOPT's last iterate.  ``search_converged`` is IPOPT's own
@@ -358,11 +359,16 @@ def solve_ipopt(
         lbg.append(np.zeros(n))
         ubg.append(np.zeros(n))
     if k:
+        # row i scaled by r_i = 1/max_j |A_ij d_j|: an O(1) gradient in Ũ (IPOPT's gradient-based
+        # scaling only scales down; a row of size d ~ 1e-10 made its multiplier ~1e10 and stopped it early)
+        Ad = A * d[None, :]
+        peak = np.max(np.abs(Ad), axis=1)
+        r = 1.0 / np.where(peak > 0, peak, 1.0)
         rows, cols = np.nonzero(A)
-        Ad = ca.DM(ca.Sparsity.triplet(k, m, rows.tolist(), cols.tolist()), (A[rows, cols] * d[cols]).tolist())
-        parts.append(ca.mtimes(Ad, xs))
+        scaled = ca.DM(ca.Sparsity.triplet(k, m, rows.tolist(), cols.tolist()), (Ad[rows, cols] * r[rows]).tolist())
+        parts.append(ca.mtimes(scaled, xs))
         lbg.append(np.full(k, -np.inf))
-        ubg.append(b)
+        ubg.append(b * r)
     g = ca.vertcat(*parts) if parts else ca.MX(0, 1)
     it_cb = Iteration(m, n + k, iteration)
     g_max = float(np.max(np.abs(d * G0))) / dfm if m else 0.0
@@ -401,7 +407,8 @@ def solve_ipopt(
     ev_end = at(x_end)[0]
     u_end = x_end * d
     reason = f"IPOPT: {status} after {int(info['iter_count'])} iterations"
-    if np.array_equal(best["u"], u_end):
+    key_end = key(u_end, ev_end)
+    if not _better(best["key"], key_end):  # IPOPT's last iterate unless a point evaluated is strictly better
         inf_du = info.get("iterations", {}).get("inf_du", [])
         out = finish(u_end, ev_end, reason, converged)
         out.first_order_optimality = float(inf_du[-1]) if len(inf_du) else math.nan
@@ -409,8 +416,8 @@ def solve_ipopt(
     feasible, f_best, e_best = best["key"]
     f_end = ev_end.performance if ev_end.ok else math.nan
     reason += (
-        f"; returned the best point evaluated ({'within tolerance' if feasible else 'not within tolerance'}, "
-        f"E = {e_best:.3e}, F {f_best - f_end:+.3e} kg from IPOPT's last iterate), not that iterate "
-        f"(E = {key(u_end, ev_end)[2]:.3e}, F = {f_end:.12g} kg)"
+        f"; returned the best point evaluated, not IPOPT's last iterate (best: "
+        f"{'within tolerance' if feasible else 'not within tolerance'}, E = {e_best:.3e}, F {f_best - f_end:+.3e} kg "
+        f"from the last iterate; last iterate: E = {key_end[2]:.3e}, F = {f_end:.12g} kg)"
     )
     return finish(best["u"], best["ev"], reason, converged)

@@ -27,7 +27,7 @@ from collections import OrderedDict
 from collections.abc import Callable
 
 import numpy as np
-from scipy.optimize import BFGS, Bounds, NonlinearConstraint, minimize
+from scipy.optimize import BFGS, Bounds, LinearConstraint, NonlinearConstraint, minimize
 
 from fracas.tom.search import (
     Evaluation,
@@ -36,6 +36,7 @@ from fracas.tom.search import (
     SearchResult,
     SearchSettings,
     _angle,
+    _better,
     _clean,
     _validated,
     result_of,
@@ -44,6 +45,10 @@ from fracas.tom.search import (
 
 METHODS = ("slsqp", "trust_constr")
 _FAIL = 1e30
+# SLSQP's ftol on the objective −F/ΔF_max: 1e-10 ΔF_max (5e-10 kg for ΔF_max = 5 kg) is far below
+# any performance difference that matters and above the ~1e-12 relative noise of an integrated
+# trajectory, so SLSQP stops by its own test at an optimum (1e-12 left it iterating to maxiter)
+SLSQP_FTOL = 1e-10
 
 
 _DEFAULT = SearchSettings()
@@ -68,7 +73,10 @@ def solve_nlp(
     ``IterationRecord`` per SciPy callback (submode "NLP"; ``gamma``/``predicted_slope`` nan,
     ``du`` the change since the previous record, ``du1``/``du2`` zero, ``trials`` empty,
     ``angle_rad`` θ of SIZE-6 at the point).  ``stop_reason`` carries SciPy's message;
-    ``search_converged`` is SciPy's success flag (re-verify it).  ``result.u`` is SciPy's final point.
+    ``search_converged`` is SciPy's success flag (re-verify it).  ``result.u`` is SciPy's final
+    point when it converged within tolerance, else the best point seen (rule of
+    ``search._better``).  The switch-order rows ``ineq_matrix @ U <= ineq_bound`` are linear
+    inequality constraints.  SLSQP's ``ftol`` is ``SLSQP_FTOL`` (1e-10 of ΔF_max).
     ``time_line_search_s`` is 0 (every value comes from ``sensitivities``).
 
     Scaling caveat: SciPy's quasi-Newton start (identity Hessian) assumes an O(1) objective gradient
@@ -123,20 +131,40 @@ def solve_nlp(
     x0 = u0 / d
     cache[x0.tobytes()] = first
 
+    A, b = prob.ineq_matrix, prob.ineq_bound
+    best: dict = {"key": None, "u": u0.copy(), "ev": ev0}
+
+    def tau_of(ev: Evaluation) -> np.ndarray:
+        return np.asarray(err(ev.targets), dtype=float).reshape(n) / tol
+
+    def key_of(u: np.ndarray, ev: Evaluation) -> tuple[bool, float, float]:
+        """The best-point rule of the projected-gradient search (``search._better``): within
+        tolerance, within the bounds and the switch order beats not; then F, else E."""
+        if not ev.ok:
+            return (False, -math.inf, math.inf)
+        tau = tau_of(ev)
+        inside = bool(np.all(np.abs(tau) <= 1.0)) and bool(np.all(u >= prob.lower) and np.all(u <= prob.upper))
+        if A is not None:
+            inside = inside and bool(np.all(A @ u <= b + 1e-9 * (1.0 + np.abs(b))))
+        return (inside, ev.performance, float(tau @ tau))
+
     def at(x: np.ndarray):
-        """(Evaluation, S, G) at U = D Ũ, one `sensitivities` call per distinct Ũ (LRU of 256)."""
+        """(Evaluation, S, G) at U = D Ũ, one `sensitivities` call per distinct Ũ (LRU of 256);
+        every new point is scored for the best point seen."""
         x = np.asarray(x, dtype=float)
         key = x.tobytes()
         if key in cache:
             cache.move_to_end(key)
         else:
             cache[key] = call(x * d)
+            k = key_of(x * d, cache[key][0])
+            if best["key"] is None or _better(k, best["key"]):
+                best.update(key=k, u=(x * d).copy(), ev=cache[key][0])
             if len(cache) > 256:
                 cache.popitem(last=False)
         return cache[key]
 
-    def tau_of(ev: Evaluation) -> np.ndarray:
-        return np.asarray(err(ev.targets), dtype=float).reshape(n) / tol
+    best.update(key=key_of(u0, ev0), u=u0.copy(), ev=ev0)
 
     def fun(x):
         ev, _, _ = at(x)
@@ -192,6 +220,9 @@ def solve_nlp(
     with warnings.catch_warnings():
         if method == "slsqp":
             constraints = [{"type": "eq", "fun": con, "jac": con_jac}] if n else []
+            if A is not None:
+                Ad = A * d[None, :]
+                constraints.append({"type": "ineq", "fun": lambda x: b - Ad @ x, "jac": lambda x: -Ad})
             res = minimize(
                 fun,
                 x0,
@@ -200,12 +231,14 @@ def solve_nlp(
                 bounds=bounds if has_bounds else None,
                 constraints=constraints,
                 callback=callback,
-                options={"maxiter": max(s.max_iterations, 1), "ftol": 1e-12},
+                options={"maxiter": max(s.max_iterations, 1), "ftol": SLSQP_FTOL},
             )
         else:
             # BFGS updates warn "delta_grad == 0.0" on linear constraints; harmless, so silenced here.
             warnings.filterwarnings("ignore", message="delta_grad == 0.0", category=UserWarning)
             constraints = [NonlinearConstraint(con, np.zeros(n), np.zeros(n), jac=con_jac, hess=BFGS())] if n else []
+            if A is not None:
+                constraints.append(LinearConstraint(A * d[None, :], -np.inf, b))
             res = minimize(
                 fun,
                 x0,
@@ -219,10 +252,23 @@ def solve_nlp(
             )
     x = np.asarray(res.x, dtype=float)
     ev, _, _ = at(x)
+    success = bool(res.success)
     if method == "slsqp":
-        return finish(x * d, ev, f"SLSQP: {res.message}", bool(res.success))
-    optimality = float(res.optimality)
-    reason = f"trust-constr: {res.message} (‖∇ₓL‖∞ {optimality:.1e}, violation {float(res.constr_violation):.1e})"
-    out = finish(x * d, ev, reason, bool(res.success))
-    out.first_order_optimality = optimality
-    return out
+        reason = f"SLSQP: {res.message} after {int(res.nit)} iterations"
+        optimality = math.nan
+    else:
+        optimality = float(res.optimality)
+        reason = f"trust-constr: {res.message} (‖∇ₓL‖∞ {optimality:.1e}, violation {float(res.constr_violation):.1e})"
+    k_end = key_of(x * d, ev)
+    # SciPy's final point when it converged there within tolerance; otherwise the best point seen
+    # (SciPy returns its last iterate, which after an iteration limit can be far from the best)
+    if (success and k_end[0]) or not _better(best["key"], k_end):
+        out = finish(x * d, ev, reason, success)
+        out.first_order_optimality = optimality
+        return out
+    feasible, f_best, e_best = best["key"]
+    reason += (
+        f"; returned the best point seen, not the last ({'within' if feasible else 'not within'} tolerance, "
+        f"E = {e_best:.3e}, F {f_best - (ev.performance if ev.ok else math.nan):+.3e} from the last)"
+    )
+    return finish(best["u"], best["ev"], reason, success)

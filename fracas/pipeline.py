@@ -458,11 +458,10 @@ def run_tom(
     """
     from fracas.build.tom import build_tom, reference_deck_text
     from fracas.config.tom import load_tom_deck
-    from fracas.errors import FracasError
     from fracas.io.atomic import atomic_path
     from fracas.io.tom_results import write_tom_results
     from fracas.products import TomProduct
-    from fracas.tom import nlp, search
+    from fracas.tom import search
 
     say = _say(on_stage)
     t0 = time.perf_counter()
@@ -475,38 +474,15 @@ def run_tom(
     if png is not None:
         check_output_path(png, "plot")
     say("building the TOM problem")
-    case = build_tom(cfg)
+    first_note = ""
+    if cfg.tom.first_guess is not None:
+        case, first_note = _tom_first_guess(cfg, say, on_iteration)
+    else:
+        case = build_tom(cfg)
     prob = case.problem
     tg = prob.targets
     say("propagating the starting trajectory")
-    start = prob.outcome(case.u0)
-    if not start.evaluation.ok:
-        from fracas.status import status_text
-
-        raise NumericalError(
-            f"{cfg.source_path}: the trajectory at the starting controls failed ({status_text(start.status)}, "
-            f"stopped at {start.t_final / DAY_S:.6g} d): nothing usable to optimize from"
-        )
-    sp = search.Problem(
-        u0=case.u0,
-        desired=tg.desired,
-        tolerance=tg.tolerance,
-        scale=case.scale,
-        lower=case.lower,
-        upper=case.upper,
-        floor=case.floor,
-        evaluate=prob.evaluate,
-        sensitivities=prob.sensitivities,
-        target_error=tg.error,
-        given_S=case.given_s,
-        given_G=case.given_g,
-        labels=case.control_names,
-        target_labels=tg.names,
-        value_weighted=np.array([u not in ("deg", "days") for u in case.control_units]),
-        ineq_matrix=case.ineq_matrix,
-        ineq_bound=case.ineq_bound,
-        periodic=case.periodic,
-    )
+    start, sp = _tom_start(cfg, case)
     grid = None
     t1 = time.perf_counter()
     timing: dict[str, float] = {}
@@ -541,17 +517,9 @@ def run_tom(
         )
     else:
         say(f"searching ({cfg.tom.optimizer}, {cfg.tom.sensitivities} sensitivities)")
-        try:
-            if cfg.tom.optimizer == "projected_gradient":
-                res = search.projected_gradient(sp, case.settings, on_iteration)
-            elif cfg.tom.optimizer == "ipopt":
-                from fracas.tom.ipopt import solve_ipopt
-
-                res = solve_ipopt(sp, case.settings, on_iteration)
-            else:
-                res = nlp.solve_nlp(sp, cfg.tom.optimizer, case.settings, on_iteration)
-        except ValueError as exc:
-            raise FracasError(f"{cfg.source_path}: {exc}") from None
+        res = _tom_search(cfg, case, sp, on_iteration)
+        if first_note:
+            res.stop_reason = f"{res.stop_reason} [{first_note}]"
     t2 = time.perf_counter()
 
     # ---- verification: the plain core at the final controls, afresh
@@ -664,6 +632,107 @@ def run_tom(
         _tom_stm_file(cfg, ref_path)
     product.timing["total_s"] = time.perf_counter() - t0
     return product, out, (ref_path if ref_written else None)
+
+
+def _tom_start(cfg, case):
+    """The starting trajectory (NumericalError when it fails: nothing to optimize from) and the
+    search's :class:`fracas.tom.search.Problem` of a TOM case."""
+    from fracas.tom import search
+
+    prob = case.problem
+    tg = prob.targets
+    start = prob.outcome(case.u0)
+    if not start.evaluation.ok:
+        from fracas.status import status_text
+
+        raise NumericalError(
+            f"{cfg.source_path}: the trajectory at the starting controls failed ({status_text(start.status)}, "
+            f"stopped at {start.t_final / DAY_S:.6g} d): nothing usable to optimize from"
+        )
+    sp = search.Problem(
+        u0=case.u0,
+        desired=tg.desired,
+        tolerance=tg.tolerance,
+        scale=case.scale,
+        lower=case.lower,
+        upper=case.upper,
+        floor=case.floor,
+        evaluate=prob.evaluate,
+        sensitivities=prob.sensitivities,
+        target_error=tg.error,
+        given_S=case.given_s,
+        given_G=case.given_g,
+        labels=case.control_names,
+        target_labels=tg.names,
+        value_weighted=np.array([u not in ("deg", "days") for u in case.control_units]),
+        ineq_matrix=case.ineq_matrix,
+        ineq_bound=case.ineq_bound,
+        periodic=case.periodic,
+    )
+    return start, sp
+
+
+def _tom_search(cfg, case, sp, on_iteration):
+    """One search with the deck's optimizer (a malformed problem: a one-line FracasError)."""
+    from fracas.errors import FracasError
+    from fracas.tom import nlp, search
+
+    try:
+        if cfg.tom.optimizer == "projected_gradient":
+            return search.projected_gradient(sp, case.settings, on_iteration)
+        if cfg.tom.optimizer == "ipopt":
+            from fracas.tom.ipopt import solve_ipopt
+
+            return solve_ipopt(sp, case.settings, on_iteration)
+        return nlp.solve_nlp(sp, cfg.tom.optimizer, case.settings, on_iteration)
+    except ValueError as exc:
+        raise FracasError(f"{cfg.source_path}: {exc}") from None
+
+
+def _tom_first_guess(cfg, say, on_iteration):
+    """[tom.first_guess] (:mod:`fracas.tom.first_guess`): pass 1 on throttle segments, its burns
+    as arcs with Legendre pointing laws; returns the pass-2 case (its start) and a one-line note."""
+    import dataclasses
+    import math
+
+    from fracas.build.tom import build_tom, first_guess_burns, first_guess_segments
+    from fracas.config.tom import tom_trajectory_deck
+    from fracas.tom.first_guess import burns_from_segments
+
+    fg = cfg.tom.first_guess
+    traj = tom_trajectory_deck(cfg)
+    deck1, traj1 = first_guess_segments(cfg, traj)
+    say(f"first guess, pass 1: {fg.segments} segments ({cfg.tom.optimizer})")
+    case1 = build_tom(deck1, trajectory=traj1)
+    _, sp1 = _tom_start(cfg, case1)
+    res1 = _tom_search(cfg, case1, sp1, on_iteration)
+    prm = case1.problem.params_at(res1.u)
+    edges = np.append(np.asarray(prm.arc_t_on, float), float(np.asarray(prm.arc_t_off)[-1]))
+    burns = burns_from_segments(
+        edges,
+        np.asarray(prm.arc_throttle, float),
+        np.asarray(prm.arc_alpha, float),
+        np.asarray(prm.arc_beta, float),
+        degree=fg.degree,
+        max_fit_error_rad=math.radians(fg.max_fit_error_deg),
+        max_arcs=fg.max_arcs_per_burn,
+    )
+    if not burns:
+        raise NumericalError(
+            f"{cfg.source_path}: tom.first_guess: pass 1 left every segment coasting (no burn to refine); "
+            f"its search stopped: {res1.stop_reason}"
+        )
+    n_arcs = sum(len(b) for b in burns)
+    spans = ", ".join(f"{b[0].start_s / DAY_S:.1f}-{b[-1].stop_s / DAY_S:.1f} d" for b in burns)
+    say(f"first guess, pass 2: {len(burns)} burns ({spans}) in {n_arcs} arcs")
+    deck2, traj2 = first_guess_burns(cfg, traj, burns)
+    case2 = dataclasses.replace(build_tom(deck2, trajectory=traj2), arcs_rewritten=True)
+    perf = res1.evaluation.performance / case1.performance_factor
+    note = (
+        f"first guess: {fg.segments} segments, {len(res1.history)} iterations to F = {perf:.6g} "
+        f"{case1.performance_unit}; {len(burns)} burns ({spans}) in {n_arcs} arcs"
+    )
+    return case2, note
 
 
 def _deck_performance(case, value: float) -> float:

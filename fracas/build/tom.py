@@ -80,6 +80,7 @@ class TomCase:
     performance_unit: str = "kg"
     performance_factor: float = 1.0
     periodic: np.ndarray | None = None  # (M,) bool: unbounded, unlinked arc_alpha / vinf_ra controls
+    arcs_rewritten: bool = False  # the trajectory's thrust arcs are the first guess's, not the deck's
 
 
 def switch_order_constraints(cmap: ControlMap, params, n_arcs: int) -> tuple[np.ndarray, np.ndarray] | None:
@@ -146,11 +147,13 @@ def _wrap_deg(angle_deg: float) -> float:
     return 180.0 if w == -180.0 else w
 
 
-def build_tom(deck: TomDeck) -> TomCase:
+def build_tom(deck: TomDeck, trajectory: TrajectoryDeck | None = None) -> TomCase:
     """Validated TOM deck -> :class:`TomCase`; ConfigError naming the field for what the
-    trajectory cannot support (an arc that does not exist, a body outside the model ...)."""
+    trajectory cannot support (an arc that does not exist, a body outside the model ...).
+    ``trajectory``: the trajectory deck to stand on instead of the deck's own (the first
+    guess's passes, :func:`first_guess_segments` and :func:`first_guess_burns`)."""
     src = deck.source_path or "<deck>"
-    traj = tom_trajectory_deck(deck)
+    traj = tom_trajectory_deck(deck) if trajectory is None else trajectory
     base = build_propagation(traj)
     if any(_steering_control(c) for c in deck.control) and not base.model.steering:
         # a pointing-law coefficient is a control: the arcs evaluate their laws at every stage
@@ -465,6 +468,8 @@ def reference_deck_text(case: TomCase, u) -> str:
         for key in ("elements", "spherical", "cartesian"):
             ist.pop(key, None)
         ist["cartesian"] = {"r_km": [float(a) for a in r_deck], "v_km_s": [float(a) for a in v_deck]}
+    if case.arcs_rewritten:  # the first guess's arcs replace the deck's
+        data["thrust_arc"] = [{"frame": a.frame} for a in traj.thrust_arc]
     arcs = data.get("thrust_arc", [])
     for k, arc in enumerate(arcs):
         arc["start_days"] = float(float(prm.arc_t_on[k]) / constants.DAY_S)
@@ -506,3 +511,93 @@ def reference_deck_text(case: TomCase, u) -> str:
         f"# TOM deck: {case.deck.source_path or '<deck>'}\n"
     )
     return header + body
+
+
+# ------------------------------------------------------------------ the automatic first guess
+_LAW_BOUND_DEG = 180.0  # bound on each Legendre coefficient of the first guess's pass 2
+
+
+def _window(deck: TomDeck, traj: TrajectoryDeck) -> tuple[float, float]:
+    fg = deck.tom.first_guess
+    start = fg.start_days if fg.start_days is not None else 0.0
+    stop = fg.stop_days if fg.stop_days is not None else traj.duration_days
+    return start, stop
+
+
+def _throttled(deck: TomDeck) -> bool:
+    fg = deck.tom.first_guess
+    return fg.throttle if fg.throttle is not None else deck.tom.performance == "final_mass"
+
+
+def first_guess_segments(deck: TomDeck, traj: TrajectoryDeck) -> tuple[TomDeck, TrajectoryDeck]:
+    """Pass 1 of [tom.first_guess] (:mod:`fracas.tom.first_guess`): the thrust window cut into
+    ``segments`` contiguous arcs at half throttle (full when the throttle is not a control),
+    thrust along the velocity (alpha = beta = 0); controls: each segment's throttle, alpha and
+    (``out_of_plane``) beta, then the deck's own controls."""
+    from fracas.config.tom import ControlSpec
+    from fracas.config.trajectory import ThrustArc
+
+    fg = deck.tom.first_guess
+    start, stop = _window(deck, traj)
+    edges = np.linspace(start, stop, fg.segments + 1)
+    throttled = _throttled(deck)
+    arcs = [
+        ThrustArc(start_days=float(a), stop_days=float(b), frame=fg.frame, throttle=0.5 if throttled else 1.0)
+        for a, b in zip(edges[:-1], edges[1:])
+    ]
+    controls = []
+    for k in range(fg.segments):
+        if throttled:
+            controls.append(ControlSpec(name=f"arc_throttle[{k}]"))
+        controls.append(ControlSpec(name=f"arc_alpha[{k}]"))
+        if fg.out_of_plane:
+            controls.append(ControlSpec(name=f"arc_beta[{k}]"))
+    controls += list(deck.control)
+    return deck.model_copy(update={"control": controls}), traj.model_copy(update={"thrust_arc": arcs})
+
+
+def first_guess_burns(deck: TomDeck, traj: TrajectoryDeck, burns) -> tuple[TomDeck, TrajectoryDeck]:
+    """Pass 2 of [tom.first_guess]: the burns of pass 1 (``fracas.tom.first_guess.Burn`` lists, one
+    list of contiguous arcs per burn) as full-throttle arcs with their Legendre pointing laws;
+    controls: each burn's start and end (the joins between a burn's arcs stay fixed), each arc's
+    mean angles and Legendre coefficients up to ``degree`` (within ±180°), then the deck's own
+    controls."""
+    from fracas.config.tom import ControlSpec
+    from fracas.config.trajectory import ThrustArc
+
+    fg = deck.tom.first_guess
+    arcs, controls = [], []
+    k = 0
+    for pieces in burns:
+        for i, b in enumerate(pieces):
+            alpha_p = [math.degrees(c) for c in b.alpha_legendre[: fg.degree]]
+            beta_p = [math.degrees(c) for c in b.beta_legendre[: fg.degree]] if fg.out_of_plane else []
+            arcs.append(
+                ThrustArc(
+                    start_days=b.start_s / constants.DAY_S,
+                    stop_days=b.stop_s / constants.DAY_S,
+                    frame=fg.frame,
+                    alpha_deg=_wrap_deg(math.degrees(b.alpha)),
+                    beta_deg=min(max(math.degrees(b.beta), -89.0), 89.0) if fg.out_of_plane else 0.0,
+                    alpha_legendre_deg=alpha_p,
+                    beta_legendre_deg=beta_p,
+                )
+            )
+            # the burn's ends are controls; the joins between its arcs stay where pass 1 put them
+            # (as controls they let an arc collapse, seen on Bryson & Ho: three of four arcs closed)
+            if i == 0:
+                controls.append(ControlSpec(name=f"arc_t_on[{k}]"))
+            if i == len(pieces) - 1:
+                controls.append(ControlSpec(name=f"arc_t_off[{k}]"))
+            angles = ["alpha"] + (["beta"] if fg.out_of_plane else [])
+            for angle in angles:
+                controls.append(ControlSpec(name=f"arc_{angle}[{k}]"))
+                # a law coefficient beyond 180 deg turns the thrust more than a revolution within an
+                # arc: bounded, so the search cannot wander into meaningless laws
+                controls += [
+                    ControlSpec(name=f"arc_{angle}_p{d}[{k}]", lower=-_LAW_BOUND_DEG, upper=_LAW_BOUND_DEG)
+                    for d in range(1, fg.degree + 1)
+                ]
+            k += 1
+    controls += list(deck.control)
+    return deck.model_copy(update={"control": controls}), traj.model_copy(update={"thrust_arc": arcs})

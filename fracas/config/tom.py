@@ -59,7 +59,16 @@ from fracas.errors import DeckError
 from fracas.guidance.target_kinds import TARGET_KINDS
 from fracas.params import CONTROL_KINDS
 
-__all__ = ["TomDeck", "TomSettings", "ControlSpec", "TargetSpec", "parse_tom_deck", "load_tom_deck", "SUBMODES"]
+__all__ = [
+    "FirstGuess",
+    "TomDeck",
+    "TomSettings",
+    "ControlSpec",
+    "TargetSpec",
+    "parse_tom_deck",
+    "load_tom_deck",
+    "SUBMODES",
+]
 
 SUBMODES = ("auto", "grid", "target", "target_optimize", "optimize", "nominal")
 OPTIMIZERS = ("projected_gradient", "slsqp", "trust_constr", "ipopt")
@@ -70,6 +79,32 @@ class TrajectoryRef(_Section):
     """$DATA's trajectory part named by file: a trajectory deck (relative to this deck)."""
 
     deck: str
+
+
+class FirstGuess(_Section):
+    """[tom.first_guess]: TOM's automatic first guess for low-thrust problems
+    (:mod:`fracas.tom.first_guess`).  Pass 1 cuts the thrust window into ``segments`` contiguous
+    arcs, each with its own throttle (when ``throttle``) and constant pointing as controls, from
+    half throttle and thrust along the velocity; pass 2 merges the thrusting segments into burns
+    with full throttle, each split into at most ``max_arcs_per_burn`` contiguous arcs until a
+    Legendre law of ``degree`` fits the pass-1 pointing within ``max_fit_error_deg``, and
+    optimizes their switch times and pointing laws.  The deck's own thrust arcs are replaced."""
+
+    segments: Annotated[int, Field(ge=2, le=120)] = 24
+    start_days: float | None = None  # the thrust window (default: the whole flight)
+    stop_days: float | None = None
+    throttle: bool | None = None  # a throttle per segment; default: true when maximizing the final mass
+    out_of_plane: bool = True  # beta (and its law) as controls; false keeps the thrust in the orbit plane
+    degree: Annotated[int, Field(ge=0, le=3)] = 3
+    max_fit_error_deg: PositiveFloat = 5.0
+    max_arcs_per_burn: Annotated[int, Field(ge=1, le=8)] = 4
+    frame: Literal["velocity", "inertial"] = "velocity"
+
+    @model_validator(mode="after")
+    def _window(self) -> FirstGuess:
+        if self.start_days is not None and self.stop_days is not None and self.stop_days <= self.start_days:
+            raise FieldProblem("stop_days", self.stop_days, f"must be > start_days = {self.start_days:g}")
+        return self
 
 
 class TomSettings(_Section):
@@ -95,6 +130,7 @@ class TomSettings(_Section):
     performance_body: BodyName | None = None
     maximize: bool = True
     departure_body: BodyName | None = None
+    first_guess: FirstGuess | None = None
     results: str | None = None
     reference_deck: str | None = None
     plot: str | None = None
@@ -194,8 +230,23 @@ class TomDeck(SourcedDeck):
 
     @model_validator(mode="after")
     def _cross_checks(self) -> TomDeck:
-        if not self.control:
-            raise FieldProblem("control", [], "at least one [[control]]")
+        if not self.control and self.tom.first_guess is None:
+            raise FieldProblem("control", [], "at least one [[control]] (or a [tom.first_guess] table)")
+        if self.tom.first_guess is not None:
+            for k, c in enumerate(self.control):
+                for n in list(c.links) or [c.name]:
+                    if n.strip().startswith("arc_"):
+                        raise FieldProblem(
+                            ("control", k, "links" if c.links else "name"),
+                            n,
+                            "no thrust-arc control with [tom.first_guess] (it makes the arcs and their controls)",
+                        )
+            if self.tom.submode in ("grid", "nominal", "target"):
+                raise FieldProblem(
+                    ("tom", "submode"),
+                    self.tom.submode,
+                    'an optimizing submode ("auto", "target_optimize", "optimize") with [tom.first_guess]',
+                )
         seen: dict[str, int] = {}
         for k, c in enumerate(self.control):
             if c.name in seen:

@@ -22,6 +22,7 @@ Arrays in, arrays out (no deck objects): :mod:`fracas.build.tom` builds the two 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -67,6 +68,22 @@ def legendre_fit(s: np.ndarray, values: np.ndarray, weights: np.ndarray, degree:
     return out
 
 
+def _fit(edges, thr, alpha, beta, k, j, start, stop, degree):
+    """The Burn of segments k..j over [start, stop] and its worst fit error (rad) at the midpoints."""
+    mids = 0.5 * (edges[k : j + 1] + edges[k + 1 : j + 2])
+    s = np.clip((2.0 * mids - start - stop) / max(stop - start, 1e-300), -1.0, 1.0)
+    w = np.maximum(thr[k : j + 1], 1e-3) * (edges[k + 1 : j + 2] - edges[k : j + 1])
+    ca = legendre_fit(s, alpha[k : j + 1], w, degree)
+    cb = legendre_fit(s, beta[k : j + 1], w, degree)
+    basis = legendre_values(s, degree)
+    err = max(
+        float(np.max(np.abs(basis @ ca - alpha[k : j + 1]))),
+        float(np.max(np.abs(basis @ cb - beta[k : j + 1]))),
+    )
+    mean_alpha = float(-np.remainder(-ca[0] + np.pi, 2.0 * np.pi) + np.pi)
+    return Burn(float(start), float(stop), mean_alpha, float(cb[0]), tuple(ca[1:]), tuple(cb[1:])), err
+
+
 def burns_from_segments(
     edges_s: np.ndarray,
     throttle: np.ndarray,
@@ -74,22 +91,27 @@ def burns_from_segments(
     beta: np.ndarray,
     degree: int = 3,
     on: float = 0.02,
-) -> list[Burn]:
-    """The burns of a solved segment pass.
+    max_fit_error_rad: float = math.inf,
+    max_arcs: int = 1,
+) -> list[list[Burn]]:
+    """The burns of a solved segment pass, each as a list of contiguous arcs.
 
     ``edges_s`` (N + 1,) segment edges (s); ``throttle``, ``alpha``, ``beta`` (N,) the solution.
     A burn is a maximal run of segments with throttle > ``on``.  Its start moves into its first
     segment by (1 - throttle) of that segment's length, its end back from its last segment's end
-    likewise (a partial edge segment keeps its impulse, ∫ throttle dt); partial segments inside a
-    run count as thrusting.  The pointing law of a burn is the throttle-weighted Legendre fit of
-    degree ``degree`` through the segments' midpoints (alpha unwrapped first, so a run through
-    ±180° is continuous).  No burn: an empty list.
+    likewise (a partial edge segment keeps its impulse, ∫ throttle dt); a lone partial segment
+    becomes a burn of throttle x its length centred in it; partial segments inside a run count as
+    thrusting.  Each burn's pointing is the throttle-weighted Legendre fit of degree ``degree``
+    through its segments' midpoints (alpha unwrapped first, so a run through ±180° is
+    continuous); when the worst fit error exceeds ``max_fit_error_rad`` the burn is cut into
+    2, 3, ... ``max_arcs`` contiguous arcs of (nearly) equal segment counts, each with its own law,
+    until it fits (arcs meet at segment edges).  No burn: an empty list.
     """
     edges = np.asarray(edges_s, float)
     thr = np.clip(np.asarray(throttle, float), 0.0, 1.0)
     alpha = np.unwrap(np.asarray(alpha, float))
     beta = np.asarray(beta, float)
-    burns: list[Burn] = []
+    burns: list[list[Burn]] = []
     n = thr.size
     k = 0
     while k < n:
@@ -99,18 +121,26 @@ def burns_from_segments(
         j = k
         while j + 1 < n and thr[j + 1] > on:
             j += 1
-        start = edges[k] + (1.0 - thr[k]) * (edges[k + 1] - edges[k])
-        stop = edges[j + 1] - (1.0 - thr[j]) * (edges[j + 1] - edges[j]) if j > k else edges[k + 1]
         if j == k:  # one partial segment: centre its impulse in it
             mid = 0.5 * (edges[k] + edges[k + 1])
             half = 0.5 * thr[k] * (edges[k + 1] - edges[k])
             start, stop = mid - half, mid + half
-        mids = 0.5 * (edges[k : j + 1] + edges[k + 1 : j + 2])
-        s = np.clip((2.0 * mids - start - stop) / max(stop - start, 1e-300), -1.0, 1.0)
-        w = thr[k : j + 1] * (edges[k + 1 : j + 2] - edges[k : j + 1])
-        ca = legendre_fit(s, alpha[k : j + 1], w, degree)
-        cb = legendre_fit(s, beta[k : j + 1], w, degree)
-        mean_alpha = float(-np.remainder(-ca[0] + np.pi, 2.0 * np.pi) + np.pi)
-        burns.append(Burn(float(start), float(stop), mean_alpha, float(cb[0]), tuple(ca[1:]), tuple(cb[1:])))
+        else:
+            start = edges[k] + (1.0 - thr[k]) * (edges[k + 1] - edges[k])
+            stop = edges[j + 1] - (1.0 - thr[j]) * (edges[j + 1] - edges[j])
+        count = j - k + 1
+        pieces: list[Burn] = []
+        for n_arcs in range(1, max(1, min(max_arcs, count)) + 1):
+            cuts = [k + round(i * count / n_arcs) for i in range(n_arcs + 1)]
+            pieces, worst = [], 0.0
+            for a, b in zip(cuts[:-1], cuts[1:]):
+                t0 = start if a == k else edges[a]
+                t1 = stop if b == j + 1 else edges[b]
+                burn, err = _fit(edges, thr, alpha, beta, a, b - 1, t0, t1, degree)
+                pieces.append(burn)
+                worst = max(worst, err)
+            if worst <= max_fit_error_rad:
+                break
+        burns.append(pieces)
         k = j + 1
     return burns

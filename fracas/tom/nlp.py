@@ -39,6 +39,7 @@ from fracas.tom.search import (
     _better,
     _clean,
     _validated,
+    optimality_angle,
     result_of,
     weights,
 )
@@ -119,6 +120,14 @@ def solve_nlp(
     history: list[IterationRecord] = []
 
     def finish(u, ev, reason, ok):
+        if ok and ev.ok and n:
+            # SciPy's word is checked by FRACAS's TEST at the returned point: θ over the free controls
+            _, S_u, G_u = at(np.asarray(u, float) / d)
+            theta = optimality_angle(prob, u, S_u, G_u, s.weighting)
+            reason = f"{reason}; TEST angle θ {theta:.1e} rad"
+            if not theta < s.convergence_angle_rad:
+                ok = False
+                reason += f" >= θ_conv {s.convergence_angle_rad:.1e}: not an optimum"
         return result_of(
             u, ev, history, reason, ok, stats["n_eval"], stats["n_sens"], stats["t_sens"], stats["t_eval"], t_start
         )

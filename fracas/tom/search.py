@@ -704,6 +704,34 @@ def _angle(St: np.ndarray, Gt: np.ndarray) -> float:
     return math.asin(min(1.0, float(np.linalg.norm(proj @ Gt)) / ng))
 
 
+def optimality_angle(problem: Problem, u: np.ndarray, S: np.ndarray, G: np.ndarray, weighting: str) -> float:
+    """TEST's θ at U for an NLP solver's answer (FRACAS's optimality test, SIZE-6), over the
+    controls not held at a bound and with the active switch-order rows counted as constraints:
+    sin θ = |P̃ G̃| / |G̃| with P̃ the projector off the rows of [S̃; Ã_active] on the free controls.
+    A control is at a bound when within 1e-4 of its floor unit (an interior-point solver stops a
+    hair inside: IPOPT left a burn's start 0.06 s after t = 0), a row active when within 1e-4 of
+    the floor of its controls.  No free control: 0.  No targets and no active row: nan."""
+    u = np.asarray(u, float)
+    near = 1e-4 * np.maximum(problem.floor, 1e-300)
+    at_bound = (np.abs(u - problem.lower) <= near) | (np.abs(u - problem.upper) <= near)
+    free = np.flatnonzero(~at_bound)
+    if free.size == 0:
+        return 0.0
+    d = weights(S, problem.tolerance, u, problem.scale, problem.floor, weighting, problem.value_weighted)
+    rows = [S * d[None, :] / problem.tolerance[:, None]] if S.shape[0] else []
+    if problem.ineq_matrix is not None:
+        A, b = problem.ineq_matrix, problem.ineq_bound
+        slack = 1e-4 * np.array([np.max(problem.floor[row != 0.0]) for row in A])
+        active = A @ u >= b - slack
+        if np.any(active):
+            Ad = A[active] * d[None, :]
+            rows.append(Ad / np.maximum(np.abs(Ad).max(axis=1, keepdims=True), 1e-300))
+    if not rows:
+        return math.nan
+    St = np.vstack(rows)
+    return _angle(St[:, free], (-d * G)[free])
+
+
 def _ill_conditioned(St: np.ndarray, theta_min: float) -> bool:
     """Gate of STEST in the search: drop dependent controls only when S̃ itself is ill-conditioned,
     σ_min(N, M)/σ_max < sin θ_min.  With N = 1 every pair of columns is parallel, and with spare

@@ -51,6 +51,15 @@ from fracas.tom.search import (
 
 _DEFAULT = SearchSettings()
 _SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+# TOM's stall test, checked after every IPOPT iteration: the last STALL_ITERATIONS iterates all
+# within tolerance (|τ| <= 1) with F spread over less than STALL_RTOL |F|, and FRACAS's TEST
+# angle at the current iterate below θ_conv (an optimum, not a slow stretch).  IPOPT with L-BFGS on
+# integrated trajectories reaches its optimum and then, with its barrier parameter at 1e-11,
+# can take a wild quasi-Newton step and wander off (the Earth-Mars rendezvous: iterates 22-27
+# within 4e-8 of 603.93993 kg, iterate 28 E_rms 5e4, never back); the stop is then certified
+# by FRACAS's TEST angle at the returned point
+STALL_ITERATIONS = 5
+STALL_RTOL = 1e-7
 _INEQ_SLACK = 1e-9  # relative: A U <= b + 1e-9 (1 + |b|) counts as satisfied (as search._validated)
 
 # IPOPT options (overridable through ``options``); see :func:`solve_ipopt`.
@@ -333,6 +342,7 @@ def solve_ipopt(
     )
 
     last = {"u": u0.copy(), "calls": 0}
+    stalled: list[int] = []
 
     def iteration(x: np.ndarray) -> bool:
         last["calls"] += 1
@@ -368,6 +378,13 @@ def solve_ipopt(
             history.append(rec)
             if on_iteration is not None:
                 on_iteration(rec)
+            recent = history[-STALL_ITERATIONS:]
+            if len(recent) == STALL_ITERATIONS and all(np.all(np.abs(r.tau) <= 1.0) for r in recent):
+                perf = [r.performance for r in recent]
+                if max(perf) - min(perf) <= STALL_RTOL * max(abs(p) for p in perf) and n:
+                    if optimality_angle(prob, u, S, G, s.weighting) < s.convergence_angle_rad:
+                        stalled.append(len(history))
+                        return True
         except BaseException as exc:  # noqa: B036 - re-raised after the solve
             error.append(exc)
             return True
@@ -423,11 +440,16 @@ def solve_ipopt(
         raise error[0]
     info = solver.stats()
     status = str(info["return_status"])
-    converged = status in _SUCCESS
+    converged = status in _SUCCESS or bool(stalled)
     x_end = np.array(sol["x"], dtype=float).reshape(-1)
     ev_end = at(x_end)[0]
     u_end = x_end * d
     reason = f"IPOPT: {status} after {int(info['iter_count'])} iterations"
+    if stalled:
+        reason = (
+            f"IPOPT stopped by TOM's stall test after {int(info['iter_count'])} iterations "
+            f"(the last {STALL_ITERATIONS} within tolerance, F spread < {STALL_RTOL:.0e} |F|, TEST angle < θ_conv)"
+        )
     key_end = key(u_end, ev_end)
     # IPOPT's last iterate when it converged there within tolerance (its optimum, not a trial at the
     # edge of the tolerance band that gains micrograms), else unless a point evaluated is strictly better

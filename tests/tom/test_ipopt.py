@@ -65,7 +65,9 @@ def test_quadratic_with_target_and_switch_order_matches_kkt(weighting, capfd):
     seen = []
     res = solve_ipopt(quadratic_problem(), SearchSettings(weighting=weighting), on_iteration=seen.append)
     assert res.search_converged, res.stop_reason
-    assert res.stop_reason.startswith("IPOPT: Solve_Succeeded")
+    # IPOPT's own success, or TOM's stall test (the last 5 iterates within tolerance, F flat to 1e-7,
+    # TEST angle below θ_conv): either way the point must be the KKT point below
+    assert res.stop_reason.startswith("IPOPT: Solve_Succeeded") or "stall test" in res.stop_reason
     np.testing.assert_allclose(res.u, u_star, atol=1e-7)
     assert res.history and all(h.submode == "IPOPT" for h in res.history) and seen == res.history
     assert res.evaluation.ok and abs(A_TGT @ res.u - T_TGT) <= 1e-9

@@ -361,6 +361,7 @@ def tom_problems(deck: TomDeck) -> list[str]:
                 out.append(f'{src}: {field} = "final_time": only with stop.condition = "time"')
             if kind.name in ("vinf", "vinf_ra", "vinf_dec", "final_time") and c.links:
                 out.append(f"{src}: {field} = {name!r}: cannot be linked")
+    out += _nominal_problems(deck, traj, src)
     bodies = {traj.initial_state.centre, *traj.forces.third_bodies, *traj.forces.conic_bodies}
     if traj.stop.body:
         bodies.add(traj.stop.body)
@@ -374,6 +375,101 @@ def tom_problems(deck: TomDeck) -> list[str]:
                 f"{src}: target[{i}].body = {body!r}: not in the trajectory's model ({', '.join(sorted(bodies))}); "
                 "add it to forces.third_bodies or make it the stop body"
             )
+    fg = deck.tom.first_guess
+    if fg is not None:
+        if traj.propulsion is None:
+            out.append(f"{src}: tom.first_guess: the trajectory has no [propulsion] section to thrust with")
+        for name in ("start_days", "stop_days"):
+            value = getattr(fg, name)
+            if value is not None and not 0.0 <= value <= traj.duration_days:
+                out.append(
+                    f"{src}: tom.first_guess.{name} = {value:g}: within the flight, [0, {traj.duration_days:g}] days"
+                )
     if deck.tom.departure_body is not None and deck.tom.departure_body not in bodies:
         out.append(f"{src}: tom.departure_body = {deck.tom.departure_body!r}: not in the trajectory's model")
+    return out
+
+
+def _trajectory_value(traj, kind: str, idx: tuple[int, ...]) -> float | None:
+    """The trajectory deck's own value of a control (deck units), for the kinds a deck states
+    directly; None for the others (the state, v∞, propulsion: checked when the case is built)."""
+    if kind.startswith("arc_"):
+        arc = traj.thrust_arc[idx[0]]
+        direct = {
+            "arc_t_on": arc.start_days,
+            "arc_t_off": arc.stop_days,
+            "arc_duration": arc.stop_days - arc.start_days,
+            "arc_alpha": arc.alpha_deg,
+            "arc_beta": arc.beta_deg,
+            "arc_throttle": arc.throttle,
+        }
+        if kind in direct:
+            return direct[kind]
+        for angle in ("alpha", "beta"):
+            for n in (1, 2, 3):
+                if kind == f"arc_{angle}_p{n}":
+                    coeffs = getattr(arc, f"{angle}_legendre_deg")
+                    return coeffs[n - 1] if n <= len(coeffs) else 0.0
+        return None
+    if kind == "impulse_t":
+        return traj.impulse[idx[0]].time_days
+    if kind == "impulse_dv":
+        return traj.impulse[idx[0]].dv_km_s[idx[1]]
+    if kind == "final_time":
+        return traj.duration_days
+    return None
+
+
+def _nominal_problems(deck: TomDeck, traj, src: str) -> list[str]:
+    """Each control's starting value (its nominal, else the trajectory's) within its bounds (the
+    deck's, else the catalogue's; times within the flight), and the thrust arcs at the starting
+    values in order: each arc's start <= its end <= the next arc's start (arcs cannot overlap:
+    where they did, thrust doubled and pointing angles added)."""
+    from fracas.params import parse_control
+
+    out: list[str] = []
+    n_arcs, n_imp = len(traj.thrust_arc), len(traj.impulse)
+    starts = [a.start_days for a in traj.thrust_arc]
+    stops = [a.stop_days for a in traj.thrust_arc]
+    moved: dict[int, int] = {}  # arc -> the control that moves it (for the message)
+    span = sorted((0.0, traj.duration_days))
+    for j, c in enumerate(deck.control):
+        if c.links:
+            continue
+        try:
+            kind, idx = parse_control(c.name, n_arcs, n_imp)
+        except KeyError:
+            continue  # reported above
+        value = c.nominal if c.nominal is not None else _trajectory_value(traj, kind.name, idx)
+        if value is None:
+            continue
+        lo = c.lower if c.lower is not None else kind.bounds[0]
+        hi = c.upper if c.upper is not None else kind.bounds[1]
+        if kind.name in ("arc_t_on", "arc_t_off", "impulse_t"):
+            lo = span[0] if lo is None else lo
+            hi = span[1] if hi is None else hi
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            which = "nominal" if c.nominal is not None else "name"
+            origin = "" if c.nominal is not None else " (the trajectory's value)"
+            bounds = f"[{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}]"
+            out.append(f"{src}: control[{j}].{which} = {value:g}{origin}: within its bounds {bounds} {kind.unit}")
+        if kind.name == "arc_t_on":
+            starts[idx[0]] = value
+            moved[idx[0]] = j
+        elif kind.name == "arc_t_off":
+            stops[idx[0]] = value
+            moved[idx[0]] = j
+        elif kind.name == "arc_duration":
+            stops[idx[0]] = starts[idx[0]] + value
+            moved[idx[0]] = j
+    for k in range(n_arcs):
+        nxt = starts[k + 1] if k + 1 < n_arcs else math.inf
+        if not starts[k] <= stops[k] <= nxt:
+            j = moved.get(k, moved.get(k + 1))
+            where = f"control[{j}].nominal" if j is not None else f"thrust_arc[{k}]"
+            out.append(
+                f"{src}: {where}: thrust_arc[{k}] would run {starts[k]:g}-{stops[k]:g} d"
+                + (f" and thrust_arc[{k + 1}] start at {nxt:g} d" if k + 1 < n_arcs else "")
+                + ": arcs in order, each start <= its end <= the next start (arcs cannot invert or overlap)"
+            )
     return out

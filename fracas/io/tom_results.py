@@ -90,8 +90,9 @@ def write_tom_results(path: str | os.PathLike, product: TomProduct) -> Path:
         write(h, "angle_rad", np.asarray(product.angle_rad, float), "rad", description="TEST angle theta")
         write(h, "gamma", np.asarray(product.gamma, float), "1", description="accepted step fraction")
         write(h, "n_trajectories", np.asarray(product.n_trajectories, np.int64), "1")
-        write(h, "controls", np.asarray(product.controls, float).reshape(-1, len(product.control_names)), "controls")
-        write(h, "targets", np.asarray(product.targets, float).reshape(-1, len(product.target_names)), "targets")
+        k = len(product.iteration)
+        write(h, "controls", np.asarray(product.controls, float).reshape(k, len(product.control_names)), "controls")
+        write(h, "targets", np.asarray(product.targets, float).reshape(k, len(product.target_names)), "targets")
         if product.trials is not None:
             write(
                 h,

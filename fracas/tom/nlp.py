@@ -152,7 +152,11 @@ def solve_nlp(
         if not ev.ok:
             return (False, -math.inf, math.inf)
         tau = tau_of(ev)
-        inside = bool(np.all(np.abs(tau) <= 1.0)) and bool(np.all(u >= prob.lower) and np.all(u <= prob.upper))
+        # bounds to 1e-9 relative (U = D Ũ of a bound-active control can land a rounding outside)
+        lo = np.where(np.isfinite(prob.lower), prob.lower, 0.0)
+        hi = np.where(np.isfinite(prob.upper), prob.upper, 0.0)
+        within = (u >= prob.lower - 1e-9 * (1.0 + np.abs(lo))) & (u <= prob.upper + 1e-9 * (1.0 + np.abs(hi)))
+        inside = bool(np.all(np.abs(tau) <= 1.0)) and bool(np.all(within))
         if A is not None:
             inside = inside and bool(np.all(A @ u <= b + 1e-9 * (1.0 + np.abs(b))))
         return (inside, ev.performance, float(tau @ tau))

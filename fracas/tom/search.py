@@ -847,7 +847,8 @@ def feasible_point(x, lower, upper, ineq_matrix=None, ineq_bound=None) -> np.nda
     from scipy.optimize import Bounds, LinearConstraint, minimize
 
     moved = np.flatnonzero(np.any(ineq_matrix != 0.0, axis=0))
-    scale = np.maximum(np.abs(y[moved]), 1.0)
+    # one common scale (the distance stays Euclidean in U; the QP is O(1))
+    scale = np.full(moved.size, max(float(np.max(np.abs(y[moved]))), 1.0))
     a = ineq_matrix[:, moved] * scale[None, :]
     rest = ineq_bound - ineq_matrix @ np.where(np.isin(np.arange(y.size), moved), 0.0, y)
     z0 = y[moved] / scale
@@ -1062,7 +1063,9 @@ def projected_gradient(
 
         def record(label_, gamma, dr_, trials, dropped):
             rec = IterationRecord(
-                iteration=it,
+                # the limit's final test of the last point belongs to the last iteration (a run with a
+                # limit of 200 reports 200 iterations, not 201)
+                iteration=min(it, max(s.max_iterations, 1)),
                 submode=label_,
                 u=u.copy(),
                 targets=ev.targets.copy(),

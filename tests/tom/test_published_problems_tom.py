@@ -24,11 +24,11 @@ from __future__ import annotations
 
 import math
 import time
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
+import tomllib
 from click.testing import CliRunner
 from scipy.integrate import solve_ivp
 

@@ -706,7 +706,8 @@ def _tom_first_guess(cfg, say, on_iteration):
     fg = cfg.tom.first_guess
     traj = tom_trajectory_deck(cfg)
     deck1, traj1 = first_guess_segments(cfg, traj)
-    say(f"first guess, pass 1: {fg.segments} segments ({cfg.tom.optimizer})")
+    n_segments = len(traj1.thrust_arc)
+    say(f"first guess, pass 1: {n_segments} segments ({cfg.tom.optimizer})")
     case1 = build_tom(deck1, trajectory=traj1)
     _, sp1 = _tom_start(cfg, case1)
     res1 = _tom_search(cfg, case1, sp1, on_iteration)
@@ -743,7 +744,7 @@ def _tom_first_guess(cfg, say, on_iteration):
     case2 = dataclasses.replace(case2, u0=targeted.u)
     perf = res1.evaluation.performance / case1.performance_factor
     note = (
-        f"first guess: {fg.segments} segments, {len(res1.history)} iterations to F = {perf:.6g} "
+        f"first guess: {n_segments} segments, {len(res1.history)} iterations to F = {perf:.6g} "
         f"{case1.performance_unit}; {len(burns)} burns ({spans}) in {n_arcs} arcs, targeted in "
         f"{len(targeted.history)} iterations"
     )

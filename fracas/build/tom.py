@@ -529,6 +529,23 @@ def _throttled(deck: TomDeck) -> bool:
     return fg.throttle if fg.throttle is not None else deck.tom.performance == "final_mass"
 
 
+def auto_segments(traj: TrajectoryDeck, window_days: float) -> int:
+    """[tom.first_guess] segments by default: 12 per revolution of the initial osculating orbit
+    about the centre over the window (a minimum-propellant burn pattern repeats about twice per
+    revolution; 6 segments per half revolution resolve it), within [24, 120]; 24 when the orbit
+    is not elliptic."""
+    base = build_propagation(traj)
+    mu = float(base.params.mu[base.model.primary])
+    r = float(np.linalg.norm(base.x0[:3]))
+    v2 = float(base.x0[3:6] @ base.x0[3:6])
+    energy = v2 / 2.0 - mu / r
+    if energy >= 0.0:
+        return 24
+    a = -mu / (2.0 * energy)
+    revolutions = abs(window_days) * constants.DAY_S / (2.0 * math.pi * math.sqrt(a**3 / mu))
+    return int(min(120, max(24, round(12 * revolutions))))
+
+
 def first_guess_segments(deck: TomDeck, traj: TrajectoryDeck) -> tuple[TomDeck, TrajectoryDeck]:
     """Pass 1 of [tom.first_guess] (:mod:`fracas.tom.first_guess`): the thrust window cut into
     ``segments`` contiguous arcs at half throttle (full when the throttle is not a control),
@@ -539,14 +556,15 @@ def first_guess_segments(deck: TomDeck, traj: TrajectoryDeck) -> tuple[TomDeck, 
 
     fg = deck.tom.first_guess
     start, stop = _window(deck, traj)
-    edges = np.linspace(start, stop, fg.segments + 1)
+    n_segments = fg.segments if fg.segments is not None else auto_segments(traj, stop - start)
+    edges = np.linspace(start, stop, n_segments + 1)
     throttled = _throttled(deck)
     arcs = [
         ThrustArc(start_days=float(a), stop_days=float(b), frame=fg.frame, throttle=0.5 if throttled else 1.0)
         for a, b in zip(edges[:-1], edges[1:])
     ]
     controls = []
-    for k in range(fg.segments):
+    for k in range(n_segments):
         if throttled:
             controls.append(ControlSpec(name=f"arc_throttle[{k}]"))
         controls.append(ControlSpec(name=f"arc_alpha[{k}]"))

@@ -88,9 +88,12 @@ class FirstGuess(_Section):
     half throttle and thrust along the velocity; pass 2 merges the thrusting segments into burns
     with full throttle, each split into at most ``max_arcs_per_burn`` contiguous arcs until a
     Legendre law of ``degree`` fits the pass-1 pointing within ``max_fit_error_deg``, and
-    optimizes their switch times and pointing laws.  The deck's own thrust arcs are replaced."""
+    optimizes their switch times and pointing laws.  The deck's own thrust arcs are replaced.
+    ``segments`` defaults to 12 per revolution of the initial osculating orbit over the window,
+    at least 24 and at most 120 (a burn pattern repeats about twice per revolution)."""
 
-    segments: Annotated[int, Field(ge=2, le=120)] = 24
+    # None: 12 per revolution of the initial osculating orbit over the window, within [24, 120]
+    segments: Annotated[int, Field(ge=2, le=120)] | None = None
     start_days: float | None = None  # the thrust window (default: the whole flight)
     stop_days: float | None = None
     throttle: bool | None = None  # a throttle per segment; default: true when maximizing the final mass

@@ -3,11 +3,13 @@ against the closed-form answers and against the projected-gradient search."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from fracas.tom.nlp import solve_nlp
-from fracas.tom.search import SearchSettings, projected_gradient, weights
+from fracas.tom.search import SearchSettings, _better, projected_gradient, weights
 from tests.tom.test_search import circle_problem, make_problem, projection_problem, unit_weights
 
 METHODS = ["slsqp", "trust_constr"]
@@ -126,3 +128,48 @@ def test_start_failure_and_bad_method():
     assert res.stop_reason == "trajectory failed at the starting controls" and not res.search_converged
     with pytest.raises(ValueError):
         solve_nlp(prob, "nelder_mead")
+
+
+def test_slsqp_honors_the_switch_order_rows():
+    """Reference: max −‖u − c‖² s.t. u₀ ≤ u₁ ≤ u₂ ≤ u₃ (three switch-order rows, no targets) is
+    the isotonic regression of c by pool-adjacent-violators: c = (3, 1, 2, 0) pools to
+    (1.5, 1.5, 1.5, 1.5).  Tolerance 1e-6 (SLSQP's accuracy on this scaled problem)."""
+    c = np.array([3.0, 1.0, 2.0, 0.0])
+    prob = make_problem(
+        np.array([0.0, 1.0, 2.0, 3.0]),
+        lambda u: np.zeros(0),
+        lambda u: np.zeros((0, 4)),
+        lambda u: -float((u - c) @ (u - c)),
+        lambda u: -2.0 * (u - c),
+        np.zeros(0),
+        np.zeros(0),
+        **unit_weights(4),
+    )
+    A = np.array([[1.0, -1.0, 0.0, 0.0], [0.0, 1.0, -1.0, 0.0], [0.0, 0.0, 1.0, -1.0]])
+    res = solve_nlp(dataclasses.replace(prob, ineq_matrix=A, ineq_bound=np.zeros(3)), "slsqp")
+    assert res.search_converged, res.stop_reason
+    np.testing.assert_allclose(res.u, np.full(4, 1.5), atol=1e-6)
+    assert np.all(A @ res.u <= 1e-9)
+
+
+def test_slsqp_returns_the_best_feasible_point_not_its_last():
+    """Reference: the best-point rule (search._better) over every point SLSQP evaluated.  On the
+    circle u₁² + u₂² = 1 from (1, 0) (on it: |τ| = 0) with ε = 1e-6 and one SLSQP iteration, the
+    last point has a higher F off the circle (|τ| ≫ 1): the feasible start comes back, and the
+    stop reason says it is not SciPy's last point."""
+    log = []
+    prob, _ = circle_problem(tol=1e-6, u0=(1.0, 0.0), **unit_weights(2))
+    prob = dataclasses.replace(prob, sensitivities=lambda u, f=prob.sensitivities: (log.append(np.array(u)), f(u))[1])
+    res = solve_nlp(prob, "slsqp", SearchSettings(weighting="control", max_iterations=1))
+    assert not res.search_converged
+    assert "returned the best point seen, not the last" in res.stop_reason, res.stop_reason
+
+    def key(u):
+        tau = (u @ u - 1.0) / 1e-6
+        return (abs(tau) <= 1.0, float(u.sum()), tau * tau)
+
+    best = log[0]
+    for u in log[1:]:
+        if _better(key(u), key(best)):
+            best = u
+    np.testing.assert_array_equal(res.u, best)

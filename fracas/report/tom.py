@@ -146,7 +146,9 @@ def convergence_figure(res: dict):
             ax2.semilogy(
                 x[sel], np.where(np.isfinite(ang[sel]), np.maximum(ang[sel], 1e-16), np.nan), mk, color="C1", ms=4
             )
-    ax1.set_ylabel("final mass (kg)")
+    perf = res.get("performance_name", "final_mass")
+    # the history holds F in canonical units: kg for the mass, km / km/s / rad / s for a target kind
+    ax1.set_ylabel("final mass (kg)" if perf == "final_mass" else f"performance: {perf} (canonical units)")
     ax1.grid(alpha=0.3)
     ax1.legend(fontsize=8, title="mode", title_fontsize=8)
     ax1.ticklabel_format(axis="y", useOffset=False)

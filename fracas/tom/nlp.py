@@ -46,10 +46,12 @@ from fracas.tom.search import (
 
 METHODS = ("slsqp", "trust_constr")
 _FAIL = 1e30
-# SLSQP's ftol on the objective −F/ΔF_max: 1e-10 ΔF_max (5e-10 kg for ΔF_max = 5 kg) is far below
-# any performance difference that matters and above the ~1e-12 relative noise of an integrated
-# trajectory, so SLSQP stops by its own test at an optimum (1e-12 left it iterating to maxiter)
-SLSQP_FTOL = 1e-10
+# SLSQP's ftol on the objective −F/ΔF_max: Kraft's test is |Δf| < ftol (or a step below it) AND the
+# constraint violation < ftol.  1e-8 ΔF_max (5e-8 kg for ΔF_max = 5 kg) is far below any difference
+# that matters and above the ~1e-11 relative noise of an integrated trajectory's F (1e-12 and
+# 1e-10 left SLSQP iterating at the optimum to maxiter: the Earth-Mars rendezvous, 300 iterations)
+SLSQP_FTOL = 1e-8
+SLSQP_TAU_OK = 0.1  # Σ|τ| at which SLSQP's own test counts the targets as met (a tenth of a tolerance)
 
 
 _DEFAULT = SearchSettings()
@@ -77,7 +79,7 @@ def solve_nlp(
     ``search_converged`` is SciPy's success flag (re-verify it).  ``result.u`` is SciPy's final
     point when it converged within tolerance, else the best point seen (rule of
     ``search._better``).  The switch-order rows ``ineq_matrix @ U <= ineq_bound`` are linear
-    inequality constraints.  SLSQP's ``ftol`` is ``SLSQP_FTOL`` (1e-10 of ΔF_max).
+    inequality constraints.  SLSQP's ``ftol`` is ``SLSQP_FTOL`` (1e-8 of ΔF_max).
     ``time_line_search_s`` is 0 (every value comes from ``sensitivities``).
 
     Scaling caveat: SciPy's quasi-Newton start (identity Hessian) assumes an O(1) objective gradient
@@ -232,7 +234,15 @@ def solve_nlp(
     has_bounds = bool(np.any(np.isfinite(prob.lower)) or np.any(np.isfinite(prob.upper)))
     with warnings.catch_warnings():
         if method == "slsqp":
-            constraints = [{"type": "eq", "fun": con, "jac": con_jac}] if n else []
+            # Kraft's SLSQP stops when |Δf| < ftol AND the summed constraint violation < ftol: with τ
+            # (targets / tolerance) as the constraints that asks Σ|τ| < 1e-10, which integrated
+            # trajectories never give (τ carries ~1e-4 of noise), so SLSQP ran to maxiter at the
+            # optimum.  Its rows are scaled by ftol/SLSQP_TAU_OK: converged means Σ|τ| < 0.1 (equality
+            # rows are scale-invariant in its QP, its multipliers take the inverse scale)
+            kappa = SLSQP_FTOL / SLSQP_TAU_OK
+            constraints = (
+                [{"type": "eq", "fun": lambda x: kappa * con(x), "jac": lambda x: kappa * con_jac(x)}] if n else []
+            )
             if A is not None:
                 Ad = A * d[None, :]
                 constraints.append({"type": "ineq", "fun": lambda x: b - Ad @ x, "jac": lambda x: -Ad})

@@ -102,15 +102,15 @@ def test_inequalities_are_honored_isotonic_projection():
 
 def test_agrees_with_slsqp_on_the_equality_only_problem():
     """Reference: the closed-form KKT point of the same quadratic without the inequalities (active
-    set {target}), and SLSQP's answer on it (solve_nlp has no inequality rows): IPOPT within 1e-7
-    of the answer, and of SLSQP within 1e-6 (SLSQP's own accuracy, see tests/tom/test_nlp.py)."""
+    set {target}), and SLSQP's answer on it: IPOPT within 1e-7 of the answer, and of SLSQP within
+    1e-5 (SLSQP's own accuracy: it stops at |Δf| < 1e-8 ΔF_max with Σ|τ| < 0.1, measured 1.8e-6)."""
     u_star, _ = kkt_answer([])
     settings = SearchSettings(weighting="control")
     res = solve_ipopt(quadratic_problem(ineq=False), settings)
     ref = solve_nlp(quadratic_problem(ineq=False), "slsqp", settings)
     assert res.search_converged and ref.search_converged, (res.stop_reason, ref.stop_reason)
     np.testing.assert_allclose(res.u, u_star, atol=1e-7)
-    np.testing.assert_allclose(res.u, ref.u, atol=1e-6)
+    np.testing.assert_allclose(res.u, ref.u, atol=1e-5)
     assert res.evaluation.performance >= ref.evaluation.performance - 1e-9
 
 

@@ -672,21 +672,25 @@ def _tom_start(cfg, case):
     return start, sp
 
 
-def _tom_search(cfg, case, sp, on_iteration):
-    """One search with the deck's optimizer (a malformed problem: a one-line FracasError)."""
+def _tom_search(cfg, case, sp, on_iteration, optimizer: str | None = None):
+    """One search with the deck's optimizer, or ``optimizer`` (a malformed problem or a missing
+    IPOPT: a one-line FracasError)."""
     from fracas.errors import FracasError
     from fracas.tom import nlp, search
 
+    optimizer = optimizer or cfg.tom.optimizer
     try:
-        if cfg.tom.optimizer == "projected_gradient":
+        if optimizer == "projected_gradient":
             return search.projected_gradient(sp, case.settings, on_iteration)
-        if cfg.tom.optimizer == "ipopt":
+        if optimizer == "ipopt":
             from fracas.tom.ipopt import solve_ipopt
 
             return solve_ipopt(sp, case.settings, on_iteration)
-        return nlp.solve_nlp(sp, cfg.tom.optimizer, case.settings, on_iteration)
+        return nlp.solve_nlp(sp, optimizer, case.settings, on_iteration)
     except ValueError as exc:
         raise FracasError(f"{cfg.source_path}: {exc}") from None
+    except ImportError as exc:
+        raise FracasError(f"{cfg.source_path}: tom.optimizer = {optimizer!r}: {exc}") from None
 
 
 _FIRST_GUESS_TARGETING = 30  # iterations of the targeting between the first guess's two passes
@@ -707,10 +711,13 @@ def _tom_first_guess(cfg, say, on_iteration):
     traj = tom_trajectory_deck(cfg)
     deck1, traj1 = first_guess_segments(cfg, traj)
     n_segments = len(traj1.thrust_arc)
-    say(f"first guess, pass 1: {n_segments} segments ({cfg.tom.optimizer})")
+    # pass 1 (tens of controls, far from the targets) needs an NLP solver: the projected gradient
+    # stopped there at E_rms 1e6 on the Earth-Mars rendezvous; a deck that chose it gets IPOPT here
+    optimizer1 = "ipopt" if cfg.tom.optimizer == "projected_gradient" else cfg.tom.optimizer
+    say(f"first guess, pass 1: {n_segments} segments ({optimizer1})")
     case1 = build_tom(deck1, trajectory=traj1)
     _, sp1 = _tom_start(cfg, case1)
-    res1 = _tom_search(cfg, case1, sp1, on_iteration)
+    res1 = _tom_search(cfg, case1, sp1, on_iteration, optimizer1)
     prm = case1.problem.params_at(res1.u)
     edges = np.append(np.asarray(prm.arc_t_on, float), float(np.asarray(prm.arc_t_off)[-1]))
     burns = burns_from_segments(

@@ -139,6 +139,15 @@ class TomSettings(_Section):
     plot: str | None = None
     stm_file: str | None = None
 
+    @model_validator(mode="before")
+    @classmethod
+    def _first_guess_optimizer(cls, data):
+        # a low-thrust first guess defaults to IPOPT: the projected gradient cannot do its passes
+        # (Earth-Mars: pass 1 stopped at E_rms 1e6, pass 2 0.7 % short after 200 iterations)
+        if isinstance(data, dict) and data.get("first_guess") is not None and "optimizer" not in data:
+            data = {**data, "optimizer": "ipopt"}
+        return data
+
     @model_validator(mode="after")
     def _thresholds(self) -> TomSettings:
         if self.performance != "final_mass" and self.performance not in TARGET_KINDS:

@@ -69,8 +69,11 @@ def legendre_fit(s: np.ndarray, values: np.ndarray, weights: np.ndarray, degree:
 
 
 def _fit(edges, thr, alpha, beta, k, j, start, stop, degree):
-    """The Burn of segments k..j over [start, stop] and its worst fit error (rad) at the midpoints."""
-    mids = 0.5 * (edges[k : j + 1] + edges[k + 1 : j + 2])
+    """The Burn of segments k..j over [start, stop] and its worst fit error (rad) at the midpoints
+    of each segment's thrusting part (a partial edge segment thrusts from ``start`` / until ``stop``)."""
+    lo = np.maximum(edges[k : j + 1], start)
+    hi = np.minimum(edges[k + 1 : j + 2], stop)
+    mids = 0.5 * (lo + hi)
     s = np.clip((2.0 * mids - start - stop) / max(stop - start, 1e-300), -1.0, 1.0)
     w = np.maximum(thr[k : j + 1], 1e-3) * (edges[k + 1 : j + 2] - edges[k : j + 1])
     ca = legendre_fit(s, alpha[k : j + 1], w, degree)

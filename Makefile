@@ -30,6 +30,7 @@ demo: $(STAMP)
 	$(BIN)/fracas run namelists/near_earth_spiral_team.toml --trajectory-deck out/near_earth_spiral_tom_reference.toml --quiet
 	$(BIN)/fracas run namelists/earth_mars_tsim.toml
 	$(BIN)/fracas run namelists/apollo12_rendezvous.toml
+	$(BIN)/fracas run namelists/earth_mars_rendezvous_tom.toml
 	$(BIN)/fracas import-namelist namelists/legacy/earth_mars_team.nml -o out/imported_earth_mars_team.toml --force
 	$(BIN)/fracas validate out/imported_earth_mars_team.toml
 	$(BIN)/fracas export out/earth_mars_team.h5 --oem out/earth_mars_team.oem

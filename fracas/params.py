@@ -134,6 +134,10 @@ class ParamKind:
         return self.unit[idx[1]] if self.index == INDEX_BODY_ELEMENT else self.unit
 
 
+#: the Params fields of an arc's pointing law (``ForceModel.steering``), in the core's order: the
+#: Legendre P1..P3 coefficients of alpha, then of beta (rad)
+POINTING_LAW_FIELDS = tuple(f"arc_{a}_p{n}" for a in ("alpha", "beta") for n in (1, 2, 3))
+_LAW_ANGLE = {name: "in-plane" if "alpha" in name else "out-of-plane" for name in POINTING_LAW_FIELDS}
 _INF = float("inf")
 _PI = 3.141592653589793
 _KINDS = (
@@ -204,12 +208,12 @@ _KINDS = (
     ),
     ParamKind("arc_bias_in_rad", INDEX_ARC, "rad", "per-arc in-plane pointing bias", 0.005, max_sigma=_PI),
     ParamKind("arc_bias_out_rad", INDEX_ARC, "rad", "per-arc out-of-plane pointing bias", 0.005, max_sigma=_PI),
-    ParamKind("arc_alpha_p1", INDEX_ARC, "rad", "arc in-plane angle's Legendre P1 coefficient", max_sigma=_PI),
-    ParamKind("arc_alpha_p2", INDEX_ARC, "rad", "arc in-plane angle's Legendre P2 coefficient", max_sigma=_PI),
-    ParamKind("arc_alpha_p3", INDEX_ARC, "rad", "arc in-plane angle's Legendre P3 coefficient", max_sigma=_PI),
-    ParamKind("arc_beta_p1", INDEX_ARC, "rad", "arc out-of-plane angle's Legendre P1 coefficient", max_sigma=_PI),
-    ParamKind("arc_beta_p2", INDEX_ARC, "rad", "arc out-of-plane angle's Legendre P2 coefficient", max_sigma=_PI),
-    ParamKind("arc_beta_p3", INDEX_ARC, "rad", "arc out-of-plane angle's Legendre P3 coefficient", max_sigma=_PI),
+    *(
+        ParamKind(
+            name, INDEX_ARC, "rad", f"arc {_LAW_ANGLE[name]} angle's Legendre P{name[-1]} coefficient", max_sigma=_PI
+        )
+        for name in POINTING_LAW_FIELDS
+    ),
     # impulsive events
     ParamKind("impulse_t", INDEX_IMPULSE, "s", "time of an impulsive dV, s from the propagation epoch"),
     ParamKind("impulse_dv", INDEX_IMPULSE_AXIS, "km/s", "impulsive dV component in its impulse frame"),
@@ -347,23 +351,11 @@ _CONTROLS = (
         "arc_beta", "arc", "deg", "rad", _DEG, "arc out-of-plane angle / declination", "arc_beta", (-90.0, 90.0)
     ),
     ControlKind("arc_throttle", "arc", "1", "1", 1.0, "arc thrust level", "arc_throttle", (0.0, 1.0)),
-    ControlKind(
-        "arc_alpha_p1", "arc", "deg", "rad", _DEG, "arc in-plane angle's Legendre P1 coefficient", "arc_alpha_p1"
-    ),
-    ControlKind(
-        "arc_alpha_p2", "arc", "deg", "rad", _DEG, "arc in-plane angle's Legendre P2 coefficient", "arc_alpha_p2"
-    ),
-    ControlKind(
-        "arc_alpha_p3", "arc", "deg", "rad", _DEG, "arc in-plane angle's Legendre P3 coefficient", "arc_alpha_p3"
-    ),
-    ControlKind(
-        "arc_beta_p1", "arc", "deg", "rad", _DEG, "arc out-of-plane angle's Legendre P1 coefficient", "arc_beta_p1"
-    ),
-    ControlKind(
-        "arc_beta_p2", "arc", "deg", "rad", _DEG, "arc out-of-plane angle's Legendre P2 coefficient", "arc_beta_p2"
-    ),
-    ControlKind(
-        "arc_beta_p3", "arc", "deg", "rad", _DEG, "arc out-of-plane angle's Legendre P3 coefficient", "arc_beta_p3"
+    *(
+        ControlKind(
+            name, "arc", "deg", "rad", _DEG, f"arc {_LAW_ANGLE[name]} angle's Legendre P{name[-1]} coefficient", name
+        )
+        for name in POINTING_LAW_FIELDS
     ),
     ControlKind("impulse_t", "impulse", "days", "s", _DAY, "time of an impulse", "impulse_t"),
     ControlKind("impulse_dv", "impulse_axis", "km/s", "km/s", 1.0, "impulse dV component (its frame)", "impulse_dv"),

@@ -22,7 +22,7 @@ from fracas.dynamics.parameters import get_values
 from fracas.errors import ConfigError
 from fracas.guidance.target_kinds import TARGET_KINDS
 from fracas.integrate.problem import Problem
-from fracas.params import STATE_CONTROLS, VINF_CONTROLS, ControlKind, parse_control
+from fracas.params import POINTING_LAW_FIELDS, STATE_CONTROLS, VINF_CONTROLS, ControlKind, parse_control
 from fracas.tom.problem import ControlMap, TargetSet, TomProblem
 from fracas.tom.search import SearchSettings
 
@@ -132,13 +132,10 @@ def _body_velocity(base: Problem, body: str, centre: str) -> np.ndarray:
     return np.asarray(vel[model.bodies.index(body)] - vel[model.bodies.index(centre)], float)
 
 
-_STEERING = tuple(f"arc_{a}_p{k}" for a in ("alpha", "beta") for k in (1, 2, 3))
-
-
 def _steering_control(c) -> bool:
     """Does the control (or one of its links) move a pointing-law coefficient?"""
     names = list(c.links) if c.links else [c.name]
-    return any(n.split("[")[0].strip() in _STEERING for n in names)
+    return any(n.split("[")[0].strip() in POINTING_LAW_FIELDS for n in names)
 
 
 def _wrap_deg(angle_deg: float) -> float:

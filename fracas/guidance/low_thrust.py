@@ -80,14 +80,8 @@ def _arc_thrust_rate(problem, params, t, x, primary: int, arc: int) -> np.ndarra
     """f_j = [0; T û/m; −T/c] (7,): the state rate that thrust arc ``arc`` alone adds at (t, x)
     (thrust and pointing of that arc, power at t; FRACAS EP)."""
     model = problem.model
-    law = None
-    if model.steering:  # the arc's pointing law at t (encke.step_controls's layout)
-        t_on, t_off = params.arc_t_on[arc], params.arc_t_off[arc]
-        width = t_off - t_on
-        coeffs = [getattr(params, f"arc_{a}_p{n}")[arc] for a in ("alpha", "beta") for n in (1, 2, 3)]
-        law = jnp.stack(
-            [0.5 * (t_on + t_off), jnp.where(width > 0.0, 2.0 / jnp.where(width > 0.0, width, 1.0), 0.0)] + coeffs
-        )
+    # the arc's pointing law at t (encke.step_controls's, with only this arc on)
+    law = encke.arc_law(params, jnp.arange(model.n_arcs) == arc) if model.steering else None
     ctl_on = encke.StepControls(
         params.thrust_scale * params.arc_throttle[arc] * params.arc_thrust_scale[arc],
         params.arc_alpha[arc] + params.arc_bias_in_rad[arc] + params.bias_in_rad,

@@ -47,6 +47,7 @@ from fracas.dynamics.model import (
     Params,
 )
 from fracas.integrate import highorder
+from fracas.params import POINTING_LAW_FIELDS
 from fracas.status import RunStatus
 
 # status codes (names kept for compatibility; the enumeration is fracas.status.RunStatus)
@@ -137,21 +138,19 @@ def step_controls(model: ForceModel, params: Params, t_mid) -> StepControls:
     beta = jnp.sum(on * (params.arc_beta + params.arc_bias_out_rad)) + params.bias_out_rad
     inertial = jnp.sum(on * params.arc_frame)
     if model.steering:
-        width = params.arc_t_off - params.arc_t_on
-        # a coasting step (no arc on) gets a harmless law: centre 0, scale 0 (s = 0)
-        inv_half = jnp.sum(on * jnp.where(width > 0.0, 2.0 / jnp.where(width > 0.0, width, 1.0), 0.0))
-        coeffs = [
-            params.arc_alpha_p1,
-            params.arc_alpha_p2,
-            params.arc_alpha_p3,
-            params.arc_beta_p1,
-            params.arc_beta_p2,
-            params.arc_beta_p3,
-        ]
-        centre = jnp.sum(on * 0.5 * (params.arc_t_on + params.arc_t_off))
-        law = jnp.stack([centre, inv_half] + [jnp.sum(on * c) for c in coeffs])
-        return StepControls(factor, alpha, beta, inertial, None, law)
+        return StepControls(factor, alpha, beta, inertial, None, arc_law(params, on))
     return StepControls(factor, alpha, beta, inertial, propulsion.angles_to_unit(alpha, beta))
+
+
+def arc_law(params: Params, on) -> jax.Array:
+    """``StepControls.law`` of the arc selected by the 0/1 weights ``on`` (na,): its centre (s),
+    2 / its duration (1/s) and its Legendre coefficients (``fracas.params.POINTING_LAW_FIELDS``); all
+    zero when no arc is on (a coasting step: s = 0, no turn)."""
+    width = params.arc_t_off - params.arc_t_on
+    inv_half = jnp.sum(on * jnp.where(width > 0.0, 2.0 / jnp.where(width > 0.0, width, 1.0), 0.0))
+    centre = jnp.sum(on * 0.5 * (params.arc_t_on + params.arc_t_off))
+    coeffs = [jnp.sum(on * getattr(params, name)) for name in POINTING_LAW_FIELDS]
+    return jnp.stack([centre, inv_half, *coeffs])
 
 
 def steered_angles(ctl: StepControls, t):

@@ -28,25 +28,18 @@ from __future__ import annotations
 
 import functools
 import math
-import time
-from collections import OrderedDict
 from collections.abc import Callable
 
 import numpy as np
 
+from fracas.tom.scaled import ScaledPoints
 from fracas.tom.search import (
-    Evaluation,
     IterationRecord,
     Problem,
     SearchResult,
     SearchSettings,
-    _angle,
-    _better,
-    _clean,
     _validated,
     optimality_angle,
-    result_of,
-    weights,
 )
 
 _DEFAULT = SearchSettings()
@@ -60,7 +53,6 @@ _SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 # by FRACAS's TEST angle at the returned point
 STALL_ITERATIONS = 5
 STALL_RTOL = 1e-7
-_INEQ_SLACK = 1e-9  # relative: A U <= b + 1e-9 (1 + |b|) counts as satisfied (as search._validated)
 
 # IPOPT options (overridable through ``options``); see :func:`solve_ipopt`.
 IPOPT_OPTIONS: dict[str, object] = {
@@ -230,94 +222,17 @@ def solve_ipopt(
     s = settings
     prob = _validated(problem)
     m, n = prob.u0.size, prob.desired.size
-    desired, tol = prob.desired, prob.tolerance
-    lower, upper = prob.lower, prob.upper
+    tol = prob.tolerance
     A, b = prob.ineq_matrix, prob.ineq_bound
     k = 0 if A is None else A.shape[0]
-    err = prob.target_error or (lambda T: T - desired)
-    t_start = time.perf_counter()
-    stats = {"n_sens": 0, "n_eval": 0, "t_sens": 0.0, "t_eval": 0.0}
-    cache: OrderedDict[bytes, tuple[Evaluation, np.ndarray, np.ndarray]] = OrderedDict()
-
-    def tau_of(ev: Evaluation) -> np.ndarray:
-        return np.asarray(err(ev.targets), dtype=float).reshape(n) / tol if ev.ok else np.full(n, math.inf)
-
-    def key(u: np.ndarray, ev: Evaluation) -> tuple[bool, float, float]:
-        if not ev.ok:
-            return (False, -math.inf, math.inf)
-        tau = tau_of(ev)
-        # bounds to 1e-9 relative: IPOPT's iterates of a bound-active control can sit ~2e-12 relative
-        # outside (seen: an arc end 5e-5 s past the 3e7 s final time, bound_relax_factor 0 notwithstanding)
-        slack_lo = 1e-9 * (1.0 + np.abs(np.where(np.isfinite(lower), lower, 0.0)))
-        slack_hi = 1e-9 * (1.0 + np.abs(np.where(np.isfinite(upper), upper, 0.0)))
-        inside = (u >= lower - slack_lo) & (u <= upper + slack_hi)
-        feasible = bool(np.all(np.abs(tau) <= 1.0)) and bool(np.all(inside))
-        if feasible and k:
-            feasible = bool(np.all(A @ u <= b + _INEQ_SLACK * (1.0 + np.abs(b))))
-        return (feasible, ev.performance, float(tau @ tau))
-
-    def call(u: np.ndarray):
-        t = time.perf_counter()
-        try:
-            ev, S, G = prob.sensitivities(u.copy())
-        finally:
-            stats["t_sens"] += time.perf_counter() - t
-            stats["n_sens"] += 1
-        S = np.array(S, dtype=float).reshape(n, m) if n else np.zeros((0, m))
-        return _clean(ev, n), S, np.array(G, dtype=float).reshape(m)
-
-    u0 = prob.u0.copy()
-    if prob.given_S is not None:
-        t = time.perf_counter()
-        ev0 = _clean(prob.evaluate(u0.copy()), n)
-        stats["t_eval"] += time.perf_counter() - t
-        stats["n_eval"] += 1
-        first = (ev0, prob.given_S, prob.given_G)
-    else:
-        first = call(u0)
-    ev0, S0, G0 = first
-    history: list[IterationRecord] = []
-
-    def finish(u, ev, reason, ok):
-        u = np.clip(u, lower, upper)  # the answer within its bounds (see ``key``: ~1e-12 relative)
-        if ok and ev.ok and n:
-            # IPOPT's word is checked by FRACAS's TEST at the returned point: θ over the free controls
-            x = np.asarray(u, float) / d
-            _, S_u, G_u = at(x)
-            theta = optimality_angle(prob, u, S_u, G_u, s.weighting)
-            reason = f"{reason}; TEST angle θ {theta:.1e} rad"
-            if not theta < s.convergence_angle_rad:
-                ok = False
-                reason += f" >= θ_conv {s.convergence_angle_rad:.1e}: not an optimum"
-        return result_of(
-            u, ev, history, reason, ok, stats["n_eval"], stats["n_sens"], stats["t_sens"], stats["t_eval"], t_start
-        )
-
-    if not ev0.ok:
-        return finish(u0, ev0, "trajectory failed at the starting controls", False)
-    d = weights(S0, tol, u0, prob.scale, prob.floor, s.weighting, prob.value_weighted)
+    pts = ScaledPoints(prob, s, "IPOPT")
+    if not pts.ev0.ok:
+        return pts.finish(pts.u0, pts.ev0, "trajectory failed at the starting controls", False)
+    d = pts.set_scale()
     dfm = s.max_performance_change
-
-    x0 = u0 / d
-    cache[x0.tobytes()] = first
-    best = {"u": u0.copy(), "ev": ev0, "key": key(u0, ev0)}
+    x0 = pts.u0 / d
+    at, tau_of, history = pts.at, pts.tau, pts.history
     error: list[BaseException] = []  # the first exception raised inside a casadi callback
-
-    def at(x: np.ndarray):
-        """(Evaluation, S, G) at U = D Ũ, one `sensitivities` call per distinct Ũ (LRU of 256);
-        every new point is a candidate for the best one."""
-        key_x = x.tobytes()
-        if key_x in cache:
-            cache.move_to_end(key_x)
-            return cache[key_x]
-        u = x * d
-        out = cache[key_x] = call(u)
-        if len(cache) > 256:
-            cache.popitem(last=False)
-        k_new = key(u, out[0])
-        if _better(k_new, best["key"]):
-            best.update(u=u.copy(), ev=out[0], key=k_new)
-        return out
 
     def guarded(fn, rows: int):
         """fn(x) -> (value, Jacobian); NaN values / zero Jacobian for a failed trajectory, and after
@@ -347,48 +262,24 @@ def solve_ipopt(
         else None
     )
 
-    last = {"u": u0.copy(), "calls": 0}
+    calls = [0]  # iteration callbacks so far (the first is IPOPT's iteration 0)
     stalled: list[int] = []
 
     def iteration(x: np.ndarray) -> bool:
-        last["calls"] += 1
+        calls[0] += 1
         if error:
             return True
-        if last["calls"] == 1:  # IPOPT's iteration 0: the (possibly bound-pushed) start
+        if calls[0] == 1:  # IPOPT's iteration 0: the (possibly bound-pushed) start
             return False
         try:
-            u = x * d
-            ev, S, G = at(x)
-            tau = tau_of(ev)
-            E = float(tau @ tau)
-            rec = IterationRecord(
-                iteration=last["calls"] - 1,
-                submode="IPOPT",
-                u=u.copy(),
-                targets=ev.targets.copy(),
-                tau=tau,
-                performance=ev.performance,
-                error_index=E,
-                error_rms=math.sqrt(E / n) if n else 0.0,
-                angle_rad=_angle(S * d[None, :] / tol[:, None], -d * G) if ev.ok else math.nan,
-                gamma=math.nan,
-                du=u - last["u"],
-                du1=np.zeros(m),
-                du2=np.zeros(m),
-                dropped=(),
-                trials=[],
-                predicted_slope=math.nan,
-                n_evaluations=stats["n_sens"] + stats["n_eval"],
-            )
-            last["u"] = u.copy()
-            history.append(rec)
-            if on_iteration is not None:
-                on_iteration(rec)
+            x = np.asarray(x, float)
+            pts.record(x, on_iteration)
             recent = history[-STALL_ITERATIONS:]
-            if len(recent) == STALL_ITERATIONS and all(np.all(np.abs(r.tau) <= 1.0) for r in recent):
+            if n and len(recent) == STALL_ITERATIONS and all(np.all(np.abs(r.tau) <= 1.0) for r in recent):
                 perf = [r.performance for r in recent]
-                if max(perf) - min(perf) <= STALL_RTOL * max(abs(p) for p in perf) and n:
-                    if optimality_angle(prob, u, S, G, s.weighting) < s.convergence_angle_rad:
+                if max(perf) - min(perf) <= STALL_RTOL * max(abs(p) for p in perf):
+                    _, S, G = at(x)
+                    if optimality_angle(prob, x * d, S, G, s.weighting) < s.convergence_angle_rad:
                         stalled.append(len(history))
                         return True
         except BaseException as exc:  # noqa: B036 - re-raised after the solve
@@ -415,7 +306,7 @@ def solve_ipopt(
         ubg.append(b * r)
     g = ca.vertcat(*parts) if parts else ca.MX(0, 1)
     it_cb = Iteration(m, n + k, iteration)
-    g_max = float(np.max(np.abs(d * G0))) / dfm if m else 0.0
+    g_max = float(np.max(np.abs(d * pts.G0))) / dfm if m else 0.0
     obj_scaling = 1.0 / g_max if math.isfinite(g_max) and g_max > 0 else 1.0
     ipopt_options = {
         **IPOPT_OPTIONS,
@@ -437,8 +328,8 @@ def solve_ipopt(
     )
     sol = solver(
         x0=x0,
-        lbx=lower / d,
-        ubx=upper / d,
+        lbx=prob.lower / d,
+        ubx=prob.upper / d,
         lbg=np.concatenate(lbg) if lbg else np.zeros(0),
         ubg=np.concatenate(ubg) if ubg else np.zeros(0),
     )
@@ -450,27 +341,14 @@ def solve_ipopt(
     x_end = np.array(sol["x"], dtype=float).reshape(-1)
     if stalled:  # the iterate the stall test passed on (after a user stop IPOPT's x can be another point)
         x_end = history[-1].u / d
-    ev_end = at(x_end)[0]
-    u_end = x_end * d
     reason = f"IPOPT: {status} after {int(info['iter_count'])} iterations"
     if stalled:
         reason = (
             f"IPOPT stopped by TOM's stall test after {int(info['iter_count'])} iterations "
             f"(the last {STALL_ITERATIONS} within tolerance, F spread < {STALL_RTOL:.0e} |F|, TEST angle < θ_conv)"
         )
-    key_end = key(u_end, ev_end)
-    # IPOPT's last iterate when it converged there within tolerance (its optimum, not a trial at the
-    # edge of the tolerance band that gains micrograms), else unless a point evaluated is strictly better
-    if (converged and key_end[0]) or not _better(best["key"], key_end):
-        inf_du = info.get("iterations", {}).get("inf_du", [])
-        out = finish(u_end, ev_end, reason, converged)
-        out.first_order_optimality = float(inf_du[-1]) if len(inf_du) else math.nan
-        return out
-    feasible, f_best, e_best = best["key"]
-    f_end = ev_end.performance if ev_end.ok else math.nan
-    reason += (
-        f"; returned the best point evaluated, not IPOPT's last iterate (best: "
-        f"{'within tolerance' if feasible else 'not within tolerance'}, E = {e_best:.3e}, F {f_best - f_end:+.3e} kg "
-        f"from the last iterate; last iterate: E = {key_end[2]:.3e}, F = {f_end:.12g} kg)"
+    inf_du = info.get("iterations", {}).get("inf_du", [])
+    optimality = float(inf_du[-1]) if len(inf_du) and not stalled else math.nan
+    return pts.answer(
+        x_end, reason, converged, "returned the best point evaluated, not IPOPT's last iterate", optimality
     )
-    return finish(best["u"], best["ev"], reason, converged)

@@ -20,28 +20,19 @@ Core module: arrays and callables in, arrays out; no printing.
 
 from __future__ import annotations
 
-import math
-import time
 import warnings
-from collections import OrderedDict
 from collections.abc import Callable
 
 import numpy as np
 from scipy.optimize import BFGS, Bounds, LinearConstraint, NonlinearConstraint, minimize
 
+from fracas.tom.scaled import ScaledPoints
 from fracas.tom.search import (
-    Evaluation,
     IterationRecord,
     Problem,
     SearchResult,
     SearchSettings,
-    _angle,
-    _better,
-    _clean,
     _validated,
-    optimality_angle,
-    result_of,
-    weights,
 )
 
 METHODS = ("slsqp", "trust_constr")
@@ -51,6 +42,7 @@ _FAIL = 1e30
 # that matters and above the ~1e-11 relative noise of an integrated trajectory's F (1e-12 and
 # 1e-10 left SLSQP iterating at the optimum to maxiter: the Earth-Mars rendezvous, 300 iterations)
 SLSQP_FTOL = 1e-8
+_NOT_LAST = "returned the best point seen, not the last"
 SLSQP_TAU_OK = 0.1  # Σ|τ| at which SLSQP's own test counts the targets as met (a tenth of a tolerance)
 
 
@@ -93,93 +85,15 @@ def solve_nlp(
     s = settings
     prob = _validated(problem)
     m, n = prob.u0.size, prob.desired.size
-    desired, tol = prob.desired, prob.tolerance
-    err = prob.target_error or (lambda T: T - desired)
-    t_start = time.perf_counter()
-    stats = {"n_sens": 0, "n_eval": 0, "t_sens": 0.0, "t_eval": 0.0}
-    cache: OrderedDict[bytes, tuple[Evaluation, np.ndarray, np.ndarray]] = OrderedDict()
-
-    def call(u: np.ndarray):
-        t = time.perf_counter()
-        try:
-            ev, S, G = prob.sensitivities(u.copy())
-        finally:
-            stats["t_sens"] += time.perf_counter() - t
-            stats["n_sens"] += 1
-        S = np.array(S, dtype=float).reshape(n, m) if n else np.zeros((0, m))
-        return _clean(ev, n), S, np.array(G, dtype=float).reshape(m)
-
-    u0 = prob.u0.copy()
-    if prob.given_S is not None:
-        t = time.perf_counter()
-        ev0 = _clean(prob.evaluate(u0.copy()), n)
-        stats["t_eval"] += time.perf_counter() - t
-        stats["n_eval"] += 1
-        first = (ev0, prob.given_S, prob.given_G)
-    else:
-        first = call(u0)
-    ev0, S0, _ = first
-    history: list[IterationRecord] = []
-
-    def finish(u, ev, reason, ok):
-        if ok and ev.ok and n:
-            # SciPy's word is checked by FRACAS's TEST at the returned point: θ over the free controls
-            _, S_u, G_u = at(np.asarray(u, float) / d)
-            theta = optimality_angle(prob, u, S_u, G_u, s.weighting)
-            reason = f"{reason}; TEST angle θ {theta:.1e} rad"
-            if not theta < s.convergence_angle_rad:
-                ok = False
-                reason += f" >= θ_conv {s.convergence_angle_rad:.1e}: not an optimum"
-        return result_of(
-            u, ev, history, reason, ok, stats["n_eval"], stats["n_sens"], stats["t_sens"], stats["t_eval"], t_start
-        )
-
-    if not ev0.ok:
-        return finish(u0, ev0, "trajectory failed at the starting controls", False)
-    d = weights(S0, tol, u0, prob.scale, prob.floor, s.weighting, prob.value_weighted)
+    tol = prob.tolerance
+    pts = ScaledPoints(prob, s, "NLP")
+    if not pts.ev0.ok:
+        return pts.finish(pts.u0, pts.ev0, "trajectory failed at the starting controls", False)
+    d = pts.set_scale()
     dfm = s.max_performance_change
-
-    x0 = u0 / d
-    cache[x0.tobytes()] = first
-
+    x0 = pts.u0 / d
     A, b = prob.ineq_matrix, prob.ineq_bound
-    best: dict = {"key": None, "u": u0.copy(), "ev": ev0}
-
-    def tau_of(ev: Evaluation) -> np.ndarray:
-        return np.asarray(err(ev.targets), dtype=float).reshape(n) / tol
-
-    def key_of(u: np.ndarray, ev: Evaluation) -> tuple[bool, float, float]:
-        """The best-point rule of the projected-gradient search (``search._better``): within
-        tolerance, within the bounds and the switch order beats not; then F, else E."""
-        if not ev.ok:
-            return (False, -math.inf, math.inf)
-        tau = tau_of(ev)
-        # bounds to 1e-9 relative (U = D Ũ of a bound-active control can land a rounding outside)
-        lo = np.where(np.isfinite(prob.lower), prob.lower, 0.0)
-        hi = np.where(np.isfinite(prob.upper), prob.upper, 0.0)
-        within = (u >= prob.lower - 1e-9 * (1.0 + np.abs(lo))) & (u <= prob.upper + 1e-9 * (1.0 + np.abs(hi)))
-        inside = bool(np.all(np.abs(tau) <= 1.0)) and bool(np.all(within))
-        if A is not None:
-            inside = inside and bool(np.all(A @ u <= b + 1e-9 * (1.0 + np.abs(b))))
-        return (inside, ev.performance, float(tau @ tau))
-
-    def at(x: np.ndarray):
-        """(Evaluation, S, G) at U = D Ũ, one `sensitivities` call per distinct Ũ (LRU of 256);
-        every new point is scored for the best point seen."""
-        x = np.asarray(x, dtype=float)
-        key = x.tobytes()
-        if key in cache:
-            cache.move_to_end(key)
-        else:
-            cache[key] = call(x * d)
-            k = key_of(x * d, cache[key][0])
-            if best["key"] is None or _better(k, best["key"]):
-                best.update(key=k, u=(x * d).copy(), ev=cache[key][0])
-            if len(cache) > 256:
-                cache.popitem(last=False)
-        return cache[key]
-
-    best.update(key=key_of(u0, ev0), u=u0.copy(), ev=ev0)
+    at = pts.at
 
     def fun(x):
         ev, _, _ = at(x)
@@ -191,44 +105,14 @@ def solve_nlp(
 
     def con(x):
         ev, _, _ = at(x)
-        return tau_of(ev) if ev.ok else np.full(n, _FAIL)
+        return pts.tau(ev) if ev.ok else np.full(n, _FAIL)
 
     def con_jac(x):
         ev, S, _ = at(x)
         return S * d[None, :] / tol[:, None] if ev.ok else np.zeros((n, m))
 
-    last = {"u": u0.copy(), "k": 0}
-
     def callback(intermediate_result):
-        x = np.asarray(intermediate_result.x, dtype=float)
-        u = x * d
-        ev, S, G = at(x)
-        tau = tau_of(ev) if ev.ok else np.full(n, math.inf)
-        E = float(tau @ tau)
-        last["k"] += 1
-        rec = IterationRecord(
-            iteration=last["k"],
-            submode="NLP",
-            u=u.copy(),
-            targets=ev.targets.copy(),
-            tau=tau,
-            performance=ev.performance,
-            error_index=E,
-            error_rms=math.sqrt(E / n) if n else 0.0,
-            angle_rad=_angle(S * d[None, :] / tol[:, None], -d * G) if ev.ok else math.nan,
-            gamma=math.nan,
-            du=u - last["u"],
-            du1=np.zeros(m),
-            du2=np.zeros(m),
-            dropped=(),
-            trials=[],
-            predicted_slope=math.nan,
-            n_evaluations=stats["n_sens"] + stats["n_eval"],
-        )
-        last["u"] = u.copy()
-        history.append(rec)
-        if on_iteration is not None:
-            on_iteration(rec)
+        pts.record(intermediate_result.x, on_iteration)
 
     bounds = Bounds(prob.lower / d, prob.upper / d)
     has_bounds = bool(np.any(np.isfinite(prob.lower)) or np.any(np.isfinite(prob.upper)))
@@ -273,25 +157,8 @@ def solve_nlp(
                 callback=callback,
                 options={"maxiter": max(20 * s.max_iterations, 1), "gtol": 1e-10, "xtol": 1e-12},
             )
-    x = np.asarray(res.x, dtype=float)
-    ev, _, _ = at(x)
-    success = bool(res.success)
     if method == "slsqp":
-        reason = f"SLSQP: {res.message} after {int(res.nit)} iterations"
-        optimality = math.nan
-    else:
-        optimality = float(res.optimality)
-        reason = f"trust-constr: {res.message} (‖∇ₓL‖∞ {optimality:.1e}, violation {float(res.constr_violation):.1e})"
-    k_end = key_of(x * d, ev)
-    # SciPy's final point when it converged there within tolerance; otherwise the best point seen
-    # (SciPy returns its last iterate, which after an iteration limit can be far from the best)
-    if (success and k_end[0]) or not _better(best["key"], k_end):
-        out = finish(x * d, ev, reason, success)
-        out.first_order_optimality = optimality
-        return out
-    feasible, f_best, e_best = best["key"]
-    reason += (
-        f"; returned the best point seen, not the last ({'within' if feasible else 'not within'} tolerance, "
-        f"E = {e_best:.3e}, F {f_best - (ev.performance if ev.ok else math.nan):+.3e} from the last)"
-    )
-    return finish(best["u"], best["ev"], reason, success)
+        return pts.answer(res.x, f"SLSQP: {res.message} after {int(res.nit)} iterations", bool(res.success), _NOT_LAST)
+    optimality = float(res.optimality)
+    reason = f"trust-constr: {res.message} (‖∇ₓL‖∞ {optimality:.1e}, violation {float(res.constr_violation):.1e})"
+    return pts.answer(res.x, reason, bool(res.success), _NOT_LAST, optimality)

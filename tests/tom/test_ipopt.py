@@ -15,7 +15,7 @@ from fracas.tom import ipopt as ipopt_module  # noqa: E402
 from fracas.tom.ipopt import solve_ipopt  # noqa: E402
 from fracas.tom.nlp import solve_nlp  # noqa: E402
 from fracas.tom.search import SearchSettings, _better  # noqa: E402
-from tests.tom.test_search import circle_problem, make_problem, unit_weights  # noqa: E402
+from tests.tom.test_search import bound_problem, circle_problem, isotonic_problem, make_problem, unit_weights  # noqa: E402
 
 # max −(u − c)ᵀQ(u − c) s.t. a·u = t (one target) and h₁·u ≤ β₁ (active), h₂·u ≤ β₂ (inactive)
 Q = np.array([[2.0, 0.5, 0.0, 0.0], [0.5, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.2], [0.0, 0.0, 0.2, 3.0]])
@@ -80,18 +80,7 @@ def test_inequalities_are_honored_isotonic_projection():
     """Reference: max −‖u − c‖² s.t. u₀ ≤ u₁ ≤ u₂ ≤ u₃ (switch order, three rows of two nonzeros,
     no targets) is the isotonic regression of c, by pool-adjacent-violators: c = (3, 1, 2, 0)
     pools to its mean, (1.5, 1.5, 1.5, 1.5).  Without the rows the answer would be c itself."""
-    c = np.array([3.0, 1.0, 2.0, 0.0])
-    prob = make_problem(
-        np.array([0.0, 1.0, 2.0, 3.0]),
-        lambda u: np.zeros(0),
-        lambda u: np.zeros((0, 4)),
-        lambda u: -float((u - c) @ (u - c)),
-        lambda u: -2.0 * (u - c),
-        np.zeros(0),
-        np.zeros(0),
-        **unit_weights(4),
-    )
-    A = np.array([[1.0, -1.0, 0.0, 0.0], [0.0, 1.0, -1.0, 0.0], [0.0, 0.0, 1.0, -1.0]])
+    prob, c, A = isotonic_problem()
     res = solve_ipopt(dataclasses.replace(prob, ineq_matrix=A, ineq_bound=np.zeros(3)))
     assert res.search_converged, res.stop_reason
     np.testing.assert_allclose(res.u, np.full(4, 1.5), atol=1e-7)
@@ -146,19 +135,7 @@ def test_failed_trajectories_do_not_raise_and_are_never_returned(capfd):
     (KKT, bound active); trajectories with u₀ > 0.3 fail (ok False).  The flyable optimum is
     (0.3, 0.35, 0.35) (KKT with u₀ ≤ 0.3 active): IPOPT, cutting back every step that lands in the
     failed region, gets there within 1e-3 without raising or printing, and the returned point flew."""
-    a = np.array([2.0, 0.0, 0.0])
-    prob = make_problem(
-        np.array([0.0, 0.5, 0.5]),
-        lambda u: np.array([u.sum()]),
-        lambda u: np.ones((1, 3)),
-        lambda u: -0.5 * float((u - a) @ (u - a)),
-        lambda u: -(u - a),
-        1.0,
-        1e-6,
-        upper=[0.5, np.inf, np.inf],
-        fails=lambda u: u[0] > 0.3,
-        **unit_weights(3),
-    )
+    prob = bound_problem(1e-6, fails=lambda u: u[0] > 0.3)
     res = solve_ipopt(prob, SearchSettings(weighting="control", max_iterations=40))
     assert res.evaluation.ok and res.u[0] <= 0.3
     assert abs(res.u.sum() - 1.0) <= 1e-6

@@ -10,7 +10,7 @@ import pytest
 
 from fracas.tom.nlp import solve_nlp
 from fracas.tom.search import SearchSettings, _better, projected_gradient, weights
-from tests.tom.test_search import circle_problem, make_problem, projection_problem, unit_weights
+from tests.tom.test_search import circle_problem, isotonic_problem, make_problem, projection_problem, unit_weights
 
 METHODS = ["slsqp", "trust_constr"]
 
@@ -134,18 +134,7 @@ def test_slsqp_honors_the_switch_order_rows():
     """Reference: max −‖u − c‖² s.t. u₀ ≤ u₁ ≤ u₂ ≤ u₃ (three switch-order rows, no targets) is
     the isotonic regression of c by pool-adjacent-violators: c = (3, 1, 2, 0) pools to
     (1.5, 1.5, 1.5, 1.5).  Tolerance 1e-6 (SLSQP's accuracy on this scaled problem)."""
-    c = np.array([3.0, 1.0, 2.0, 0.0])
-    prob = make_problem(
-        np.array([0.0, 1.0, 2.0, 3.0]),
-        lambda u: np.zeros(0),
-        lambda u: np.zeros((0, 4)),
-        lambda u: -float((u - c) @ (u - c)),
-        lambda u: -2.0 * (u - c),
-        np.zeros(0),
-        np.zeros(0),
-        **unit_weights(4),
-    )
-    A = np.array([[1.0, -1.0, 0.0, 0.0], [0.0, 1.0, -1.0, 0.0], [0.0, 0.0, 1.0, -1.0]])
+    prob, _, A = isotonic_problem()
     res = solve_nlp(dataclasses.replace(prob, ineq_matrix=A, ineq_bound=np.zeros(3)), "slsqp")
     assert res.search_converged, res.stop_reason
     np.testing.assert_allclose(res.u, np.full(4, 1.5), atol=1e-6)

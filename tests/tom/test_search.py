@@ -119,6 +119,43 @@ def circle_problem(tol=1e-8, u0=(0.9, 0.1), **kw):
     return prob, np.full(2, 1 / np.sqrt(2))
 
 
+def isotonic_problem():
+    """(problem without its rows, c, A): max −‖u − c‖², c = (3, 1, 2, 0), from (0, 1, 2, 3), no
+    targets; A the switch-order rows u₀ ≤ u₁ ≤ u₂ ≤ u₃ (b = 0).  With the rows the answer is the
+    isotonic regression of c by pool-adjacent-violators, (1.5, 1.5, 1.5, 1.5); without, c."""
+    c = np.array([3.0, 1.0, 2.0, 0.0])
+    prob = make_problem(
+        np.array([0.0, 1.0, 2.0, 3.0]),
+        lambda u: np.zeros(0),
+        lambda u: np.zeros((0, 4)),
+        lambda u: -float((u - c) @ (u - c)),
+        lambda u: -2.0 * (u - c),
+        np.zeros(0),
+        np.zeros(0),
+        **unit_weights(4),
+    )
+    A = np.array([[1.0, -1.0, 0.0, 0.0], [0.0, 1.0, -1.0, 0.0], [0.0, 0.0, 1.0, -1.0]])
+    return prob, c, A
+
+
+def bound_problem(tol=1e-8, **kw):
+    """max −½‖U − a‖², a = (2, 0, 0), s.t. u0 + u1 + u2 = 1 (tolerance ``tol``) and u0 ≤ 0.5, from
+    (0, 0.5, 0.5): the KKT point is (0.5, 0.25, 0.25) with the bound active."""
+    a = np.array([2.0, 0.0, 0.0])
+    return make_problem(
+        np.array([0.0, 0.5, 0.5]),
+        lambda u: np.array([u.sum()]),
+        lambda u: np.ones((1, 3)),
+        lambda u: -0.5 * float((u - a) @ (u - a)),
+        lambda u: -(u - a),
+        1.0,
+        tol,
+        upper=[0.5, np.inf, np.inf],
+        **kw,
+        **unit_weights(3),
+    )
+
+
 def unit_weights(m, bound=10.0):
     """Control weighting with k = 1/bound and floor = bound: d_j = 1 while |U_j| ≤ bound (W = I)."""
     return {"scale": np.full(m, 1.0 / bound), "floor": np.full(m, bound)}
@@ -444,19 +481,7 @@ def test_bound_active_at_optimum_is_reported_dropped():
     """Reference: max −½‖U − a‖², a = (2, 0, 0), s.t. u0 + u1 + u2 = 1 and u0 ≤ 0.5.  The bound-free
     answer (5/3, −1/3, −1/3) violates u0 ≤ 0.5; the KKT point is (0.5, 0.25, 0.25) with the bound
     active.  Tolerance as for the projection problem (θ_conv = 1e-7, ε = 1e-8)."""
-    a = np.array([2.0, 0.0, 0.0])
-    prob = make_problem(
-        np.array([0.0, 0.5, 0.5]),
-        lambda u: np.array([u.sum()]),
-        lambda u: np.ones((1, 3)),
-        lambda u: -0.5 * float((u - a) @ (u - a)),
-        lambda u: -(u - a),
-        1.0,
-        1e-8,
-        upper=[0.5, np.inf, np.inf],
-        labels=("x", "y", "z"),
-        **unit_weights(3),
-    )
+    prob = bound_problem(1e-8, labels=("x", "y", "z"))
     res = projected_gradient(prob, SearchSettings(weighting="control", convergence_angle_rad=1e-7))
     assert res.search_converged, res.stop_reason
     np.testing.assert_allclose(res.u, [0.5, 0.25, 0.25], atol=1e-6)

@@ -147,8 +147,13 @@ def convergence_figure(res: dict):
                 x[sel], np.where(np.isfinite(ang[sel]), np.maximum(ang[sel], 1e-16), np.nan), mk, color="C1", ms=4
             )
     perf = res.get("performance_name", "final_mass")
-    # the history holds F in canonical units: kg for the mass, km / km/s / rad / s for a target kind
-    ax1.set_ylabel("final mass (kg)" if perf == "final_mass" else f"performance: {perf} (canonical units)")
+    # the history holds F in canonical units: kg for the mass, the target kind's own unit otherwise
+    if perf == "final_mass":
+        ax1.set_ylabel("final mass (kg)")
+    else:
+        from fracas.guidance.target_kinds import TARGET_KINDS
+
+        ax1.set_ylabel(f"performance: {perf} ({TARGET_KINDS[perf].unit})")
     ax1.grid(alpha=0.3)
     ax1.legend(fontsize=8, title="mode", title_fontsize=8)
     ax1.ticklabel_format(axis="y", useOffset=False)

@@ -28,7 +28,6 @@ from fracas.tom.search import (
     Problem,
     SearchResult,
     SearchSettings,
-    _angle,
     _better,
     _clean,
     optimality_angle,
@@ -129,8 +128,10 @@ class ScaledPoints:
     # ------------------------------------------------------------------ records and the end
     def record(self, x: np.ndarray, on_iteration: Callable[[IterationRecord], None] | None) -> IterationRecord:
         """One IterationRecord at the iterate x (Ũ): ``gamma``/``predicted_slope`` nan, ``du`` the
-        change since the previous record, ``angle_rad`` θ of SIZE-6 there."""
-        d, tol = self.d, self.prob.tolerance
+        change since the previous record, ``angle_rad`` TEST's θ there over the free controls (the
+        angle that decides convergence: over every control a bound-active one keeps it at ~0.7 rad
+        on Bryson & Ho at the optimum)."""
+        d = self.d
         u = np.asarray(x, float) * d
         ev, S, G = self.at(x)
         tau = self.tau(ev)
@@ -145,7 +146,7 @@ class ScaledPoints:
             performance=ev.performance,
             error_index=E,
             error_rms=math.sqrt(E / n) if n else 0.0,
-            angle_rad=_angle(S * d[None, :] / tol[:, None], -d * G) if ev.ok else math.nan,
+            angle_rad=optimality_angle(self.prob, u, S, G, self.settings.weighting) if ev.ok else math.nan,
             gamma=math.nan,
             du=u - self._last_u,
             du1=np.zeros(m),

@@ -3,6 +3,7 @@ references, and the full search on problems with closed-form Kuhn–Tucker answe
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -12,6 +13,7 @@ from fracas.tom.search import (
     Evaluation,
     Problem,
     SearchSettings,
+    _validated,
     bracket_min,
     bucket,
     choose_submode,
@@ -20,6 +22,7 @@ from fracas.tom.search import (
     dependent_controls,
     funct,
     genmin,
+    optimality_angle,
     projected_gradient,
     pseudo_inverse,
     quadratic_min,
@@ -681,3 +684,21 @@ def test_evaluation_is_a_named_tuple():
     """Reference: the interface: Evaluation(targets, performance, ok) unpacks as a 3-tuple."""
     t, f, ok = Evaluation(np.zeros(1), 1.0, True)
     assert ok and f == 1.0
+
+
+def test_optimality_angle_counts_active_bounds_and_switch_order_rows():
+    """TEST's θ for the NLP answers (search.optimality_angle), against closed-form KKT points:
+    the bound-active problem at (0.5, 0.25, 0.25): G = a − u = (1.5, −0.25, −0.25); u₀ at its
+    bound leaves (−0.25, −0.25), parallel to S's free part (1, 1): θ = 0 (1e-12, rounding);
+    at the feasible non-optimum (0.4, 0.3, 0.3) θ > 0.1.  The isotonic problem at its answer
+    (1.5, 1.5, 1.5, 1.5): G = −2(u − c) = (3, −1, 1, −3) sums to zero, so it lies in the span of
+    the three active switch-order rows: θ = 0 with them counted."""
+    prob = _validated(bound_problem(1e-8))
+    a = np.array([2.0, 0.0, 0.0])
+    for u, small in ((np.array([0.5, 0.25, 0.25]), True), (np.array([0.4, 0.3, 0.3]), False)):
+        theta = optimality_angle(prob, u, np.ones((1, 3)), a - u, "control")
+        assert (theta < 1e-12) if small else (theta > 0.1), (u, theta)
+    iso, c, A = isotonic_problem()
+    iso = _validated(dataclasses.replace(iso, ineq_matrix=A, ineq_bound=np.zeros(3)))
+    u = np.full(4, 1.5)
+    assert optimality_angle(iso, u, np.zeros((0, 4)), -2.0 * (u - c), "control") < 1e-12

@@ -1,7 +1,7 @@
-"""``fracas validate``: every problem of a deck, without running (or importing) anything heavy.
-
-:func:`validate_path` reads a deck of any mode and returns every problem found, one line
-each (``source: field = value: expected``; an empty list means the deck is valid):
+"""``fracas validate``'s checks of trajectory and TEAM decks, without running (or importing)
+anything heavy.  :func:`fracas.modes.check_path` reads a deck of any mode and asks its mode
+(the registry) for these; each returns every problem found, one line each (``source: field
+= value: expected``; an empty list means the deck is valid):
 
 * the schema (all problems, not only the first: :attr:`fracas.errors.FracasError.problems`);
 * a TEAM deck's trajectory deck ([ertraj] deck: exists, parses, its sizes) and the sizes
@@ -27,14 +27,12 @@ from pathlib import Path
 
 from fracas.build.trajectory import model_bodies
 from fracas.config.limits import team_size_problems
-from fracas.config.modes import deck_mode, parse_any
-from fracas.config.team import TeamDeck, load_team_deck
+from fracas.config.team import TeamDeck
 from fracas.config.trajectory import (
     BACKWARD_TEAM_PROBLEM,
     TrajectoryDeck,
     cut,
     load_deck,
-    read_deck_text,
     trajectory_hash,
 )
 from fracas.errors import FracasError, OutputPathError
@@ -42,7 +40,7 @@ from fracas.io.atomic import check_output_path
 from fracas.measurements.kinds import check_measurement_label, is_measurement_label
 from fracas.params import parse_label
 
-__all__ = ["validate_path", "check_path"]
+__all__ = ["trajectory_problems", "team_problems"]
 
 _BUILTIN_STATIONS = ("goldstone", "madrid", "canberra")
 
@@ -194,7 +192,7 @@ def _content_problem(path: Path, kind: str) -> str | None:
     return None
 
 
-def _trajectory_problems(tdeck: TrajectoryDeck) -> list[str]:
+def trajectory_problems(tdeck: TrajectoryDeck) -> list[str]:
     src = tdeck.source_path or "<deck>"
     model = _model(tdeck)
     out = []
@@ -205,7 +203,7 @@ def _trajectory_problems(tdeck: TrajectoryDeck) -> list[str]:
     return out
 
 
-def _team_problems(deck: TeamDeck) -> list[str]:
+def team_problems(deck: TeamDeck) -> list[str]:
     try:
         return _team_checks(deck)
     except OSError as exc:  # a path no file system accepts (too long, NUL, ...)
@@ -229,7 +227,7 @@ def _team_checks(deck: TeamDeck) -> list[str]:
         out.append(_line(src, "ertraj.deck", deck.ertraj.deck, BACKWARD_TEAM_PROBLEM))
         tdeck = None
     if tdeck is not None:
-        out += _trajectory_problems(tdeck)
+        out += trajectory_problems(tdeck)
         out += team_size_problems(deck, tdeck)
         model = _model(tdeck)
         stations = set(_BUILTIN_STATIONS) | {s.name for s in deck.station}
@@ -282,88 +280,3 @@ def _team_checks(deck: TeamDeck) -> list[str]:
         if rel:
             out.append(_output_problem(deck.resolve(rel), src, field, rel))
     return [p for p in out if p]
-
-
-def _sweep_problems(deck) -> list[str]:
-    """A sweep deck: its study deck (every check of a TEAM deck), then what the sweep refuses
-    before any work (:func:`fracas.config.sweep.sweep_problems`: every generated study
-    against TeamDeck's schema), then the checks of a TEAM deck that depend on the swept values
-    (the trajectory's span, sizes, files) on one study of each set of structural values
-    (studies that differ only in sigmas and noise levels share them)."""
-    from fracas.config.sweep import is_numeric_field, study_label, sweep_problems, varied_deck
-
-    src = deck.source_path or "<deck>"
-    study = deck.resolve(deck.sweep.study)
-    if not study.is_file():
-        return [f'{src}: sweep.study = "{cut(deck.sweep.study)}": no such TEAM deck ({cut(str(study))})']
-    mode, base_problems = check_path(study)
-    if mode != "team":
-        return base_problems or [
-            f'{src}: sweep.study = "{cut(deck.sweep.study)}": is a {mode} deck, expected a TEAM deck'
-        ]
-    try:
-        base = load_team_deck(study)
-    except FracasError as exc:
-        return base_problems or list(exc.problems)
-    out = list(base_problems)
-    problems = sweep_problems(deck, base)
-    if problems:
-        return out + problems
-    fields = deck.fields
-    structural = [k for k, f in enumerate(fields) if not is_numeric_field(f)]
-    if not structural:
-        return out
-    seen: set[str] = set(base_problems)
-    groups: set[str] = set()
-    for i, values in enumerate(deck.studies()):
-        key = repr([values[k] for k in structural])
-        if key in groups:
-            continue
-        groups.add(key)
-        head = f"{src}: {study_label(i, fields, values)}: "
-        for line in _team_problems(varied_deck(base, dict(zip(fields, values)))):
-            if line not in seen:
-                seen.add(line)
-                out.append(head + line)
-    return out
-
-
-def check_path(path: str | Path) -> tuple[str | None, list[str]]:
-    """(the deck's mode or None if unreadable, every problem one line each)."""
-    src = str(path)
-    try:
-        text = read_deck_text(path)
-        mode = deck_mode(text, src)
-        deck = parse_any(text, src)
-    except FracasError as exc:
-        kind = None
-        try:
-            kind = deck_mode(read_deck_text(path), src)
-        except FracasError:
-            pass
-        return kind, list(exc.problems)
-    if mode == "team":
-        return mode, _team_problems(deck)
-    if mode == "tom":
-        from fracas.config.tom import tom_problems
-
-        return mode, tom_problems(deck)
-    if mode == "tsim":
-        from fracas.config.tsim import tsim_problems
-
-        probs = tsim_problems(deck)
-        if probs:
-            return mode, probs
-        return mode, check_path(deck.resolve(deck.insim.team_deck))[1]
-    if mode == "rendezvous":
-        from fracas.config.rendezvous import rendezvous_problems
-
-        return mode, rendezvous_problems(deck)
-    if mode == "sweep":
-        return mode, _sweep_problems(deck)
-    return mode, _trajectory_problems(deck)
-
-
-def validate_path(path: str | Path) -> list[str]:
-    """Every problem of the deck at ``path`` (any mode), one line each; [] if it is valid."""
-    return check_path(path)[1]

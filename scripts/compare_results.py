@@ -1,14 +1,19 @@
 """Regression check of the example studies: run them, then compare two sets of files.
 
-    python scripts/compare_results.py run OUTDIR          # every bundled study -> OUTDIR/*.h5
+    python scripts/compare_results.py run OUTDIR          # every bundled deck -> OUTDIR/*.h5
     python scripts/compare_results.py compare OLD NEW     # dataset by dataset, 1e-12 relative
+    python scripts/compare_results.py compare OLD NEW --exact   # bit for bit
 
-``run`` drives the command line on the bundled decks (propagations, both TEAM studies, the
-Mercury study through its STM file, the small test study in PHI and PDOT form); ``compare``
+``run`` drives the command line on every deck in namelists/ (each in the mode it names: the
+propagations, TEAM studies, the sweep, the TOM decks with the reference decks they write,
+the TSIM decks in this process, the rendezvous), the Mercury study through its STM file, and
+the small test study in PHI and PDOT form; ``compare``
 walks every HDF5 file present in OLD, and reports for each numeric dataset the largest
 difference relative to the dataset's largest magnitude (NaNs must sit in the same places),
 every string dataset or attribute that differs, and datasets the new files lack (new
 datasets and attributes are counted, and listed with -v, but are not differences).
+``--exact`` asks for the same dtype, shape and bytes in every dataset and attribute, and the
+same text in every written deck (``*.toml``) and table (``*.csv``) beside them.
 Provenance (times, versions, host) is skipped: it is meant to differ.  Exit 1 if anything
 differs by more than ``--rtol`` (default 1e-12: "identical, or within 1e-12 relative where
 the order of arithmetic had to change").
@@ -39,12 +44,28 @@ def _fracas(*args: str) -> None:
     print(r.stdout.strip().splitlines()[-1] if r.stdout.strip() else " ".join(args))
 
 
+def _mode(deck: Path) -> str:
+    m = re.search(r'(?m)^mode\s*=\s*"(\w+)"', deck.read_text(encoding="utf-8"))
+    return m.group(1) if m else "propagate"
+
+
 def run(out: Path) -> None:
     out = out.resolve()
     out.mkdir(parents=True, exist_ok=True)
-    for deck in ("leo_j2", "earth_mars_sep", "near_earth_spiral", "mercury_approach_traj"):
-        _fracas("propagate", f"namelists/{deck}.toml", "-o", str(out / f"{deck}.h5"), "--json")
-    _fracas("run", "namelists/earth_mars_team.toml", "-o", str(out / "earth_mars_team.h5"), "--quiet")
+    for path in sorted((ROOT / "namelists").glob("*.toml")):
+        deck, mode = path.stem, _mode(path)
+        rel = f"namelists/{path.name}"
+        if mode == "propagate":
+            _fracas("propagate", rel, "-o", str(out / f"{deck}.h5"), "--json")
+        elif mode == "sweep":
+            _fracas("sweep", rel, "--workers", "0", "--no-resume", "-o", str(out / f"{deck}.h5"))
+        elif mode == "tsim":
+            _fracas("run", rel, "--workers", "0", "-o", str(out / f"{deck}.h5"), "--quiet")
+        elif mode == "tom":
+            ref = out / f"{deck}_reference.toml"
+            _fracas("run", rel, "-o", str(out / f"{deck}.h5"), "--reference-deck", str(ref), "--quiet")
+        else:
+            _fracas("run", rel, "-o", str(out / f"{deck}.h5"), "--quiet")
     _fracas("stm", "build", "namelists/mercury_approach_team.toml", "-o", str(out / "mercury_approach_stm.h5"))
     _fracas(
         "run",
@@ -52,7 +73,7 @@ def run(out: Path) -> None:
         "--stm",
         str(out / "mercury_approach_stm.h5"),
         "-o",
-        str(out / "mercury_approach_team.h5"),
+        str(out / "mercury_approach_team_stm.h5"),
         "--quiet",
     )
     _fracas("run", "tests/data/team_small.toml", "-o", str(out / "team_small.h5"), "--quiet")
@@ -100,7 +121,14 @@ def _numeric(v) -> np.ndarray | None:
     return a if a.dtype.kind in "fiub" else None
 
 
-def compare_file(a: Path, b: Path, rtol: float) -> list[str]:
+def _same_bits(x, y) -> bool:
+    a, b = np.asarray(x), np.asarray(y)
+    if a.dtype.kind in "OSU" or b.dtype.kind in "OSU":
+        return a.shape == b.shape and bool(np.all(a == b))
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+def compare_file(a: Path, b: Path, rtol: float, exact: bool = False) -> list[str]:
     with h5py.File(a, "r") as fa, h5py.File(b, "r") as fb:
         ia, ib = _items(fa), _items(fb)
     bad = [f"{k}: only in the old file" for k in sorted(set(ia) - set(ib))]
@@ -110,6 +138,10 @@ def compare_file(a: Path, b: Path, rtol: float) -> list[str]:
         if k.endswith(("@fracas_version", "@written_utc", "@created_utc")):
             continue
         x, y = _numeric(ia[k]), _numeric(ib[k])
+        if exact and x is not None and y is not None:
+            if not _same_bits(x, y):
+                bad.append(f"{k}: not bit-identical ({x.dtype}{x.shape} vs {y.dtype}{y.shape})")
+            continue
         if x is None or y is None:
             xa, xb = _text(ia[k], a.parent), _text(ib[k], b.parent)
             if not (xa.shape == xb.shape and np.all(xa == xb)):
@@ -139,21 +171,35 @@ def compare_file(a: Path, b: Path, rtol: float) -> list[str]:
     return bad
 
 
-def compare(old: Path, new: Path, rtol: float) -> int:
+def compare_text(a: Path, b: Path) -> list[str]:
+    """A written deck or table: the same text once each run's own folder reads <out>."""
+    ta = a.read_text(encoding="utf-8").replace(str(a.parent.resolve()), "<out>")
+    tb = b.read_text(encoding="utf-8").replace(str(b.parent.resolve()), "<out>")
+    print(f"{a.name:28s} {len(ta.splitlines()):4d} lines  {'OK' if ta == tb else 'DIFFER'}")
+    return [] if ta == tb else [f"{a.name}: text differs"]
+
+
+def compare(old: Path, new: Path, rtol: float, exact: bool = False) -> int:
     files = sorted(old.glob("*.h5"))
     if not files:
         raise SystemExit(f"{old}: no .h5 files")
+    texts = sorted([*old.glob("*.toml"), *old.glob("*.csv")]) if exact else []
     n_bad = 0
-    for a in files:
+    for a in [*files, *texts]:
         b = new / a.name
         if not b.exists():
             print(f"{a.name}: missing in {new}")
             n_bad += 1
             continue
-        for line in compare_file(a, b, rtol):
+        lines = compare_file(a, b, rtol, exact) if a.suffix == ".h5" else compare_text(a, b)
+        for line in lines:
             print("    " + line)
             n_bad += 1
-    print("identical within" if n_bad == 0 else "DIFFERENCES above", f"rtol {rtol:g}")
+    what = "bit-identical" if exact else f"within rtol {rtol:g}"
+    print(
+        f"{len(files)} results files, {len(texts)} decks and tables:",
+        what if n_bad == 0 else f"DIFFERENCES ({what} asked)",
+    )
     return 1 if n_bad else 0
 
 
@@ -166,12 +212,13 @@ def main() -> None:
     c.add_argument("old", type=Path)
     c.add_argument("new", type=Path)
     c.add_argument("--rtol", type=float, default=1e-12)
+    c.add_argument("--exact", action="store_true", help="bit for bit: same dtype, shape and bytes everywhere")
     c.add_argument("-v", action="store_true", help="list the datasets and attributes only the new files have")
     a = ap.parse_args()
     if a.cmd == "run":
         run(a.out)
     else:
-        sys.exit(compare(a.old, a.new, a.rtol))
+        sys.exit(compare(a.old, a.new, a.rtol, a.exact))
 
 
 if __name__ == "__main__":

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from fracas.validate import check_path, validate_path
+from fracas.modes import check_path, validate_path
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = sorted((ROOT / "namelists").glob("*.toml")) + [ROOT / "tests" / "data" / "team_small.toml"]
@@ -180,7 +180,7 @@ def test_unreadable_decks(tmp_path):
 
 def test_no_jax_imported():
     code = (
-        "import sys\nfrom fracas.validate import validate_path\n"
+        "import sys\nfrom fracas.modes import validate_path\n"
         f"paths = {[str(p) for p in BUNDLED]!r}\n"
         "for p in paths:\n    assert validate_path(p) == [], p\n"
         "print(sorted(m for m in sys.modules if m == 'jax' or m.startswith('jax.')))\n"

@@ -151,7 +151,7 @@ def test_bad_backward_decks_one_line(case):
 def test_team_refuses_a_backward_trajectory(tmp_path):
     from fracas.build.team import trajectory_problem
     from fracas.config.team import load_team_deck
-    from fracas.validate import validate_path
+    from fracas.modes import validate_path
 
     (tmp_path / "traj.toml").write_text(BASE + "\n[stop]\nduration_days = -1.0\n")
     team = tmp_path / "team.toml"

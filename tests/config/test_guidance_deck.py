@@ -9,7 +9,7 @@ import pytest
 
 from fracas.config.team import parse_team_deck
 from fracas.errors import DeckError
-from fracas.validate import validate_path
+from fracas.modes import validate_path
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 

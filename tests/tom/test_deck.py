@@ -17,7 +17,7 @@ from fracas.cli import main
 from fracas.config.tom import parse_tom_deck
 from fracas.errors import FracasError
 from fracas.io.tom_results import read_tom_results
-from fracas.validate import validate_path
+from fracas.modes import validate_path
 
 ROOT = Path(__file__).resolve().parents[2]
 LAMBERT = ROOT / "namelists" / "lambert_tom.toml"

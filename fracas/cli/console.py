@@ -1,0 +1,332 @@
+"""The terminal side of the command line: 80-column wrapping, one-line errors, the progress
+display of a run's stages (rich, on stderr), and :class:`TerminalConsole`, the
+:class:`fracas.modes.base.Console` every mode's command prints through.
+
+Imports only click and the standard library at module import time, so help, version and a
+deck's error answer without loading JAX, pydantic, h5py, rich or matplotlib.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+import textwrap
+from contextlib import contextmanager
+from typing import Any
+
+import click
+
+# ----------------------------------------------------------------------------- 80 columns
+# Terminal text wraps at word boundaries, never mid-word; a word longer than a line (a long
+# path) stays whole on a line of its own, so it can be copied.  (textwrap only: an error
+# must not wait for numpy or rich to import.)
+WIDTH = 80
+
+
+def _wrap(text: str, width: int = WIDTH, indent: str = "", more: str = "    ") -> list[str]:
+    """``text`` as lines of at most ``width`` columns; continuation lines indented by
+    ``indent + more``."""
+    lines = textwrap.wrap(
+        text,
+        width,
+        initial_indent=indent,
+        subsequent_indent=indent + more,
+        break_on_hyphens=False,
+        break_long_words=False,
+    )
+    return [s if len(s) <= width else s.lstrip() for s in lines] or [indent.rstrip()]  # a long word: no indent
+
+
+def _fill(text: str, width: int = WIDTH, indent: str = "", more: str = "    ") -> str:
+    """:func:`_wrap` joined by newlines."""
+    return "\n".join(_wrap(text, width, indent, more))
+
+
+_VALUE_COLUMN = re.compile(r"^(\s*\S.*?\s{2,})\S")
+
+
+def _fit_block(text: str, width: int = WIDTH) -> str:
+    """Every line of ``text`` that is wider than ``width`` wrapped at word boundaries, its
+    continuation lines indented under its value column (``label    value``: under
+    ``value``; else 4 spaces past the line's own indentation).  Lines that fit are kept."""
+    out = []
+    for line in text.splitlines():
+        if len(line) <= width:
+            out.append(line)
+            continue
+        lead = line[: len(line) - len(line.lstrip())]
+        m = _VALUE_COLUMN.match(line)
+        hang = " " * len(m.group(1)) if m and len(m.group(1)) <= width // 2 else lead + "    "
+        wrapped = textwrap.wrap(
+            line.strip(),
+            width,
+            initial_indent=lead,
+            subsequent_indent=hang,
+            break_on_hyphens=False,
+            break_long_words=False,
+        )
+        out += [s if len(s) <= width else s.lstrip() for s in wrapped]
+    return "\n".join(out)
+
+
+def _is_terminal(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
+def _stdout_is_terminal() -> bool:
+    return _is_terminal(sys.stdout)
+
+
+def _stderr_is_terminal() -> bool:
+    return _is_terminal(sys.stderr)
+
+
+def _say(text: str) -> None:
+    """A line of the printout on stdout ("written: PATH", a one-line summary): wrapped to 80
+    columns at word boundaries on a terminal; one line when piped (logs and scripts grep it)."""
+    click.echo(_fill(text) if _stdout_is_terminal() else text)
+
+
+def _error_line(text: str) -> None:
+    """An error on stderr: one line when stderr is not a terminal (logs, scripts: one line
+    per problem to grep), wrapped to 80 columns with indented continuation lines on one."""
+    if _stderr_is_terminal():
+        text = _fill(text)
+    click.echo(text, err=True)
+
+
+@contextmanager
+def _errors(debug: bool):
+    """Map FracasError to one line + exit 2 (re-raise under --debug)."""
+    from fracas.errors import FracasError
+
+    try:
+        yield
+    except FracasError as exc:
+        if debug:
+            raise
+        _error_line(f"fracas: error: {exc}")
+        sys.exit(exc.exit_code)
+    except KeyboardInterrupt:
+        click.echo("fracas: interrupted", err=True)
+        sys.exit(130)
+    except (click.exceptions.Exit, click.ClickException, SystemExit):
+        raise
+    except Exception as exc:  # a bug: say so briefly, the traceback is one flag away
+        if debug:
+            raise
+        _error_line(f"fracas: internal error: {type(exc).__name__}: {exc} (rerun with --debug for the traceback)")
+        sys.exit(1)
+
+
+def _duration(seconds: float) -> str:
+    """12.3 s, 3 min 05 s, 1 h 02 min."""
+    if seconds < 60:
+        return f"{seconds:.1f} s"
+    m, s = divmod(int(round(seconds)), 60)
+    if m < 60:
+        return f"{m} min {s:02d} s"
+    h, m = divmod(m, 60)
+    return f"{h} h {m:02d} min"
+
+
+class _Stages:
+    """The ``stage(text)`` callback of a command, as a rich progress display on stderr.
+
+    Each call starts a new step: a spinner, what it is doing, a bar and ``done/total``
+    once a count is known (``stage.count(done, total)``), and the step's elapsed time.  A
+    step that took 2 s or more leaves a line with its duration.  While a step runs, every
+    JAX compilation shows on its own line as ``compiling <function> (first run; cached
+    afterwards)`` with its elapsed time (driven by JAX's compile log, which is captured
+    here, never printed, and switched back off afterwards).  Off when ``enabled`` is false
+    or stderr is not a terminal; ``plain`` then prints each step as one line on stderr.
+    """
+
+    LEAVE_S = 2.0
+
+    def __init__(self, enabled: bool, plain: bool = False):
+        self.progress = None
+        self.task = None
+        self.text = ""
+        self.plain = False
+        self._started = 0.0
+        self._compile = None
+        self._handler = None
+        self._saved: dict = {}
+        if not enabled:
+            return
+        from rich.console import Console
+
+        console = Console(stderr=True)
+        if not console.is_terminal:
+            self.plain = plain
+            return
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+        from rich.table import Column
+
+        class _IfCounted:
+            def render(self, task):
+                return super().render(task) if task.total is not None else ""
+
+        class _Count(_IfCounted, MofNCompleteColumn):
+            pass
+
+        class _Bar(_IfCounted, BarColumn):
+            pass
+
+        self.progress = Progress(
+            SpinnerColumn(),
+            TextColumn("{task.description}", table_column=Column(no_wrap=True, overflow="ellipsis", ratio=1)),
+            _Bar(bar_width=16),
+            _Count(),
+            TimeElapsedColumn(),
+            console=console,
+            transient=True,
+            expand=True,
+        )
+
+    # -- steps
+    def __call__(self, text: str) -> None:
+        if self.plain:
+            click.echo(text, err=True)
+            return
+        if self.progress is None:
+            return
+        self._watch_compiles()
+        if text == self.text and self.task is not None:
+            return
+        import time
+
+        self._finish_compile()
+        self._finish()
+        self.text = text
+        self._started = time.monotonic()
+        self.task = self.progress.add_task(text, total=None)
+
+    def count(self, done: int, total: int | None) -> None:
+        """The current step's count (``done`` of ``total``; None: not known yet)."""
+        if self.progress is not None and self.task is not None:
+            self.progress.update(self.task, completed=done, total=total)
+
+    def _leave(self, text: str) -> None:
+        from rich.text import Text
+
+        self.progress.console.print(Text(text, style="dim"))
+
+    def _finish(self) -> None:
+        import time
+
+        if self.task is None:
+            return
+        took = time.monotonic() - self._started
+        self.progress.remove_task(self.task)
+        self.task = None
+        if took >= self.LEAVE_S:
+            self._leave(f"{self.text} ({_duration(took)})")
+
+    # -- JAX compilations (jax_log_compiles: "Compiling jit(f) ...", "Finished XLA compilation ...")
+    def _compile_event(self, message: str) -> None:
+        import re
+        import time
+
+        if self.progress is None:
+            return
+        m = re.match(r"Compiling (\w+)\(([^)]*)\)", message)
+        if m:
+            self._finish_compile()
+            name = m.group(2) or m.group(1)
+            task = self.progress.add_task(f"  compiling {name} (first run; cached afterwards)", total=None)
+            self._compile = (task, name, time.monotonic())
+        elif message.startswith("Finished XLA compilation"):
+            self._finish_compile()
+
+    def _finish_compile(self) -> None:
+        import time
+
+        if self._compile is None or self.progress is None:
+            return
+        task, name, t0 = self._compile
+        self._compile = None
+        self.progress.remove_task(task)
+        took = time.monotonic() - t0
+        if took >= self.LEAVE_S:
+            self._leave(f"  compiled {name} ({_duration(took)}; cached for later runs)")
+
+    def _watch_compiles(self) -> None:
+        """Once JAX is imported: capture its compile log (not before: importing JAX here
+        would slow commands that never use it; an environment variable would reach Dask
+        workers, which would print the log)."""
+        if self._handler is not None or "jax" not in sys.modules:
+            return
+        import logging
+
+        import jax
+
+        stages = self
+
+        class _Handler(logging.Handler):
+            def emit(self, record):
+                try:
+                    stages._compile_event(record.getMessage())
+                except Exception:  # noqa: BLE001  (a display never breaks a run)
+                    pass
+
+        log = logging.getLogger("jax")
+        self._handler = _Handler(level=logging.WARNING)
+        self._saved = {"propagate": log.propagate, "log_compiles": bool(jax.config.jax_log_compiles)}
+        log.addHandler(self._handler)
+        log.propagate = False  # the compile log drives the display; it is not printed
+        jax.config.update("jax_log_compiles", True)
+
+    def __enter__(self):
+        if self.progress is not None:
+            self.progress.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        if self.progress is None:
+            return False
+        self._finish_compile()
+        self._finish()
+        self.progress.__exit__(*exc)
+        if self._handler is not None:
+            import logging
+
+            import jax
+
+            log = logging.getLogger("jax")
+            log.removeHandler(self._handler)
+            log.propagate = self._saved["propagate"]
+            jax.config.update("jax_log_compiles", self._saved["log_compiles"])
+            self._handler = None
+        return False
+
+
+@contextmanager
+def _progress(enabled: bool, plain: bool = False):
+    """Yield a :class:`_Stages` callback (``stage(text)``, ``stage.count(done, total)``)."""
+    with _Stages(enabled, plain) as stages:
+        yield stages
+
+
+class TerminalConsole:
+    """The :class:`fracas.modes.base.Console` of the command line: stdout for the report,
+    stderr for errors and the progress display."""
+
+    def echo(self, text: str) -> None:
+        click.echo(text)
+
+    def say(self, text: str) -> None:
+        _say(text)
+
+    def fill(self, text: str, indent: str = "") -> str:
+        return _fill(text, indent=indent)
+
+    def error(self, text: str) -> None:
+        _error_line(text)
+
+    def progress(self, enabled: bool, plain: bool = False) -> Any:
+        return _progress(enabled, plain)

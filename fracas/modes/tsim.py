@@ -1,0 +1,103 @@
+"""Mode ``tsim``: the Monte Carlo (FRACAS TSIM): the TEAM study it stands on, blocks of
+sampled missions with designed and executed guidance, statistics, consistency with the
+linear analysis -> results file -> the report.  The orchestrator is
+:func:`fracas.montecarlo.run_tsim`; Dask through :mod:`fracas.cluster`."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from fracas.config.tsim import parse_tsim_deck
+from fracas.modes.base import Console, Mode, ReportOptions, RunOptions, plot_path
+
+__all__ = ["MODE", "run_tsim"]
+
+
+def run_tsim(*args: Any, **kw: Any) -> Any:
+    """The TSIM orchestrator (:func:`fracas.montecarlo.run_tsim`)."""
+    from fracas.montecarlo import run_tsim as run
+
+    return run(*args, **kw)
+
+
+def _json_summary(product: Any, path: Path, written: list[Path]) -> str:
+    from fracas.montecarlo import missions_per_second
+
+    return json.dumps(
+        {
+            "results": str(path),
+            "counts": product.counts,
+            "missions_per_s": missions_per_second(product),
+            "verdicts": [r["verdict"] for r in product.consistency],
+            "plots": [str(w) for w in written],
+        }
+    )
+
+
+def command(deck: Path, opts: RunOptions, console: Console) -> None:
+    """``fracas run`` on a TSIM deck: stages, a progress bar over the missions, the summary."""
+    from fracas.config.tsim import load_tsim_deck
+    from fracas.io.atomic import check_output_path
+    from fracas.montecarlo import missions_per_second
+    from fracas.report.tsim import plot_tsim, summary_text
+
+    cfg = load_tsim_deck(deck)
+    png = plot_path(opts.plot, opts.output, cfg.output.plot and cfg.resolve(cfg.output.plot))
+    if png is not None:
+        check_output_path(png, "plot")
+    with console.progress(not (opts.as_json or opts.quiet), plain=True) as stage:
+        product, path = run_tsim(
+            cfg, opts.output, workers=opts.workers, scheduler=opts.scheduler, on_stage=stage, progress=stage.count
+        )
+    written = plot_tsim(product, png) if png is not None else []
+    if opts.as_json:
+        console.echo(_json_summary(product, path, written))
+        return
+    if opts.quiet:
+        bad = sum(r["verdict"] not in ("consistent", "not compared") for r in product.consistency)
+        console.say(f"{product.counts['missions']} missions, {bad} outputs flagged; results: {path}")
+        return
+    console.echo(summary_text(product))
+    console.say(f"results: {path}  ({missions_per_second(product):.1f} missions/s)")
+    for w in written:
+        console.say(f"plot: {w}")
+
+
+def report(file: Path, opts: ReportOptions, console: Console) -> None:
+    """``fracas report`` on a TSIM results file."""
+    from fracas.io.tsim_results import read_tsim_results
+    from fracas.report.tsim import plot_tsim, summary_text
+
+    res = read_tsim_results(file)
+    if opts.as_json:
+        console.echo(json.dumps({"file": str(file), "counts": res.counts}))
+    else:
+        console.echo(summary_text(res, width=opts.width or 80))
+    for w in plot_tsim(res, opts.plot) if opts.plot is not None else []:
+        console.say(f"plot: {w}")
+    if not opts.as_json:
+        console.say(f"TSIM results file: {file}")
+
+
+def tsim_problems(deck: Any) -> list[str]:
+    """``fracas validate`` on a TSIM deck: its own checks, then the TEAM deck it stands on."""
+    from fracas.config.tsim import tsim_problems as problems
+    from fracas.modes import check_path
+
+    return problems(deck) or check_path(deck.resolve(deck.insim.team_deck))[1]
+
+
+MODE = Mode(
+    name="tsim",
+    noun="TSIM",
+    summary="Monte Carlo of sampled errors with designed and executed guidance",
+    parse=parse_tsim_deck,
+    run=run_tsim,
+    command=command,
+    results_kinds=("fracas-tsim-results",),
+    report=report,
+    problems=tsim_problems,
+    run_options=frozenset({"workers", "scheduler"}),
+)

@@ -24,20 +24,21 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from fracas import pipeline  # noqa: E402
 from fracas.config.team import load_team_deck  # noqa: E402
+from fracas.modes.stm import build_stm  # noqa: E402
+from fracas.modes.team import run_team  # noqa: E402
 
 DECK = ROOT / "namelists" / "mercury_approach_guidance.toml"
 
 
 def _time(deck, repeat: int) -> tuple[float, float]:
     t0 = time.perf_counter()
-    pipeline.run_team(deck, write_results=False)
+    run_team(deck, write_results=False)
     cold = time.perf_counter() - t0
     ts = []
     for _ in range(repeat):
         t0 = time.perf_counter()
-        pipeline.run_team(deck, write_results=False)
+        run_team(deck, write_results=False)
         ts.append(time.perf_counter() - t0)
     return cold, statistics.median(ts)
 
@@ -50,7 +51,7 @@ def main() -> None:
     stm = base.resolve(base.errcon.stm_file)
     if not stm.exists():
         print(f"building {stm} once (not timed)")
-        pipeline.build_stm(base, stm)
+        build_stm(base, stm)
     plain = base.model_copy(update={"guidance": [], "budget": base.budget.model_copy(update={"enabled": False})})
     guided = base.model_copy(update={"budget": base.budget.model_copy(update={"enabled": False})})
     rows = [("plain TEAM study", plain), ("+ B-plane maneuver", guided), ("+ maneuver + error budget", base)]
@@ -62,7 +63,7 @@ def main() -> None:
     print(f"{'row':28s} {'cold s':>8s} {'warm s':>8s} {'warm / row 1':>13s}")
     for name, cold, warm in out:
         print(f"{name:28s} {cold:8.2f} {warm:8.3f} {warm / w0:13.2f}")
-    n_src = len(pipeline.run_team(base, write_results=False)[0].budget.sources)
+    n_src = len(run_team(base, write_results=False)[0].budget.sources)
     print(f"(error budget: {n_src} sources)")
 
 

@@ -179,7 +179,7 @@ def test_propagate_with_sensitivities_in_process(tmp_path):
 @pytest.mark.parametrize("name", ["earth_mars_sep.toml", "near_earth_spiral.toml"])
 def test_example_decks_run_end_to_end(tmp_path, name):
     from fracas.constants import DAY_S
-    from fracas.pipeline import propagate_deck
+    from fracas.modes.propagate import propagate_deck
 
     data, path = propagate_deck(REPO / "namelists" / name, tmp_path / "o.h5")
     assert path.exists()

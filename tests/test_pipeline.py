@@ -14,10 +14,10 @@ import numpy as np
 from click.testing import CliRunner
 
 from fracas.cli import main
-from fracas.config.modes import deck_mode
 from fracas.config.team import load_team_deck
 from fracas.io.team_results import read_team_results
-from fracas.pipeline import run
+from fracas.modes import deck_mode
+from fracas.modes.team import run_team as run
 
 DATA = Path(__file__).resolve().parent / "data"
 SMALL = DATA / "team_small.toml"

@@ -22,9 +22,8 @@ from pathlib import Path
 
 import pytest
 
-from fracas.config.modes import parse_any
 from fracas.errors import ConfigError, DeckError
-from fracas.modes import validate_path
+from fracas.modes import parse_any, validate_path
 
 ROOT = Path(__file__).resolve().parents[2]
 DECKS = sorted((ROOT / "namelists").glob("*.toml")) + [ROOT / "tests" / "data" / "team_small.toml"]

@@ -8,10 +8,10 @@ from pathlib import Path
 import pytest
 
 from fracas.config.limits import DEFAULT_LIMITS, HARD_LIMITS, check_team_sizes
-from fracas.config.modes import load_any
 from fracas.config.team import parse_team_deck
 from fracas.config.trajectory import parse_deck, trajectory_hash
 from fracas.errors import DeckError
+from fracas.modes import load_any
 
 ROOT = Path(__file__).resolve().parents[2]
 TRAJ = (ROOT / "namelists" / "leo_j2.toml").read_text(encoding="utf-8")

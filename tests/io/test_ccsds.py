@@ -123,7 +123,7 @@ def work(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def traj_file(work) -> Path:
-    from fracas.pipeline import propagate_deck
+    from fracas.modes.propagate import propagate_deck
 
     _, path = propagate_deck(work / "leo.toml", work / "leo.h5")
     return path
@@ -131,7 +131,7 @@ def traj_file(work) -> Path:
 
 @pytest.fixture(scope="session")
 def team_file(work) -> Path:
-    from fracas.pipeline import run_team
+    from fracas.modes.team import run_team
 
     _, path, _ = run_team(work / "team.toml", None, work / "team.h5")
     return path
@@ -313,7 +313,7 @@ def test_deck_initial_state_from_oem_equals_the_record_and_reproduces_the_states
     in fact equal to the 15 digits the OEM keeps, the same integrator taking the same steps)."""
     from fracas.build.trajectory import build_propagation
     from fracas.config.trajectory import load_deck, trajectory_hash
-    from fracas.pipeline import propagate_deck
+    from fracas.modes.propagate import propagate_deck
 
     deck = load_deck(_oem_deck(work, "from_oem.toml", 'at = "start"'))
     f = ccsds.read_oem(traj_oem)
@@ -340,7 +340,7 @@ def test_deck_initial_state_interpolated_from_the_oem(work):
     HERMITE 7 interpolation (python-oem, 4 records): an interpolation error, so a looser
     tolerance (1e-9 relative is not an interpolation's; measured ~1e-11)."""
     from fracas.config.trajectory import load_deck
-    from fracas.pipeline import propagate_deck
+    from fracas.modes.propagate import propagate_deck
 
     base = LEO.read_text(encoding="utf-8").replace("duration_days = 1.0", "duration_days = 0.05")
     (work / "dense.toml").write_text(base.replace("step_days = 0.01", "step_days = 0.002"), encoding="utf-8")
@@ -491,7 +491,7 @@ def test_export_writes_nothing_when_a_later_part_is_refused(work, team_file):
 def test_team_file_of_another_trajectory_is_refused(work, team_file):
     """--team must hold covariances of this trajectory: a trajectory a year later (no TEAM
     epoch in its span) is refused instead of giving an OEM without covariances."""
-    from fracas.pipeline import propagate_deck
+    from fracas.modes.propagate import propagate_deck
 
     text = (work / "leo.toml").read_text(encoding="utf-8")
     assert 'iso = "2030-01-01T00:00:00"' in text

@@ -11,7 +11,7 @@ from click.testing import CliRunner
 from fracas.cli import main
 from fracas.errors import ResultsFileError
 from fracas.io.rendezvous_results import read_rendezvous_results
-from fracas.pipeline import run_rendezvous
+from fracas.modes.rendezvous import run_rendezvous
 from fracas.report.rendezvous import plot_rendezvous, summary_text
 from tests.io.damage import edited
 

@@ -19,7 +19,7 @@ from click.testing import CliRunner
 from rich.console import Console
 
 from fracas.io.team_results import read_team_results
-from fracas.pipeline import run_team
+from fracas.modes.team import run_team
 from fracas.report import team as team_report
 from fracas.report.guidance import (
     BUDGET_TOP,

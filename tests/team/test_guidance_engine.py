@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fracas import pipeline
 from fracas.constants import DAY_S
 from fracas.integrate.propagate import propagate
+from fracas.modes.stm import load_team, stm_product
 from fracas.team.engine import run_study
 from fracas.team.reference import reference_from_product
 from fracas.team.result import team_product
@@ -67,8 +67,8 @@ def _deck(tmp: Path, extra: str = GUIDANCE) -> Path:
 @pytest.fixture(scope="module")
 def case_ref(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("guid")
-    case = pipeline.load_team(_deck(tmp))
-    product = pipeline.stm_product(case)
+    case = load_team(_deck(tmp))
+    product = stm_product(case)
     study = case.study
     idx = [list(product.param_labels).index(lab) for lab in study.dynamic_labels]
     sel = dataclasses.replace(  # the study's columns, as read_stm_file(labels=...) gives them

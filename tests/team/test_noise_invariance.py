@@ -26,10 +26,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-import fracas.team.transitions as transitions
+import fracas.team.noise_cells as noise_cells
+import fracas.team.white_acceleration as white_acceleration
 from fracas.build.team import build_case
 from fracas.config.team import parse_team_deck
-from fracas.pipeline import stm_product
+from fracas.modes.stm import stm_product
 from fracas.team.engine import run_study
 from fracas.team.reference import integrate_reference, reference_from_product
 from fracas.team.transitions import noise_cell_step, noise_settings
@@ -167,7 +168,8 @@ def test_stm_grid_noise_is_invariant_to_events(files):
     e = _with_events(d)
     assert fb.n_times > fa.n_times
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(transitions, "propagate_with_sensitivities", None)  # grid_noise must not integrate
+        for module in (noise_cells, white_acceleration):  # grid_noise must not integrate
+            mp.setattr(module, "propagate_with_sensitivities", None)
         b = _from_file(e, fb)
         runs = {"same file": _from_file(d, fb), "own file": _from_file(d, fa)}
     assert noise_settings(b.study, b.ref)["noise_cells"] == "stm_file"

@@ -305,7 +305,7 @@ def test_onboard_settings_are_structure_for_batched_sweeps():
     together: structure_mismatch names the observations."""
     import dataclasses
 
-    from fracas.pipeline import load_team
+    from fracas.modes.stm import load_team
     from fracas.team.batch import structure_mismatch
 
     study = load_team("namelists/near_earth_spiral_horizon_team.toml").study

@@ -9,7 +9,7 @@ import pytest
 from rich.console import Console
 
 from fracas.io.team_results import read_team_results
-from fracas.pipeline import run_team
+from fracas.modes.team import run_team
 from fracas.report.team import print_team, quiet_line
 from tests.team.test_team_engine import SMALL
 
@@ -82,7 +82,7 @@ def test_skipped_per_entry_and_no_usable_warning(results):
 
 def test_trajectory_summary_fits_80_columns(tmp_path):
     from fracas.io.trajectory_file import read_trajectory_file
-    from fracas.pipeline import propagate_deck
+    from fracas.modes.propagate import propagate_deck
     from fracas.report.trajectory import print_summary
 
     deck = SMALL.parent / "team_small_traj.toml"
@@ -105,7 +105,7 @@ def test_trajectory_sensitivities_line_wraps_at_word_boundaries(tmp_path):
     from types import SimpleNamespace
 
     from fracas.io.trajectory_file import read_trajectory_file
-    from fracas.pipeline import propagate_deck
+    from fracas.modes.propagate import propagate_deck
     from fracas.report.trajectory import print_summary
 
     _, path = propagate_deck(SMALL.parent / "team_small_traj.toml", tmp_path / "traj.h5")

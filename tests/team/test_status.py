@@ -47,19 +47,19 @@ def test_healthy_reference_is_ok():
 
 def test_pipeline_turns_the_status_into_one_line(monkeypatch):
     """The edge raises NumericalError naming the trajectory deck and the time."""
-    import fracas.pipeline as pl
+    import fracas.modes.team as team_mode
     from fracas.errors import NumericalError
 
-    real = pl.load_team
+    real = team_mode.load_team
 
     def stopped(deck):
         case = real(deck)
         st = _stopped_study(40)
         return dataclasses.replace(case, study=st)
 
-    monkeypatch.setattr(pl, "load_team", stopped)
+    monkeypatch.setattr(team_mode, "load_team", stopped)
     with pytest.raises(NumericalError, match=r"team_small_traj\.toml: the reference trajectory stopped before t = "):
-        pl.run_team(SMALL, output=None)
+        team_mode.run_team(SMALL, output=None)
 
 
 def test_failed_prediction_still_writes_the_results_file(monkeypatch, tmp_path):
@@ -69,7 +69,7 @@ def test_failed_prediction_still_writes_the_results_file(monkeypatch, tmp_path):
     import fracas.team.result as result
     from fracas.errors import NumericalError
     from fracas.io.team_results import read_team_results
-    from fracas.pipeline import run_team
+    from fracas.modes.team import run_team
 
     real = result.predictions
 

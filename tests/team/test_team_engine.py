@@ -24,7 +24,8 @@ import tomllib
 from fracas.build.team import build_study
 from fracas.config.team import parse_team_deck
 from fracas.errors import StmFileError
-from fracas.pipeline import build_stm, reference_from_stm, run_team
+from fracas.modes.stm import build_stm, reference_from_stm
+from fracas.modes.team import run_team
 from fracas.team.engine import augmented_transitions, exact_inputs, process_noise, run_study
 from fracas.team.measure import assemble_measurements
 from fracas.team.reference import integrate_reference
@@ -515,7 +516,7 @@ def test_restart_from_punch_of_another_trajectory(punched, tmp_mod):
     """A punch from team_small_traj.toml, a restart on the same deck with power_kw 10 -> 10.5:
     refused with a one-line error naming the trajectory (as the STM file's check does)."""
     from fracas.errors import DeckError
-    from fracas.pipeline import load_team
+    from fracas.modes.stm import load_team
 
     traj = tmp_mod / "traj_power.toml"
     traj.write_text(TRAJ.read_text(encoding="utf-8").replace("power_kw = 10.0", "power_kw = 10.5"), encoding="utf-8")

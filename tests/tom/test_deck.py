@@ -129,7 +129,7 @@ def test_smag_given_sensitivities_are_used_at_the_first_iteration(tmp_path):
     _, s_fd, _ = base.problem.fegs(base.u0, steps=[1e-6] * 3, central=True)
     rows = ", ".join("[" + ", ".join(repr(float(x)) for x in row) + "]" for row in s_fd)
     text = LAMBERT.read_text(encoding="utf-8") + f"\n[smag]\ns = [{rows}]\ng = [0.0, 0.0, 0.0]\n"
-    from fracas.pipeline import run_tom
+    from fracas.modes.tom import run_tom
 
     plain, _, _ = run_tom(
         parse_tom_deck(LAMBERT.read_text(encoding="utf-8"), str(LAMBERT)),

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from fracas.config.tom import parse_tom_deck
-from fracas.pipeline import run_tom
+from fracas.modes.tom import run_tom
 
 pytestmark = pytest.mark.slow  # DOP853 with thrust: the AD program compiles in ~40 s cold
 

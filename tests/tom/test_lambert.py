@@ -19,7 +19,7 @@ import pytest
 from scipy.optimize import brentq
 
 from fracas.config.tom import parse_tom_deck
-from fracas.pipeline import run_tom
+from fracas.modes.tom import run_tom
 
 ROOT = Path(__file__).resolve().parents[2]
 DECK = ROOT / "namelists" / "lambert_tom.toml"

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from fracas.config.tom import parse_tom_deck
-from fracas.pipeline import run_tom
+from fracas.modes.tom import run_tom
 
 ROOT = Path(__file__).resolve().parents[2]
 DECK = ROOT / "tests" / "data" / "hohmann_tom.toml"

@@ -113,7 +113,7 @@ def test_bplane_targets_at_closest_approach(tmp_path):
     differences, then the search converges, and the impact parameter of the solution's initial
     state, |B| = |r x v| / v_inf (two-body invariants, computed here in numpy), equals
     sqrt(B.T^2 + B.R^2) of the targets to 1e-6 (the 0.01 km tolerances on 13 400 km)."""
-    from fracas.pipeline import run_tom
+    from fracas.modes.tom import run_tom
 
     deck = ROOT / "namelists" / "earth_flyby_bplane_tom.toml"
     case = _case(deck)

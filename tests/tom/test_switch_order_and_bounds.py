@@ -27,8 +27,8 @@ from fracas.cli import main
 from fracas.config.tom import parse_tom_deck
 from fracas.config.trajectory import parse_deck
 from fracas.io.tom_results import read_tom_results
-from fracas.tom.search import Evaluation, Problem, SearchSettings, feasible_point, projected_gradient, wrap_periodic
 from fracas.modes import validate_path
+from fracas.tom.search import Evaluation, Problem, SearchSettings, feasible_point, projected_gradient, wrap_periodic
 
 ROOT = Path(__file__).resolve().parents[2]
 SPIRAL = ROOT / "namelists" / "near_earth_spiral_tom.toml"

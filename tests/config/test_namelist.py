@@ -21,13 +21,12 @@ import pytest
 from click.testing import CliRunner
 
 from fracas.cli import main
-from fracas.config.modes import load_any
 from fracas.config.namelist import import_namelist, namelist_from_deck
 from fracas.config.team import TeamDeck
 from fracas.config.tom import TomDeck, tom_trajectory_deck
 from fracas.config.tsim import TsimDeck, tsim_team_deck
 from fracas.errors import DeckError
-from fracas.validate import check_path
+from fracas.modes import check_path, load_any
 
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO / "tests" / "data"
@@ -101,7 +100,7 @@ def write_import(result, out: Path) -> Path:
 def test_round_trip_equals_the_bundled_toml_deck(deck, tmp_path):
     """namelist_from_deck(deck) imported back validates (``fracas validate``'s check) and is the
     same deck, field by field, sub-decks included; nothing is reported unmapped or unwritten."""
-    text = namelist_from_deck(deck)
+    text = namelist_from_deck(load_any(deck))
     assert "! not written" not in text, text
     result = import_namelist(text, str(tmp_path / "old.nml"), name="new")
     assert result.unmapped == []
@@ -115,7 +114,7 @@ def test_round_trip_equals_the_bundled_toml_deck(deck, tmp_path):
 def test_round_trip_validates_with_fracas_validate(tmp_path):
     """The CLI's ``fracas validate`` accepts the imported TEAM deck and its trajectory deck."""
     nml = tmp_path / "team.nml"
-    nml.write_text(namelist_from_deck(DATA / "team_small.toml"), encoding="utf-8")
+    nml.write_text(namelist_from_deck(load_any(DATA / "team_small.toml")), encoding="utf-8")
     r = fracas("import-namelist", nml, "-o", tmp_path / "team.toml")
     assert r.exit_code == 0, r.output
     v = fracas("validate", tmp_path / "team.toml", tmp_path / "team_traj.toml")
@@ -129,7 +128,7 @@ def test_round_trip_gives_the_same_propagation_as_the_toml_deck(tmp_path):
     from fracas.pipeline import propagate_deck
 
     deck = NAMELISTS / "leo_j2.toml"
-    out = write_import(import_namelist(namelist_from_deck(deck), "leo.nml"), tmp_path / "leo.toml")
+    out = write_import(import_namelist(namelist_from_deck(load_any(deck)), "leo.nml"), tmp_path / "leo.toml")
     a, _ = propagate_deck(deck, tmp_path / "a.h5")
     b, _ = propagate_deck(out, tmp_path / "b.h5")
     for x, y in ((a.r_final_km, b.r_final_km), (a.v_final_km_s, b.v_final_km_s)):
@@ -204,7 +203,7 @@ def test_every_unmapped_field_is_reported_with_namelist_and_name(tmp_path):
 
 def test_mode_detection_and_forced_mode():
     """The deck's mode label decides, else its namelists; --mode forces one; sweep is refused."""
-    team = namelist_from_deck(DATA / "team_small.toml")
+    team = namelist_from_deck(load_any(DATA / "team_small.toml"))
     assert import_namelist(team, "t.nml").mode == "team"
     unlabelled = team.replace("\nTEAM\n", "\n")
     assert import_namelist(unlabelled, "t.nml").mode == "team"
@@ -226,9 +225,11 @@ def test_units_are_converted_as_documented():
     assert d["tracking"][3]["sigma"] == 2.0 and d["tracking"][3]["interval_hours"] == 24.0
     assert math.isclose(d["tracking"][0]["sigma"], 1.0, rel_tol=REL) and d["stm"]["grid_hours"] == 2.0
     assert any("$ERANAL.MSIGMA(4) = 0.002 (FRACAS units) -> sigma = 2 m" in n for n in team.notes)
-    text = namelist_from_deck(NAMELISTS / "earth_mars_tom.toml").replace("    MAXIT", "    PERCEN = 50.0\n    MAXIT")
+    text = namelist_from_deck(load_any(NAMELISTS / "earth_mars_tom.toml")).replace(
+        "    MAXIT", "    PERCEN = 50.0\n    MAXIT"
+    )
     assert import_namelist(text, "x.nml").decks["tom"]["tom"]["correction_fraction"] == 0.5
-    guid = import_namelist(namelist_from_deck(DATA / "tsim_team.toml"), "g.nml")
+    guid = import_namelist(namelist_from_deck(load_any(DATA / "tsim_team.toml")), "g.nml")
     assert guid.decks["team"]["guidance"][1]["arc"] == 1
     assert any("$ERANAL.GARC(2) = 2" in n for n in guid.notes)
 
@@ -236,7 +237,7 @@ def test_units_are_converted_as_documented():
 def test_each_inman_group_is_one_maneuver(tmp_path):
     """§3.3: "each maneuver must have its own $INMAN": two groups -> two [[maneuver]] entries in
     deck order, checked against the TEAM deck's guidance events by ``fracas validate``."""
-    text = namelist_from_deck(NAMELISTS / "earth_mars_tsim_nonlinear.toml")
+    text = namelist_from_deck(load_any(NAMELISTS / "earth_mars_tsim_nonlinear.toml"))
     at = text.index("&INMAN")
     text = text[:at] + "&INMAN\n    NAME = 'lt1'\n    LAW = 1\n/\n" + text[at:]
     result = import_namelist(text, str(tmp_path / "x.nml"), name="x")
@@ -253,8 +254,8 @@ def test_each_inman_group_is_one_maneuver(tmp_path):
 def test_dollar_end_and_ampersand_slash_forms_read_alike():
     """f90nml reads &GROUP ... / ; FRACAS wrote $GROUP ... $END (and &GROUP ... &END): the same
     deck in each form gives the same TOML."""
-    amp = namelist_from_deck(DATA / "team_small.toml")
-    dollar = namelist_from_deck(DATA / "team_small.toml", dollar=True)
+    amp = namelist_from_deck(load_any(DATA / "team_small.toml"))
+    dollar = namelist_from_deck(load_any(DATA / "team_small.toml"), dollar=True)
     assert "$ERANAL" in dollar and "$END" in dollar and "&ERANAL" in amp
     amp_end = amp.replace("\n/\n", "\n&END\n")
     texts = {import_namelist(t, "x.nml").toml for t in (amp, dollar, amp_end)}
@@ -375,7 +376,7 @@ def test_output_is_written_atomically(tmp_path, monkeypatch):
 
 def test_writer_refuses_a_sweep_deck():
     with pytest.raises(DeckError, match="no FRACAS namelist form"):
-        namelist_from_deck(NAMELISTS / "earth_mars_sweep.toml")
+        namelist_from_deck(load_any(NAMELISTS / "earth_mars_sweep.toml"))
 
 
 def test_the_config_layer_loads_no_jax(tmp_path):
@@ -383,7 +384,8 @@ def test_the_config_layer_loads_no_jax(tmp_path):
     contract: config imports no core module)."""
     code = (
         "import json, sys; from fracas.config.namelist import import_namelist, namelist_from_deck; "
-        f"import_namelist(namelist_from_deck({str(DATA / 'tsim_small.toml')!r}), 'x.nml'); "
+        "from fracas.config.tsim import load_tsim_deck; "
+        f"import_namelist(namelist_from_deck(load_tsim_deck({str(DATA / 'tsim_small.toml')!r})), 'x.nml'); "
         "print(json.dumps(sorted(m for m in sys.modules if m.split('.')[0] == 'jax')))"
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=120)

@@ -6,7 +6,6 @@ per maneuver of a TSIM deck; every TOML field with no namelist field listed in a
 from __future__ import annotations
 
 import re
-from pathlib import Path
 from typing import Any
 
 import f90nml
@@ -25,15 +24,6 @@ from fracas.config.namelist.team_fields import (
 from fracas.config.trajectory import cut
 from fracas.errors import DeckError
 from fracas.measurements.kinds import SIGMA_UNITS
-
-
-def _load_config(toml_path_or_config: Any) -> Any:
-    """The validated deck of a TOML path (any mode), or the config given."""
-    from fracas.config.modes import load_any
-
-    if isinstance(toml_path_or_config, (str, Path)):
-        return load_any(toml_path_or_config)
-    return toml_path_or_config
 
 
 def _dump(cfg: Any) -> dict:
@@ -192,8 +182,9 @@ def _nml(groups: list[tuple[str, list]]) -> str:
     return str(out) if items else ""
 
 
-def namelist_from_deck(toml_path_or_config: Any, dollar: bool = False, inline: bool = True) -> str:
-    """A FRACAS-style namelist deck from a TOML deck (path or validated config), any mode but sweep.
+def namelist_from_deck(cfg: Any, dollar: bool = False, inline: bool = True) -> str:
+    """A FRACAS-style namelist deck from a validated TOML deck (``fracas.modes.load_any``), any
+    mode but sweep.
 
     The inverse of :func:`import_namelist` for the fields the mapping covers (same names and
     unit conversions); every TOML field it cannot write is listed in a ``!`` comment at the
@@ -205,7 +196,6 @@ def namelist_from_deck(toml_path_or_config: Any, dollar: bool = False, inline: b
     from fracas.config.trajectory import TrajectoryDeck
     from fracas.config.tsim import TsimDeck
 
-    cfg = _load_config(toml_path_or_config)
     missed: list[str] = []
     src = cfg.source_path or "<deck>"
     if isinstance(cfg, TrajectoryDeck):

@@ -24,16 +24,11 @@ import warnings
 from collections.abc import Callable
 
 import numpy as np
-from scipy.optimize import BFGS, Bounds, LinearConstraint, NonlinearConstraint, minimize
+from scipy.optimize import BFGS, Bounds, LinearConstraint, NonlinearConstraint, OptimizeResult, minimize
 
 from fracas.tom.scaled import ScaledPoints
-from fracas.tom.search import (
-    IterationRecord,
-    Problem,
-    SearchResult,
-    SearchSettings,
-    _validated,
-)
+from fracas.tom.search_support import _validated
+from fracas.tom.search_types import IterationRecord, Problem, SearchResult, SearchSettings
 
 METHODS = ("slsqp", "trust_constr")
 _FAIL = 1e30
@@ -84,81 +79,101 @@ def solve_nlp(
         raise ValueError(f"method must be one of {METHODS}, not {method!r}")
     s = settings
     prob = _validated(problem)
-    m, n = prob.u0.size, prob.desired.size
-    tol = prob.tolerance
     pts = ScaledPoints(prob, s, "NLP")
     if not pts.ev0.ok:
         return pts.finish(pts.u0, pts.ev0, "trajectory failed at the starting controls", False)
     d = pts.set_scale()
-    dfm = s.max_performance_change
     x0 = pts.u0 / d
-    A, b = prob.ineq_matrix, prob.ineq_bound
-    at = pts.at
+    fns = _Scaled(pts, d)
 
-    def fun(x):
-        ev, _, _ = at(x)
-        return -ev.performance / dfm if ev.ok else _FAIL
-
-    def jac(x):
-        ev, _, G = at(x)
-        return -d * G / dfm if ev.ok else np.zeros(m)
-
-    def con(x):
-        ev, _, _ = at(x)
-        return pts.tau(ev) if ev.ok else np.full(n, _FAIL)
-
-    def con_jac(x):
-        ev, S, _ = at(x)
-        return S * d[None, :] / tol[:, None] if ev.ok else np.zeros((n, m))
-
-    def callback(intermediate_result):
+    def callback(intermediate_result: OptimizeResult) -> None:
         pts.record(intermediate_result.x, on_iteration)
 
     bounds = Bounds(prob.lower / d, prob.upper / d)
     has_bounds = bool(np.any(np.isfinite(prob.lower)) or np.any(np.isfinite(prob.upper)))
     with warnings.catch_warnings():
-        if method == "slsqp":
-            # Kraft's SLSQP stops when |Δf| < ftol AND the summed constraint violation < ftol: with τ
-            # (targets / tolerance) as the constraints that asks Σ|τ| < 1e-10, which integrated
-            # trajectories never give (τ carries ~1e-4 of noise), so SLSQP ran to maxiter at the
-            # optimum.  Its rows are scaled by ftol/SLSQP_TAU_OK: converged means Σ|τ| < 0.1 (equality
-            # rows are scale-invariant in its QP, its multipliers take the inverse scale)
-            kappa = SLSQP_FTOL / SLSQP_TAU_OK
-            constraints = (
-                [{"type": "eq", "fun": lambda x: kappa * con(x), "jac": lambda x: kappa * con_jac(x)}] if n else []
-            )
-            if A is not None:
-                Ad = A * d[None, :]
-                constraints.append({"type": "ineq", "fun": lambda x: b - Ad @ x, "jac": lambda x: -Ad})
-            res = minimize(
-                fun,
-                x0,
-                jac=jac,
-                method="SLSQP",
-                bounds=bounds if has_bounds else None,
-                constraints=constraints,
-                callback=callback,
-                options={"maxiter": max(s.max_iterations, 1), "ftol": SLSQP_FTOL},
-            )
-        else:
-            # BFGS updates warn "delta_grad == 0.0" on linear constraints; harmless, so silenced here.
-            warnings.filterwarnings("ignore", message="delta_grad == 0.0", category=UserWarning)
-            constraints = [NonlinearConstraint(con, np.zeros(n), np.zeros(n), jac=con_jac, hess=BFGS())] if n else []
-            if A is not None:
-                constraints.append(LinearConstraint(A * d[None, :], -np.inf, b))
-            res = minimize(
-                fun,
-                x0,
-                jac=jac,
-                hess=BFGS(),
-                method="trust-constr",
-                bounds=bounds if has_bounds else None,
-                constraints=constraints,
-                callback=callback,
-                options={"maxiter": max(20 * s.max_iterations, 1), "gtol": 1e-10, "xtol": 1e-12},
-            )
+        solve = _slsqp if method == "slsqp" else _trust_constr
+        res = solve(fns, x0, bounds if has_bounds else None, callback)
     if method == "slsqp":
         return pts.answer(res.x, f"SLSQP: {res.message} after {int(res.nit)} iterations", bool(res.success), _NOT_LAST)
     optimality = float(res.optimality)
     reason = f"trust-constr: {res.message} (‖∇ₓL‖∞ {optimality:.1e}, violation {float(res.constr_violation):.1e})"
     return pts.answer(res.x, reason, bool(res.success), _NOT_LAST, optimality)
+
+
+class _Scaled:
+    """The scaled problem's functions of Ũ for SciPy: the objective −F/ΔF_max and its gradient,
+    the τ rows and their Jacobian S̃ (``_FAIL`` values and zero derivatives for a failed
+    trajectory); ``A``/``b`` the switch-order rows in U (None without)."""
+
+    def __init__(self, pts: ScaledPoints, d: np.ndarray) -> None:
+        self.pts, self.d = pts, d
+        self.m, self.n = pts.m, pts.n
+        self.tol = pts.prob.tolerance
+        self.dfm = pts.settings.max_performance_change
+        self.A, self.b = pts.prob.ineq_matrix, pts.prob.ineq_bound
+        self.maxiter = pts.settings.max_iterations
+
+    def fun(self, x: np.ndarray) -> float:
+        ev, _, _ = self.pts.at(x)
+        return -ev.performance / self.dfm if ev.ok else _FAIL
+
+    def jac(self, x: np.ndarray) -> np.ndarray:
+        ev, _, G = self.pts.at(x)
+        return -self.d * G / self.dfm if ev.ok else np.zeros(self.m)
+
+    def con(self, x: np.ndarray) -> np.ndarray:
+        ev, _, _ = self.pts.at(x)
+        return self.pts.tau(ev) if ev.ok else np.full(self.n, _FAIL)
+
+    def con_jac(self, x: np.ndarray) -> np.ndarray:
+        ev, S, _ = self.pts.at(x)
+        return S * self.d[None, :] / self.tol[:, None] if ev.ok else np.zeros((self.n, self.m))
+
+
+def _slsqp(fns: _Scaled, x0: np.ndarray, bounds: Bounds | None, callback: Callable) -> OptimizeResult:
+    """SLSQP on the scaled problem (``maxiter = max_iterations``, ``ftol = SLSQP_FTOL``)."""
+    # Kraft's SLSQP stops when |Δf| < ftol AND the summed constraint violation < ftol: with τ
+    # (targets / tolerance) as the constraints that asks Σ|τ| < 1e-10, which integrated
+    # trajectories never give (τ carries ~1e-4 of noise), so SLSQP ran to maxiter at the
+    # optimum.  Its rows are scaled by ftol/SLSQP_TAU_OK: converged means Σ|τ| < 0.1 (equality
+    # rows are scale-invariant in its QP, its multipliers take the inverse scale)
+    kappa = SLSQP_FTOL / SLSQP_TAU_OK
+    con, con_jac, A, b, d = fns.con, fns.con_jac, fns.A, fns.b, fns.d
+    constraints = (
+        [{"type": "eq", "fun": lambda x: kappa * con(x), "jac": lambda x: kappa * con_jac(x)}] if fns.n else []
+    )
+    if A is not None:
+        Ad = A * d[None, :]
+        constraints.append({"type": "ineq", "fun": lambda x: b - Ad @ x, "jac": lambda x: -Ad})
+    return minimize(
+        fns.fun,
+        x0,
+        jac=fns.jac,
+        method="SLSQP",
+        bounds=bounds,
+        constraints=constraints,
+        callback=callback,
+        options={"maxiter": max(fns.maxiter, 1), "ftol": SLSQP_FTOL},
+    )
+
+
+def _trust_constr(fns: _Scaled, x0: np.ndarray, bounds: Bounds | None, callback: Callable) -> OptimizeResult:
+    """trust-constr on the scaled problem (BFGS Hessians, ``maxiter = 20·max_iterations``)."""
+    # BFGS updates warn "delta_grad == 0.0" on linear constraints; harmless, so silenced here.
+    warnings.filterwarnings("ignore", message="delta_grad == 0.0", category=UserWarning)
+    n, A, b, d = fns.n, fns.A, fns.b, fns.d
+    constraints = [NonlinearConstraint(fns.con, np.zeros(n), np.zeros(n), jac=fns.con_jac, hess=BFGS())] if n else []
+    if A is not None:
+        constraints.append(LinearConstraint(A * d[None, :], -np.inf, b))
+    return minimize(
+        fns.fun,
+        x0,
+        jac=fns.jac,
+        hess=BFGS(),
+        method="trust-constr",
+        bounds=bounds,
+        constraints=constraints,
+        callback=callback,
+        options={"maxiter": max(20 * fns.maxiter, 1), "gtol": 1e-10, "xtol": 1e-12},
+    )

@@ -47,7 +47,7 @@ from fracas.integrate.propagate import final_state_jacobian, propagate
 from fracas.integrate.variational import state_derivative, state_jacobians
 from fracas.params import parse_label
 from fracas.status import RunStatus
-from fracas.tom.search import Evaluation
+from fracas.tom.search_types import Evaluation
 
 __all__ = ["ControlMap", "TargetSet", "TomProblem", "Outcome"]
 

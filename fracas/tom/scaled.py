@@ -21,19 +21,11 @@ from collections import OrderedDict
 from collections.abc import Callable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from fracas.tom.search import (
-    Evaluation,
-    IterationRecord,
-    Problem,
-    SearchResult,
-    SearchSettings,
-    _better,
-    _clean,
-    optimality_angle,
-    result_of,
-    weights,
-)
+from fracas.tom.kernels import optimality_angle, weights
+from fracas.tom.search_support import _better, _clean, result_of
+from fracas.tom.search_types import Evaluation, IterationRecord, Problem, SearchResult, SearchSettings
 
 _SLACK = 1e-9  # relative slack of the bounds and switch-order rows in the best-point rule
 
@@ -44,7 +36,7 @@ class ScaledPoints:
     Construction evaluates the start (``given_S``/``given_G`` when given); :meth:`set_scale`
     fixes d from WEIGHT at the start, after which :meth:`at` takes scaled points."""
 
-    def __init__(self, problem: Problem, settings: SearchSettings, submode: str):
+    def __init__(self, problem: Problem, settings: SearchSettings, submode: str) -> None:
         self.prob, self.settings, self.submode = problem, settings, submode
         self.m, self.n = problem.u0.size, problem.desired.size
         desired = problem.desired
@@ -68,7 +60,7 @@ class ScaledPoints:
         self._last_u = self.u0.copy()
 
     # ------------------------------------------------------------------ points
-    def _call(self, u: np.ndarray):
+    def _call(self, u: np.ndarray) -> tuple[Evaluation, np.ndarray, np.ndarray]:
         t = time.perf_counter()
         try:
             ev, S, G = self.prob.sensitivities(u.copy())
@@ -86,7 +78,7 @@ class ScaledPoints:
         self._cache[(self.u0 / self.d).tobytes()] = self._first
         return self.d
 
-    def at(self, x: np.ndarray):
+    def at(self, x: np.ndarray) -> tuple[Evaluation, np.ndarray, np.ndarray]:
         """(Evaluation, S, G) at U = D Ũ; every new point is a candidate for the best one."""
         x = np.asarray(x, dtype=float)
         key = x.tobytes()
@@ -162,7 +154,7 @@ class ScaledPoints:
             on_iteration(rec)
         return rec
 
-    def finish(self, u, ev: Evaluation, reason: str, ok: bool, optimality: float = math.nan) -> SearchResult:
+    def finish(self, u: ArrayLike, ev: Evaluation, reason: str, ok: bool, optimality: float = math.nan) -> SearchResult:
         """The result at U (clipped to its bounds); a claimed convergence must pass FRACAS's TEST
         there (θ over the free controls, with the active switch-order rows, below θ_conv)."""
         p, s = self.prob, self.settings
@@ -181,7 +173,9 @@ class ScaledPoints:
         out.first_order_optimality = optimality
         return out
 
-    def answer(self, x_end, reason: str, converged: bool, not_last: str, optimality: float = math.nan):
+    def answer(
+        self, x_end: ArrayLike, reason: str, converged: bool, not_last: str, optimality: float = math.nan
+    ) -> SearchResult:
         """The solver's end point x_end (Ũ) when it converged there within tolerance (its optimum, not
         a trial at the edge of the tolerance band that gains micrograms), or when no point seen is
         strictly better; else the best point seen, ``not_last`` and both points said in the reason."""

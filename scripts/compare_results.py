@@ -14,7 +14,8 @@ every string dataset or attribute that differs, and datasets the new files lack 
 datasets and attributes are counted, and listed with -v, but are not differences).
 ``--exact`` asks for the same dtype, shape and bytes in every dataset and attribute, and the
 same text in every written deck (``*.toml``) and table (``*.csv``) beside them.
-Provenance (times, versions, host) is skipped: it is meant to differ.  Exit 1 if anything
+Provenance (times, versions, host) and wall-clock timings (``timing*``, ``wall_s``) are
+skipped: they are meant to differ.  Exit 1 if anything
 differs by more than ``--rtol`` (default 1e-12: "identical, or within 1e-12 relative where
 the order of arithmetic had to change").
 """
@@ -33,6 +34,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 SKIP = re.compile(r"(^|/)provenance(/|$)")
+#: wall-clock measurements (seconds a stage took, missions per second): they differ between two
+#: runs of the same code, so they are not compared
+TIMING = re.compile(r"(^|[/@])(timing|wall_s|missions_per_s)")
 VERBOSE = "-v" in sys.argv
 
 
@@ -135,7 +139,7 @@ def compare_file(a: Path, b: Path, rtol: float, exact: bool = False) -> list[str
     added = sorted(set(ib) - set(ia))  # new datasets and attributes are reported, not failures
     worst = 0.0
     for k in sorted(set(ia) & set(ib)):
-        if k.endswith(("@fracas_version", "@written_utc", "@created_utc")):
+        if k.endswith(("@fracas_version", "@written_utc", "@created_utc")) or TIMING.search(k):
             continue
         x, y = _numeric(ia[k]), _numeric(ib[k])
         if exact and x is not None and y is not None:

@@ -38,6 +38,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -48,6 +49,11 @@ from jax.sharding import PartitionSpec as P
 from fracas import _jax  # noqa: F401  (float64, compilation cache)
 from fracas.dynamics.model import ForceModel, Params
 from fracas.integrate.propagate import Sensitivities, Trajectory, propagate, propagate_with_sensitivities
+
+if TYPE_CHECKING:
+    from jax.typing import ArrayLike
+
+    from fracas.dynamics.ephemeris import EphemerisTable
 
 try:  # integrator constants as traced values: one executable for every c_nom, dt_max ...
     from fracas.integrate.propagate import join_model, split_model
@@ -201,20 +207,20 @@ def step_count_proxy(x0s: np.ndarray, mu: float, span_s: float) -> np.ndarray:
 def propagate_batch(
     model: ForceModel,
     params: Params,
-    ephem,
-    epoch_et_s,
-    x0s,
-    t_out,
+    ephem: EphemerisTable | None,
+    epoch_et_s: ArrayLike,
+    x0s: ArrayLike,
+    t_out: ArrayLike,
     chunk_size: int | None = None,
     with_sensitivities: bool = False,
     param_labels: Sequence[str] = (),
-    params_axes=None,
+    params_axes: None | int | dict | Params = None,
     devices: Sequence | None = None,
     progress: Callable[[int, int], None] | None = None,
     group_lanes: bool | None = None,
     sensitivity_method: str = "auto",
     stage_loop: str | None = "unrolled",
-):
+) -> Trajectory | tuple[Trajectory, Sensitivities]:
     """Propagate every row of ``x0s`` (N, 7) through ``t_out`` (shared output times).
 
     Same conventions and outputs as :func:`~fracas.integrate.propagate.propagate` (and, with
@@ -242,6 +248,38 @@ def propagate_batch(
     (vmapped propagations in 32-cell chunks, thrust arcs) measured faster with the loop
     (earth_mars_tsim.toml warm 19 s vs 26 s unrolled; cold 28 s vs 42 s) and keep it.
     """
+    x0s, params, axes, devs = _batch_inputs(x0s, params, params_axes, devices)
+    n = x0s.shape[0]
+    if chunk_size is None:
+        chunk_size = auto_chunk_size(len(devs), with_sensitivities)
+    rows = chunk_rows(n, chunk_size, len(devs))
+    if group_lanes is None:
+        group_lanes = n > rows
+    order = None
+    if group_lanes and n > 1:
+        order = _grouping_order(model, params, axes, x0s, t_out)
+        x0s = x0s[order]
+        params = Params(*[v[order] if a == 0 else v for v, a in zip(params, axes)])
+    if stage_loop not in (None, "loop", "unrolled"):
+        raise ValueError(f"stage_loop = {stage_loop!r}: expected 'loop', 'unrolled' or None")
+    static, dyn = _split(model)
+    if stage_loop is not None and static.integrator.stage_loop != stage_loop:
+        static = dataclasses.replace(static, integrator=dataclasses.replace(static.integrator, stage_loop=stage_loop))
+    fn = _batched_fn(static, bool(with_sensitivities), tuple(param_labels), axes, devs, sensitivity_method)
+    t_out = jnp.asarray(t_out, jnp.float64)
+    epoch = jnp.asarray(epoch_et_s, jnp.float64)
+    single = devs[0] if len(devs) == 1 else None
+    out = _run_chunks(fn, (dyn, ephem, epoch, t_out), x0s, params, axes, rows, single, progress)
+    if order is not None:
+        inverse = np.empty_like(order)
+        inverse[order] = np.arange(n)
+        out = jax.tree_util.tree_map(lambda a: a[inverse], out)
+    return out
+
+
+def _batch_inputs(x0s: ArrayLike, params: Params, params_axes: object, devices: Sequence | None) -> tuple:
+    """(x0s, params, axes, devices) of :func:`propagate_batch`, checked: x0s (N, 7) float64,
+    the batched ``Params`` leaves as float64 arrays with N rows, the device tuple."""
     x0s = np.asarray(x0s, dtype=np.float64)
     if x0s.ndim != 2 or x0s.shape[1] != 7:
         raise ValueError(f"x0s must have shape (N, 7), got {x0s.shape}")
@@ -256,33 +294,34 @@ def propagate_batch(
     for f, v, a in zip(Params._fields, params, axes):
         if a == 0 and (v.ndim == 0 or v.shape[0] != n):
             raise ValueError(f"params.{f} is batched (params_axes) but its axis 0 is not N = {n}")
-    if chunk_size is None:
-        chunk_size = auto_chunk_size(len(devs), with_sensitivities)
-    rows = chunk_rows(n, chunk_size, len(devs))
-    if group_lanes is None:
-        group_lanes = n > rows
-    order = None
-    if group_lanes and n > 1:
-        t_arr = np.asarray(t_out, np.float64)
-        mu_p = (
-            float(np.asarray(params.mu)[model.primary])
-            if axes[0] is None
-            else float(np.mean(params.mu[:, model.primary]))
-        )
-        order = np.argsort(step_count_proxy(x0s, mu_p, float(t_arr[-1] - t_arr[0])), kind="stable")
-        x0s = x0s[order]
-        params = Params(*[v[order] if a == 0 else v for v, a in zip(params, axes)])
-    if stage_loop not in (None, "loop", "unrolled"):
-        raise ValueError(f"stage_loop = {stage_loop!r}: expected 'loop', 'unrolled' or None")
-    static, dyn = _split(model)
-    if stage_loop is not None and static.integrator.stage_loop != stage_loop:
-        static = dataclasses.replace(static, integrator=dataclasses.replace(static.integrator, stage_loop=stage_loop))
-    fn = _batched_fn(static, bool(with_sensitivities), tuple(param_labels), axes, devs, sensitivity_method)
-    t_out = jnp.asarray(t_out, jnp.float64)
-    epoch = jnp.asarray(epoch_et_s, jnp.float64)
-    single = devs[0] if len(devs) == 1 else None
+    return x0s, params, axes, devs
 
-    def launch(start):
+
+def _grouping_order(model: ForceModel, params: Params, axes: tuple, x0s: np.ndarray, t_out: ArrayLike) -> np.ndarray:
+    """Lane order by :func:`step_count_proxy` (stable), for ``group_lanes``."""
+    t_arr = np.asarray(t_out, np.float64)
+    mu_p = (
+        float(np.asarray(params.mu)[model.primary]) if axes[0] is None else float(np.mean(params.mu[:, model.primary]))
+    )
+    return np.argsort(step_count_proxy(x0s, mu_p, float(t_arr[-1] - t_arr[0])), kind="stable")
+
+
+def _run_chunks(
+    fn: Callable,
+    shared: tuple,
+    x0s: np.ndarray,
+    params: Params,
+    axes: tuple,
+    rows: int,
+    single: object | None,
+    progress: Callable[[int, int], None] | None,
+) -> object:
+    """Every chunk of ``rows`` lanes through ``fn`` (``shared`` = (dyn, ephem, epoch, t_out)),
+    the outputs concatenated on the host in lane order."""
+    dyn, ephem, epoch, t_out = shared
+    n = x0s.shape[0]
+
+    def launch(start: int) -> tuple:
         stop = min(start + rows, n)
         xs = _pad_rows(x0s, start, stop, rows)
         ps = Params(*[_pad_rows(v, start, stop, rows) if a == 0 else v for v, a in zip(params, axes)])
@@ -295,7 +334,7 @@ def propagate_batch(
     pieces = []
     done = 0
 
-    def collect(pending):
+    def collect(pending: tuple) -> None:
         nonlocal done
         pieces.append(_to_host(*pending))
         done += pending[0]
@@ -308,15 +347,10 @@ def propagate_batch(
         collect(pending)
         pending = nxt
     collect(pending)
-    out = jax.tree_util.tree_map(lambda *a: np.concatenate(a, axis=0), *pieces)
-    if order is not None:
-        inverse = np.empty_like(order)
-        inverse[order] = np.arange(n)
-        out = jax.tree_util.tree_map(lambda a: a[inverse], out)
-    return out
+    return jax.tree_util.tree_map(lambda *a: np.concatenate(a, axis=0), *pieces)
 
 
-def _to_host(n_valid, out):
+def _to_host(n_valid: int, out: object) -> object:
     return jax.tree_util.tree_map(lambda a: np.asarray(a)[:n_valid], out)
 
 

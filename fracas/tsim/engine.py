@@ -57,13 +57,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from fracas import _jax  # noqa: F401  (float64 before any array exists)
-from fracas.constants import G0_KM_S2
 from fracas.dynamics.model import Params
 from fracas.dynamics.parameters import get_values, set_values
 from fracas.guidance.targets import target_values
 from fracas.integrate.propagate import join_model, propagate, split_model
 from fracas.tsim import sampling as smp
-from fracas.tsim.plan import STATUS_HOPELESS, STATUS_INTEGRATION, STATUS_NEAR, STATUS_OK, TsimPlan
+from fracas.tsim.maneuvers import _fail, _impulsive_maneuver, _low_thrust_maneuver
+from fracas.tsim.plan import STATUS_INTEGRATION, TsimPlan
 
 __all__ = ["CHUNK", "BlockResult", "simulate_block", "block_fields"]
 
@@ -212,6 +212,40 @@ def _grid_chunks(grid: np.ndarray, t_a: float, t_b: float):
     return out
 
 
+def _new_outputs(plan: TsimPlan, missions: np.ndarray, dx0: np.ndarray) -> BlockResult:
+    """The block's zeroed outputs (:func:`block_fields`) with the mission numbers, no failed
+    maneuver yet and the sampled initial deviations."""
+    B = plan.block
+    fields = block_fields(plan)
+    out = {k: np.zeros((B,) + shp, dtype=dt_) for k, (shp, dt_) in fields.items()}
+    out["mission"][:] = missions
+    out["failed_maneuver"][:] = -1
+    out["initial_deviation"][:] = dx0
+    return out
+
+
+def _final_outputs(
+    plan: TsimPlan,
+    prog: dict,
+    out: BlockResult,
+    x: np.ndarray,
+    alive: np.ndarray,
+    status: np.ndarray,
+    booked: np.ndarray,
+) -> None:
+    """Fill the target errors, final mass, total ΔV and status of the block (NaN for lanes
+    that did not fly to the end)."""
+    tf = plan.final
+    t_val = np.asarray(prog["targets"][tf.names](jnp.asarray(x), tf.t_s, jnp.asarray(tf.offset), tf.mu))
+    out["target_error"][:] = t_val - tf.reference
+    out["final_mass_kg"][:] = x[:, 6] - booked
+    out["dv_total_km_s"][:] = out["dv_km_s"].sum(axis=1)
+    out["status"][:] = status
+    dead = ~alive
+    for k in ("target_error", "final_mass_kg"):
+        out[k][dead] = np.nan
+
+
 def simulate_block(plan: TsimPlan, block_index: int) -> BlockResult:
     """Fly the missions ``first_mission + block_index·block + (0..block-1)`` (module docstring).
 
@@ -237,11 +271,7 @@ def simulate_block(plan: TsimPlan, block_index: int) -> BlockResult:
     eta = np.array(eta)
     nx = plan.nx
     J = len(man)
-    fields = block_fields(plan)
-    out = {k: np.zeros((B,) + shp, dtype=dt_) for k, (shp, dt_) in fields.items()}
-    out["mission"][:] = missions
-    out["failed_maneuver"][:] = -1
-    out["initial_deviation"][:] = dx0
+    out = _new_outputs(plan, missions, dx0)
 
     dyn_dev = dx0[:, plan.dyn_index] if plan.dyn_labels else np.zeros((B, 0))
     ctrl_actual = np.zeros((B, len(ctrl_labels)))
@@ -254,11 +284,10 @@ def simulate_block(plan: TsimPlan, block_index: int) -> BlockResult:
     ephem, epoch = plan.ephem, jnp.asarray(plan.epoch_et_s)
     p_nom = plan.params
 
-    def real_params():
-        return prog["lane_params"](p_nom, jnp.asarray(nominal_dyn + dyn_dev), jnp.asarray(nominal_ctrl + ctrl_actual))
-
-    def fly(x, t_a, t_b, alive):
-        params_b = real_params()
+    def fly(x: np.ndarray, t_a: float, t_b: float, alive: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        params_b = prog["lane_params"](
+            p_nom, jnp.asarray(nominal_dyn + dyn_dev), jnp.asarray(nominal_ctrl + ctrl_actual)
+        )
         xj = jnp.asarray(x)
         ok = jnp.asarray(alive)
         for t0, t1, idx in _grid_chunks(plan.grid_s, t_a, t_b):
@@ -267,16 +296,11 @@ def simulate_block(plan: TsimPlan, block_index: int) -> BlockResult:
             )
         return np.array(xj), np.asarray(ok)
 
-    def fail(mask, code, j):
-        new = mask & alive
-        status[new] = code
-        out["failed_maneuver"][new] = j
-
     booked = np.zeros(B)  # impulsive propellant not flown (impulse_propellant = "booked")
     t_prev = 0.0
     for j, m in enumerate(man):
         x, ok = fly(x, t_prev, m.time_s, alive)
-        fail(~ok, STATUS_INTEGRATION, j)
+        _fail(out, status, alive, ~ok, STATUS_INTEGRATION, j)
         alive &= ok
         x[~alive] = plan.x_ref[j]  # frozen on the reference: NaN-free dummies
         dev = x - plan.x_ref[j]
@@ -285,139 +309,19 @@ def simulate_block(plan: TsimPlan, block_index: int) -> BlockResult:
         know = np.array(kn[j])
         out["knowledge_error"][:, j] = know
         est = aug + know
-        M = m.n_controls
         if m.impulsive:
-            dv = -est @ m.gamma.T
             ctrl_now = nominal_ctrl + ctrl_cmd  # what the navigator believes the arcs will fly
-            nonlin = m.law == "nonlinear"
-            dv, code, iters, miss_lin, miss = _impulsive_design(
-                plan, prog, dyn, m, x, know, est, dv, nominal_dyn, ctrl_now, alive, nonlin
-            )
-            mt = len(m.target.names)
-            out["linear_design_miss"][:, j, :mt] = miss_lin
-            out["design_miss"][:, j, :mt] = miss
-            out["maneuver_status"][:, j] = np.where(alive, code, STATUS_OK)
-            if nonlin:
-                fail(code == STATUS_HOPELESS, STATUS_HOPELESS, j)
-                near = (code == STATUS_NEAR) & alive & (status == STATUS_OK)
-                status[near] = STATUS_NEAR
-                alive &= code != STATUS_HOPELESS
-            dv[~alive] = 0.0
-            err = np.array(prog["gates"](ek[j], jnp.asarray(dv), m.sigma_p, m.sigma_pointing_rad, m.sigma_res_km_s))
-            err[~alive] = 0.0
-            applied = dv + err
-            x[:, 3:6] += applied
-            spent = x[:, 6] * (1.0 - np.exp(-np.linalg.norm(applied, axis=1) / (G0_KM_S2 * plan.isp_s)))
-            if plan.impulse_propellant == "spent":
-                x[:, 6] -= spent
-            else:
-                booked += spent
-            out["correction"][:, j, :3] = dv
-            out["execution_error"][:, j, :3] = err
-            out["dv_km_s"][:, j] = np.linalg.norm(dv, axis=1)
-            out["iterations"][:, j] = iters
+            lanes = (alive, status, booked)
+            _impulsive_maneuver(plan, prog, dyn, m, j, x, know, est, ctrl_now, nominal_dyn, lanes, ek[j], out)
         else:
-            idx = [ctrl_labels.index(c) for c in m.control_labels]
-            du = -est @ m.gamma.T - ctrl_cmd[:, idx] @ m.kk.T
-            du[~alive] = 0.0
-            err = np.array(prog["proportional"](ek[j], jnp.asarray(du), m.sigma_p))
-            err[~alive] = 0.0
-            ctrl_cmd[:, idx] += du
-            ctrl_actual[:, idx] += du + err
-            out["correction"][:, j, :M] = du
-            out["execution_error"][:, j, :M] = err
-            out["dv_km_s"][:, j] = np.abs(du @ m.dv_jacobian)
+            _low_thrust_maneuver(prog, m, j, est, ctrl_labels, (ctrl_cmd, ctrl_actual), alive, ek[j], out)
         t_prev = m.time_s
     x, ok = fly(x, t_prev, plan.final.t_s, alive)
-    fail(~ok, STATUS_INTEGRATION, J)
+    _fail(out, status, alive, ~ok, STATUS_INTEGRATION, J)
     alive &= ok
     x[~alive] = plan.x_ref[J]
-    tf = plan.final
-    t_val = np.asarray(prog["targets"][tf.names](jnp.asarray(x), tf.t_s, jnp.asarray(tf.offset), tf.mu))
-    out["target_error"][:] = t_val - tf.reference
-    out["final_mass_kg"][:] = x[:, 6] - booked
-    out["dv_total_km_s"][:] = out["dv_km_s"].sum(axis=1)
-    out["status"][:] = status
-    dead = ~alive
-    for k in ("target_error", "final_mass_kg"):
-        out[k][dead] = np.nan
+    _final_outputs(plan, prog, out, x, alive, status, booked)
     return out
-
-
-def _impulsive_design(plan, prog, dyn, m, x, know, est, dv0, nominal_dyn, ctrl_now, alive, iterate):
-    """GUIDS for the impulsive lanes of a block (module docstring, item 4): the design's miss
-    on the estimated trajectory (the estimated state with the correction flown to the target
-    time by the nominal model at the estimated parameters), and with ``iterate`` the
-    nonlinear design.  Returns (ΔV, status code, iterations, the linear design's miss, the
-    final design's miss), misses (B, m) in target units."""
-    B = x.shape[0]
-    nx = plan.nx
-    tgt = m.target
-    x_est = x.copy()
-    x_est[:, :nx] += know[:, :nx]
-    dyn_est = nominal_dyn + np.where(plan.est_dyn, est[:, plan.dyn_index], 0.0) if plan.dyn_labels else np.zeros((B, 0))
-    params_est = prog["lane_params"](plan.params, jnp.asarray(dyn_est), jnp.asarray(ctrl_now))
-    fn_t = prog["targets"][tgt.names]
-    ephem, epoch = plan.ephem, jnp.asarray(plan.epoch_et_s)
-
-    def miss(dv):
-        xs = x_est.copy()
-        xs[:, 3:6] += dv
-        xf, good = prog["fly_to"](dyn, params_est, ephem, epoch, jnp.asarray(xs), m.time_s, tgt.t_s)
-        val = np.asarray(fn_t(xf, tgt.t_s, jnp.asarray(tgt.offset), tgt.mu))
-        return val - tgt.reference, np.array(good)
-
-    def measure(dT, good):
-        return np.where(good, np.max(np.abs(dT) / tgt.tolerance, axis=1), np.inf)
-
-    def jacobian(dv):  # K about the current design, central differences (SCOMP by FD)
-        h = 1e-4  # km/s: the flights' step-size noise (up to ~10 km over 150 d) / h stays below 1 % of K
-        cols = []
-        for i in range(3):
-            e = np.zeros(3)
-            e[i] = h
-            cols.append((miss(dv + e)[0] - miss(dv - e)[0]) / (2 * h))
-        return np.stack(cols, axis=-1)  # (B, m, 3)
-
-    dv = dv0.copy()
-    done = ~alive.copy()
-    code = np.full(B, STATUS_HOPELESS, dtype=np.int32)
-    code[~alive] = STATUS_OK
-    iters = np.zeros(B, dtype=np.int32)
-    dT, good = miss(dv)
-    miss_linear = np.where(alive[:, None], dT, 0.0)
-    if not iterate:
-        return dv, np.full(B, STATUS_OK, dtype=np.int32), iters, miss_linear, miss_linear
-    norm = measure(dT, good)
-    kp = np.tile(m.k_pinv, (B, 1, 1))  # first step: K about the reference
-    for it in range(m.max_iterations):
-        conv = (norm <= 1.0) & ~done
-        code[conv] = STATUS_OK
-        done |= conv
-        if done.all():
-            break
-        iters[~done] = it + 1
-        if it > 0:
-            kp = np.linalg.pinv(jacobian(dv))
-        step = np.einsum("bij,bj->bi", kp, np.where(good[:, None], dT, 0.0))
-        todo = ~done & good
-        lam = 1.0
-        for _ in range(4):  # backtracking: halve the step while the weighted miss grows
-            trial = np.where(todo[:, None], dv - lam * step, dv)
-            dT_t, good_t = miss(trial)
-            norm_t = measure(dT_t, good_t)
-            take = todo & (norm_t < norm)
-            dv[take], dT[take], norm[take], good[take] = trial[take], dT_t[take], norm_t[take], good_t[take]
-            todo &= ~take
-            if not todo.any():
-                break
-            lam *= 0.5
-    conv = (norm <= 1.0) & ~done
-    code[conv] = STATUS_OK
-    done |= conv
-    near = ~done & (norm <= plan.near_success_factor)
-    code[near] = STATUS_NEAR
-    return dv, code, iters, miss_linear, np.where(alive[:, None], dT, 0.0)
 
 
 def reference_states(plan: TsimPlan, times_s) -> tuple[np.ndarray, float]:

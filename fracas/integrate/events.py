@@ -1,0 +1,80 @@
+"""Event functions of the propagation loop (FRACAS DETECT): the stop condition and the
+changes of primary body, as functions that fall through zero when the event happens.
+
+Part of the Encke/Nystrom core (:mod:`fracas.integrate.encke`, which re-exports these names and
+locates the events by Newton steps).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import jax
+import jax.numpy as jnp
+
+from fracas import _jax  # noqa: F401
+from fracas.dynamics import forces
+from fracas.dynamics.model import (
+    STOP_CLOSEST_APPROACH,
+    STOP_RADIUS,
+    STOP_SOI_ENTRY,
+    STOP_TIME,
+    ForceModel,
+    Params,
+)
+
+if TYPE_CHECKING:
+    from jax.typing import ArrayLike
+
+_INACTIVE = 1.0e30  # event-function value of an inactive event (never crosses zero)
+
+
+def _n_events(model: ForceModel) -> int:
+    return 1 + (len(model.bodies) if model.change_primary_at_soi else 0)
+
+
+def event_functions(
+    model: ForceModel,
+    params: Params,
+    r: jax.Array,
+    v: jax.Array,
+    primary: jax.Array,
+    bodies_pos: jax.Array,
+    bodies_vel: jax.Array,
+    radius_sign: ArrayLike,
+) -> jax.Array:
+    """Event functions g (ne,); an event happens when g falls through zero.
+
+    g[0] is the stop condition: soi_entry |r_b| - R_soi(b); closest_approach -(r_b . v_b);
+    radius s0(|r_b| - R) with s0 the side the propagation started on.  When primary changes
+    are on, g[1 + b] is |r_b| - R_soi(b) for bodies whose parent is the primary (entry) and
+    R_soi(p) - |r| for the primary itself (exit).  Inactive entries are +1e30.
+    """
+    stop = model.stop
+    rp, vp = bodies_pos[primary], bodies_vel[primary]
+    g = []
+    if stop.kind == STOP_TIME:
+        g.append(jnp.asarray(_INACTIVE))
+    else:
+        b = stop.body
+        rb = r + rp - bodies_pos[b]
+        vb = v + vp - bodies_vel[b]
+        dist = jnp.linalg.norm(rb)
+        if stop.kind == STOP_SOI_ENTRY:
+            gs = jnp.where(primary == b, _INACTIVE, dist - params.soi_radius[b])
+        elif stop.kind == STOP_CLOSEST_APPROACH:
+            gs = -forces.dot3(rb, vb)
+        elif stop.kind == STOP_RADIUS:
+            gs = radius_sign * (dist - stop.radius_km)
+        else:  # pragma: no cover - validated upstream
+            raise ValueError(stop.kind)
+        g.append(gs)
+    if model.change_primary_at_soi:
+        for b in range(len(model.bodies)):
+            rb = r + rp - bodies_pos[b]
+            dist = jnp.linalg.norm(rb)
+            soi = params.soi_radius[b]
+            entry = jnp.where(params.parent[b] == primary.astype(jnp.float64), dist - soi, _INACTIVE)
+            exit_ = jnp.where((primary == b) & (params.parent[b] >= 0), soi - jnp.linalg.norm(r), _INACTIVE)
+            g.append(jnp.where(primary == b, exit_, entry))
+    return jnp.stack(g)

@@ -10,9 +10,10 @@ computed once); :func:`run_batch` runs the filter scan of :mod:`fracas.team.scan
 (``filter_scan``, unchanged) under ``jax.vmap`` over the studies and returns each study's
 final covariances (after its last event), which is what a sweep's table needs.
 
-The noise code repeats the front half of :func:`fracas.team.transitions.interval_noise` /
-:func:`~fracas.team.transitions.grid_noise` (nodes, partials, cell transitions), split from
-the sigma- and tau-dependent back half so the back half can run for many studies at once.
+The noise code takes the front half of :func:`fracas.team.transitions.interval_noise` /
+:func:`~fracas.team.transitions.grid_noise` (nodes, partials, cell transitions:
+:func:`fracas.team.noise_base.interval_inputs`, :mod:`fracas.team.noise_cells`), the same
+functions they call, and runs the sigma- and tau-dependent back half for many studies at once.
 Batches are padded to a few sizes (:func:`batch_size`) and schedules to the event buckets
 of :func:`fracas.team.transitions.bucket`, so one compile serves many batches.
 
@@ -40,20 +41,13 @@ from fracas.team.gm_exact import (
     pad_H,
 )
 from fracas.team.measure import MeasurementSet, assemble_measurements
+from fracas.team.noise_base import bucket, interval_inputs, pad_rows
+from fracas.team.noise_cells import cell_inputs, cell_reference, map_cell_noise
 from fracas.team.reference import Reference
 from fracas.team.scan import filter_scan
 from fracas.team.study import Study
-from fracas.team.transitions import (
-    EPS_T,
-    augmented_transitions,
-    bucket,
-    cell_inputs,
-    cell_reference,
-    map_cell_noise,
-    noise_partials,
-    primary_index,
-    white_unit_noise,
-)
+from fracas.team.transitions import augmented_transitions
+from fracas.team.white_acceleration import white_unit_noise
 
 __all__ = [
     "BatchSetup",
@@ -211,22 +205,10 @@ def _dyno_studies(phi, h0, h1, sigma, tau, dt):
     return jax.vmap(per_interval, in_axes=(None, None, None, 0, 0, None))(phi, h0, h1, sigma, tau, dt)
 
 
-def _pad_rows(a: np.ndarray, n: int) -> np.ndarray:
-    return np.concatenate([a, np.zeros((n - len(a),) + a.shape[1:])]) if n > len(a) else a
-
-
 def _interval_nodes(study: Study, ref: Reference) -> dict:
-    """interval_noise's partials, nodes and transitions (the part that needs no sigma)."""
-    t, states, primary, phi = ref.times_s, ref.states, ref.primary, ref.phi
-    K, nx = len(t), study.nx
-    dt = np.diff(t)
-    prim = primary_index(study, primary)
-    t_nodes = np.concatenate([t[:-1] + np.minimum(EPS_T, dt / 2), t[1:] - np.minimum(EPS_T, dt / 2)])
-    x_nodes = np.concatenate([states[:-1], states[1:]])
-    p_nodes = np.concatenate([prim[:-1], prim[1:]])
-    h = noise_partials(study, t_nodes, x_nodes, p_nodes)
-    m, mp = K - 1, bucket(K - 1)
-    args = tuple(_pad_rows(a, mp) for a in (phi[1:, :nx, :nx], h[: K - 1], h[K - 1 :], dt))
+    """interval_noise's partials, nodes and transitions (the part that needs no sigma):
+    :func:`fracas.team.noise_base.interval_inputs`, shared with it."""
+    m, args = interval_inputs(study, ref.times_s, ref.states, ref.primary, ref.phi)
     return {"model": "interval", "m": m, "args": args}
 
 
@@ -237,7 +219,7 @@ def _grid_nodes(study: Study, ref: Reference) -> dict:
     ci = cell_inputs(study, t, *cell_reference(study, t, ref.states[0], getattr(ref, "product", None)))
     nc = ci["nc"]
     mp = bucket(nc)
-    ci.update(model="grid", m=nc, args=tuple(_pad_rows(ci[k], mp) for k in ("phic", "h0", "h1", "dt")))
+    ci.update(model="grid", m=nc, args=tuple(pad_rows(ci[k], mp) for k in ("phic", "h0", "h1", "dt")))
     return ci
 
 

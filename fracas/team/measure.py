@@ -77,6 +77,18 @@ def assemble_measurements(study: Study, ref: Reference, m_pad: int = 4) -> Measu
     if not pairs:
         return MeasurementSet(np.zeros((K, m_pad, n)), eye.copy(), eye.copy(), [], {})
     starts, no_start = _count_starts(study, ref, pairs)
+    items = _observation_items(study, ref, pairs, starts)
+    batch = trakm.observation_matrix_many(items, study.stations, study.labels, nx)
+    visible = _visible(study, ref, pairs, items)
+    records, skipped, per_k = _records(study, pairs, batch, visible, no_start)
+    m = int(math.ceil(max(list(per_k.values()) + [1]) / m_pad) * m_pad)
+    H, Ra, Rt = _scatter(study, K, m, n, records, batch, len(pairs))
+    return MeasurementSet(H, Ra, Rt, records, skipped)
+
+
+def _observation_items(study: Study, ref: Reference, pairs: list[tuple[int, int]], starts: dict) -> list[tuple]:
+    """(observation, geometry) of every (k, j) pair, one :class:`trakm.Geometry` per
+    schedule index, observed body and count interval (built once, shared)."""
     ks = sorted({k for k, _ in pairs} | {k0 for k0, _, _ in starts.values()})
     body_names = sorted({t.body for t in study.tracking if t.body})
     bodies = sorted({ref.primary[k] for k in ks} | {"earth"} | set(body_names))
@@ -91,56 +103,81 @@ def assemble_measurements(study: Study, ref: Reference, m_pad: int = 4) -> Measu
         dt_c = ob.sensor.count_interval_s if ob.kind == "doppler_count_1way" else 0.0
         key = (k, t.body, dt_c)
         geo = geos.get(key)
-        if geo is None and dt_c > 0.0 and (k, j) in starts:
-            k0, phi_0m, dx0 = starts[(k, j)]
-            a, a0, p = ks.index(k), ks.index(k0), bi[ref.primary[k]]
-            x, x0 = ref.states[k], ref.states[k0]
-            geo = geos[key] = trakm.Geometry(
-                et_s=float(study.problem.epoch_et_s + ref.times_s[k]),
-                sc_r=x[:3],
-                sc_v=x[3:6],
-                earth_r=pos[a, bi["earth"]] - pos[a, p],
-                earth_v=vel[a, bi["earth"]] - vel[a, p],
-                et0_s=float(study.problem.epoch_et_s + ref.times_s[k0]),
-                sc_r0=x0[:3],
-                earth_r0=pos[a0, bi["earth"]] - pos[a0, p],
-                phi_0m=phi_0m,
-                dx0_dp=dx0,
-            )
-        if geo is None and dt_c > 0.0:  # the count started before the study (or on another primary)
-            geo = geos[key] = trakm.Geometry(
-                et_s=float(study.problem.epoch_et_s + ref.times_s[k]),
-                sc_r=ref.states[k][:3],
-                sc_v=ref.states[k][3:6],
-                earth_r=np.zeros(3),
-                earth_v=np.zeros(3),
-                et0_s=float(study.problem.epoch_et_s + ref.times_s[k]),
-                sc_r0=ref.states[k][:3],
-                earth_r0=np.zeros(3),
-                phi_0m=np.eye(7),
-            )
         if geo is None:
-            a, p = ks.index(k), bi[ref.primary[k]]
-            o_r, o_v = pos[a, p], vel[a, p]
-            x = ref.states[k]
-            geo = geos[key] = trakm.Geometry(
-                et_s=float(study.problem.epoch_et_s + ref.times_s[k]),
-                sc_r=x[:3],
-                sc_v=x[3:6],
-                earth_r=pos[a, bi["earth"]] - o_r,
-                earth_v=vel[a, bi["earth"]] - o_v,
-                body_r=None if t.body is None else pos[a, bi[t.body]] - o_r,
-                body_v=None if t.body is None else vel[a, bi[t.body]] - o_v,
-                body_radius_km=None if t.body is None else BODIES[t.body].radius_km,
-                star_unit=stars.get(j),
-            )
+            geo = geos[key] = _geometry(study, ref, k, j, dt_c, starts, ks, bi, pos, vel, stars)
         items.append((study.observations[j], geo))
-    batch = trakm.observation_matrix_many(items, study.stations, study.labels, nx)
+    return items
 
+
+def _geometry(
+    study: Study,
+    ref: Reference,
+    k: int,
+    j: int,
+    dt_c: float,
+    starts: dict,
+    ks: list[int],
+    bi: dict[str, int],
+    pos: np.ndarray,
+    vel: np.ndarray,
+    stars: dict,
+) -> trakm.Geometry:
+    """The geometry of observation ``j`` at schedule index ``k``: a one-way Doppler count's
+    (with its start, or zeros when the count started before the study), else the usual one."""
+    t = study.tracking[j]
+    if dt_c > 0.0 and (k, j) in starts:
+        k0, phi_0m, dx0 = starts[(k, j)]
+        a, a0, p = ks.index(k), ks.index(k0), bi[ref.primary[k]]
+        x, x0 = ref.states[k], ref.states[k0]
+        return trakm.Geometry(
+            et_s=float(study.problem.epoch_et_s + ref.times_s[k]),
+            sc_r=x[:3],
+            sc_v=x[3:6],
+            earth_r=pos[a, bi["earth"]] - pos[a, p],
+            earth_v=vel[a, bi["earth"]] - vel[a, p],
+            et0_s=float(study.problem.epoch_et_s + ref.times_s[k0]),
+            sc_r0=x0[:3],
+            earth_r0=pos[a0, bi["earth"]] - pos[a0, p],
+            phi_0m=phi_0m,
+            dx0_dp=dx0,
+        )
+    if dt_c > 0.0:  # the count started before the study (or on another primary)
+        return trakm.Geometry(
+            et_s=float(study.problem.epoch_et_s + ref.times_s[k]),
+            sc_r=ref.states[k][:3],
+            sc_v=ref.states[k][3:6],
+            earth_r=np.zeros(3),
+            earth_v=np.zeros(3),
+            et0_s=float(study.problem.epoch_et_s + ref.times_s[k]),
+            sc_r0=ref.states[k][:3],
+            earth_r0=np.zeros(3),
+            phi_0m=np.eye(7),
+        )
+    a, p = ks.index(k), bi[ref.primary[k]]
+    o_r, o_v = pos[a, p], vel[a, p]
+    x = ref.states[k]
+    return trakm.Geometry(
+        et_s=float(study.problem.epoch_et_s + ref.times_s[k]),
+        sc_r=x[:3],
+        sc_v=x[3:6],
+        earth_r=pos[a, bi["earth"]] - o_r,
+        earth_v=vel[a, bi["earth"]] - o_v,
+        body_r=None if t.body is None else pos[a, bi[t.body]] - o_r,
+        body_v=None if t.body is None else vel[a, bi[t.body]] - o_v,
+        body_radius_km=None if t.body is None else BODIES[t.body].radius_km,
+        star_unit=stars.get(j),
+    )
+
+
+def _records(
+    study: Study, pairs: list[tuple[int, int]], batch: trakm.ObservationBatch, visible: np.ndarray, no_start: set
+) -> tuple[list[MeasurementRecord], dict[int, int], dict[int, int]]:
+    """The record of every observation (used, or skipped below the elevation mask, outside a
+    beacon's cone or without its count start), the skipped count per tracking entry and the
+    used rows per schedule index."""
     skipped: dict[int, int] = {}
     records: list[MeasurementRecord] = []
     per_k: dict[int, int] = {}
-    visible = _visible(study, ref, pairs, items)
     for i, (k, j) in enumerate(pairs):
         e = float(batch.elevation_deg[i])
         used = not (np.isfinite(e) and e < study.min_elevation_deg) and visible[i] and (k, j) not in no_start
@@ -160,7 +197,14 @@ def assemble_measurements(study: Study, ref: Reference, m_pad: int = 4) -> Measu
         else:
             skipped[j] = skipped.get(j, 0) + 1
         records.append(rec)
-    m = int(math.ceil(max(list(per_k.values()) + [1]) / m_pad) * m_pad)
+    return records, skipped, per_k
+
+
+def _scatter(
+    study: Study, K: int, m: int, n: int, records: list[MeasurementRecord], batch: trakm.ObservationBatch, n_pairs: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """H (K, m, n), R_assumed, R_true (K, m, m): the used rows scattered by schedule index
+    (MENO: the true variance adds the observation's extra variance)."""
     H = np.zeros((K, m, n))
     Ra = np.broadcast_to(np.eye(m), (K, m, m)).copy()
     Rt = Ra.copy()
@@ -170,9 +214,9 @@ def assemble_measurements(study: Study, ref: Reference, m_pad: int = 4) -> Measu
     jj = np.array([records[i].tracking for i in ii], dtype=np.intp)
     H[kk, rr] = batch.H[ii]
     Ra[kk, rr, rr] = batch.sigma[ii] ** 2
-    extra = np.zeros(len(pairs)) if batch.extra_variance is None else batch.extra_variance
+    extra = np.zeros(n_pairs) if batch.extra_variance is None else batch.extra_variance
     Rt[kk, rr, rr] = study.true_sigma[jj] ** 2 + extra[ii]
-    return MeasurementSet(H, Ra, Rt, records, skipped)
+    return H, Ra, Rt
 
 
 def _count_starts(study: Study, ref: Reference, pairs):

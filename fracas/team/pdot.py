@@ -16,6 +16,7 @@ Q_c = B q D(x) Bᵀ on the velocity block at every node (D of the reference stat
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from functools import cache
 
 import jax
@@ -27,21 +28,23 @@ from fracas.filters.covariance import Layout
 from fracas.filters.process_noise import pdot_propagate, white_direction, white_Qc
 from fracas.integrate.propagate import propagate
 from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at
+from fracas.team.measure import MeasurementSet
+from fracas.team.noise_base import EPS_T, bucket, primary_index
 from fracas.team.pdot_step import PDOT_OMEGA_STEP, PDOT_TAU_STEP, pdot_step_bounds, pdot_steps
+from fracas.team.reference import Reference
 from fracas.team.result import NOISE_STATE_LABELS, TeamResult, finish
 from fracas.team.scan import _scan
 from fracas.team.study import Study
-from fracas.team.transitions import EPS_T, bucket, primary_index
 
 __all__ = ["run_pdot", "pdot_step_bounds", "pdot_steps", "PDOT_OMEGA_STEP", "PDOT_TAU_STEP", "NOISE_STATE_LABELS"]
 
 
 @cache
-def _pdot_fn():
+def _pdot_fn() -> Callable:
     return jax.jit(pdot_propagate)
 
 
-def _pad_nodes(a: np.ndarray, extra: int):
+def _pad_nodes(a: np.ndarray, extra: int) -> jax.Array:
     """The node array ``a`` with its last node repeated ``extra`` times (zero-length steps)."""
     return jnp.asarray(np.concatenate([a, np.repeat(a[-1:], extra, axis=0)]))
 
@@ -54,22 +57,11 @@ def _expand(P: np.ndarray, sig: np.ndarray) -> np.ndarray:
     return out
 
 
-def run_pdot(study: Study, ref, meas):
-    """The TEAM run with PDOT time updates; returns a TeamResult over n + 3 augmented states."""
-    import time
-
-    if study.filter_kind == "wls" or study.square_root:  # refused when the study is built (fracas.build.team)
-        raise ValueError("PDOT propagation supports the Kalman-Schmidt and user filters in covariance form only")
-    L = study.layout
-    nx, n = L.nx, L.n
-    lay = Layout(L.nx, L.ns, L.nu, L.nv, L.nw + 3)
-    sched = study.schedule
-    K = sched.n
-    t = ref.times_s
-    h_cap = pdot_step_bounds(study, ref)
-    # nodes: for each interval, 2N+1 equally spaced points (ends nudged inside the interval)
+def _interval_nodes(t: np.ndarray, h_cap: np.ndarray) -> tuple[list[int], list[np.ndarray]]:
+    """For each interval, its step count N and its 2N+1 equally spaced nodes (ends nudged
+    ``EPS_T`` inside the interval, at most a quarter of it)."""
     Ns, nodes = [], []
-    for k in range(1, K):
+    for k in range(1, len(t)):
         dt = t[k] - t[k - 1]
         N = max(1, int(math.ceil(dt / h_cap[k - 1] - 1e-9)))
         tt = t[k - 1] + dt * np.arange(2 * N + 1) / (2 * N)
@@ -78,9 +70,14 @@ def run_pdot(study: Study, ref, meas):
         tt[-1] -= e
         Ns.append(N)
         nodes.append(tt)
-    t0 = time.perf_counter()
+    return Ns, nodes
+
+
+def _node_states(study: Study, ref: Reference, all_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The reference state (kk, 7) and primary name at every node, one integration from the
+    first schedule time through the nodes in time order."""
     pr = study.problem
-    all_t = np.concatenate(nodes) if nodes else np.zeros(0)
+    t = ref.times_s
     order = np.argsort(all_t, kind="stable")
     t_sorted = np.concatenate([[t[0]], all_t[order]])
     traj = propagate(pr.model, pr.params, pr.ephem, pr.epoch_et_s, ref.states[0], t_sorted)
@@ -89,6 +86,14 @@ def run_pdot(study: Study, ref, meas):
     prim_names = np.empty(all_t.size, dtype=object)
     bodies = pr.model.bodies
     prim_names[order] = [bodies[int(i)] for i in np.asarray(traj.primary)[1:]]
+    return xs, prim_names
+
+
+def _node_jacobian(study: Study, all_t: np.ndarray, xs: np.ndarray, prim_names: np.ndarray) -> np.ndarray:
+    """F (kk, n + 3, n + 3) at every node without the noise states' decay: A, B of the
+    dynamic parameters and h of the three thrust-noise components (AD of the force model)."""
+    pr = study.problem
+    nx, n = study.layout.nx, study.layout.n
     labels = list(dict.fromkeys(list(study.dynamic_labels) + list(THRUST_NOISE_LABELS)))  # a bias may be both
     kk = all_t.size
     kp = bucket(kk)
@@ -112,6 +117,13 @@ def run_pdot(study: Study, ref, meas):
     dyn_cols = [nx + j for j, d in enumerate(study.dynamic) if d]
     F[:, :nx, dyn_cols] = B_dyn
     F[:, :nx, n:] = h
+    return F
+
+
+def _noise_models(study: Study, F: np.ndarray, xs: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """([F_assumed, F_true], [Qc_assumed, Qc_true]): the noise states' decay -1/tau in F and
+    their white driving noise 2 sigma^2 / tau, plus white acceleration at every node."""
+    n = study.layout.n
     Fs, Qcs = [], []
     white_true = (study.white_q_true, study.white_direction_true) if study.gencov else None
     for (sig, tau), (wq, wd) in zip(
@@ -129,17 +141,60 @@ def run_pdot(study: Study, ref, meas):
             Qc = Qc[None] + np.asarray(white_Qc(wq, white_direction(xs[:, :3], xs[:, 3:6], wd), n + 3))
         Fs.append(Fx)
         Qcs.append(Qc)
+    return Fs, Qcs
+
+
+def _initial(study: Study) -> tuple[jax.Array, jax.Array]:
+    """The assumed and true a priori over n + 3 states."""
+    if study.P0_noise_states is not None:  # a punch with the noise states (issue 24)
+        return tuple(jnp.asarray(p) for p in study.P0_noise_states)
+    Pa = jnp.asarray(_expand(study.P0_assumed, study.noise_sigma_assumed))
+    Pt = jnp.asarray(_expand(study.P0_true, study.noise_sigma_true))
+    return Pa, Pt
+
+
+def _propagate_interval(
+    study: Study, Pa: jax.Array, Pt: jax.Array, N: int, dt_k: float, seg: slice, Fs: list, Qcs: list
+) -> tuple[jax.Array, jax.Array]:
+    """Pa, Pt propagated over one interval of N RK4 steps (``seg``: its nodes), padded to a
+    bucket of steps with zero-length steps: one compiled program per bucket, not one per
+    distinct N (intervals of every length in LEO)."""
+    pdot = _pdot_fn()
+    n_pad = bucket(N, 8)
+    dts = np.zeros(n_pad)
+    dts[:N] = dt_k / N
+
+    extra = 2 * (n_pad - N)
+    qa, qt = (_pad_nodes(q[seg], extra) if q.ndim == 3 else q for q in Qcs)
+    Pa = pdot(Pa, _pad_nodes(Fs[0][seg], extra), qa, jnp.asarray(dts))
+    if study.gencov:
+        Pt = pdot(Pt, _pad_nodes(Fs[1][seg], extra), qt, jnp.asarray(dts))
+    return Pa, Pt
+
+
+def run_pdot(study: Study, ref: Reference, meas: MeasurementSet) -> TeamResult:
+    """The TEAM run with PDOT time updates; returns a TeamResult over n + 3 augmented states."""
+    import time
+
+    if study.filter_kind == "wls" or study.square_root:  # refused when the study is built (fracas.build.team)
+        raise ValueError("PDOT propagation supports the Kalman-Schmidt and user filters in covariance form only")
+    L = study.layout
+    nx, n = L.nx, L.n
+    lay = Layout(L.nx, L.ns, L.nu, L.nv, L.nw + 3)
+    K = study.schedule.n
+    t = ref.times_s
+    # nodes: for each interval, 2N+1 equally spaced points (ends nudged inside the interval)
+    Ns, nodes = _interval_nodes(t, pdot_step_bounds(study, ref))
+    t0 = time.perf_counter()
+    all_t = np.concatenate(nodes) if nodes else np.zeros(0)
+    xs, prim_names = _node_states(study, ref, all_t)
+    Fs, Qcs = _noise_models(study, _node_jacobian(study, all_t, xs, prim_names), xs)
     t_nodes = time.perf_counter() - t0
 
-    if study.P0_noise_states is not None:  # a punch with the noise states (issue 24)
-        Pa, Pt = (jnp.asarray(p) for p in study.P0_noise_states)
-    else:
-        Pa = jnp.asarray(_expand(study.P0_assumed, study.noise_sigma_assumed))
-        Pt = jnp.asarray(_expand(study.P0_true, study.noise_sigma_true))
+    Pa, Pt = _initial(study)
     H = np.concatenate([meas.H, np.zeros(meas.H.shape[:2] + (3,))], axis=2)
     eye = jnp.eye(n + 3)[None]
     zq = jnp.zeros((1, nx, nx))
-    pdot = _pdot_fn()
     out = {k: [] for k in ("am", "ap", "tm", "tp", "sig")}
     start = 0
     for k in range(K):
@@ -147,17 +202,7 @@ def run_pdot(study: Study, ref, meas):
             N = Ns[k - 1]
             seg = slice(start, start + 2 * N + 1)
             start += 2 * N + 1
-            # padded to a bucket of steps with zero-length steps: one compiled program per
-            # bucket, not one per distinct N (intervals of every length in LEO)
-            n_pad = bucket(N, 8)
-            dts = np.zeros(n_pad)
-            dts[:N] = (t[k] - t[k - 1]) / N
-
-            extra = 2 * (n_pad - N)
-            qa, qt = (_pad_nodes(q[seg], extra) if q.ndim == 3 else q for q in Qcs)
-            Pa = pdot(Pa, _pad_nodes(Fs[0][seg], extra), qa, jnp.asarray(dts))
-            if study.gencov:
-                Pt = pdot(Pt, _pad_nodes(Fs[1][seg], extra), qt, jnp.asarray(dts))
+            Pa, Pt = _propagate_interval(study, Pa, Pt, N, t[k] - t[k - 1], seg, Fs, Qcs)
         am, ap, tm, tp, sg = _scan(
             Pa,
             Pt,
@@ -190,6 +235,6 @@ def run_pdot(study: Study, ref, meas):
         np.array(out["sig"]),
         noise_states=True,
     )
-    tm = {"pdot_nodes_s": t_nodes, "pdot_nodes": int(kk)}
+    tm = {"pdot_nodes_s": t_nodes, "pdot_nodes": int(all_t.size)}
     finish(res, tm)
     return res

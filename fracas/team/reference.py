@@ -62,10 +62,10 @@ def run_reference(problem, t_out: np.ndarray, labels: list[str]):
 
 def noise_cell_times(study: Study) -> np.ndarray:
     """The extra output times of an in-line reference for the fixed-cell noise model: the
-    noise cells (fracas.team.transitions) over the schedule and on to the last prediction
+    noise cells (fracas.team.noise_cells) over the schedule and on to the last prediction
     target inside the trajectory, and those targets, so that neither the run nor its
     predictions integrate the reference again (empty for other models or without noise)."""
-    from fracas.team.transitions import _noise_cells
+    from fracas.team.noise_cells import _noise_cells
 
     if study.propagation != "phi" or study.noise_model != "grid" or not study.has_noise:
         return np.zeros(0)

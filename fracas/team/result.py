@@ -186,35 +186,21 @@ def _history(Pm, Pp, Q, P0, events, status) -> CovarianceHistory:
     return CovarianceHistory(Pm, Pp, Q, sig, sig0, _eigen_events(Pp, events), status)
 
 
-def team_product(
-    res: TeamResult, *, reference_source: str, settings: dict | None = None, provenance: dict | None = None
-) -> TeamProduct:
-    """The frozen, labelled :class:`~fracas.products.TeamProduct` of a run.
+def _initial_cov(st: Study, n: int, P0: np.ndarray) -> np.ndarray:
+    """A history's a priori over its n states (PDOT: the noise states start stationary at their sigma)."""
+    if n == P0.shape[0]:
+        return P0
+    out = np.zeros((n, n))  # PDOT: the noise states start stationary at their sigma
+    out[: P0.shape[0], : P0.shape[0]] = P0
+    sig = st.noise_sigma_assumed if P0 is st.P0_assumed else st.noise_sigma_true
+    out[P0.shape[0] :, P0.shape[0] :] = np.diag(sig**2)
+    return out
 
-    ``settings``: extra descriptive entries (the print options, the trajectory deck's path
-    and hash) merged into the product's settings; ``provenance``: deck text, path, versions.
-    """
-    st = res.study
-    events = st.schedule.events
-    n = res.Pa_plus.shape[1]
 
-    def p0(P0):
-        if n == P0.shape[0]:
-            return P0
-        out = np.zeros((n, n))  # PDOT: the noise states start stationary at their sigma
-        out[: P0.shape[0], : P0.shape[0]] = P0
-        sig = st.noise_sigma_assumed if P0 is st.P0_assumed else st.noise_sigma_true
-        out[P0.shape[0] :, P0.shape[0] :] = np.diag(sig**2)
-        return out
-
-    sa = event_status(res.Pa_plus, res.psd_problems, "assumed")
-    assumed = _history(res.Pa_minus, res.Pa_plus, res.Q_assumed, p0(st.P0_assumed), events, sa)
-    true = None
-    if res.Pt_plus is not None:
-        stt = event_status(res.Pt_plus, res.psd_problems, "true")
-        true = _history(res.Pt_minus, res.Pt_plus, res.Q_true, p0(st.P0_true), events, stt)
+def _measurement_log(res: TeamResult) -> MeasurementLog:
+    """Every observation of the run, used or skipped, with its innovation sigma."""
     recs = res.meas.records
-    log = MeasurementLog(
+    return MeasurementLog(
         index=np.array([r.k for r in recs], dtype=np.int64),
         tracking=np.array([r.tracking for r in recs], dtype=np.int64),
         kind=[r.kind for r in recs],
@@ -227,11 +213,21 @@ def team_product(
             [res.innovation_sigma[r.k, r.row] if r.used else np.nan for r in recs], dtype=np.float64
         ),
     )
+
+
+def _prediction_list(res: TeamResult) -> list[Prediction]:
+    """The prediction events (PRED) in schedule order, each with its status."""
     preds = []
     for k, lst in sorted(res.predictions.items()):
         stat = res.prediction_status.get(k, [0] * len(lst))
         for (t_to, Pa, Pt), s in zip(lst, stat):
             preds.append(Prediction(int(k), float(res.times_s[k]), float(t_to), Pa, Pt, int(s)))
+    return preds
+
+
+def _settings(res: TeamResult, reference_source: str, settings: dict | None) -> dict:
+    """The product's settings: the filter's, ``settings`` merged in, then the process noise's."""
+    st = res.study
     sett = {
         "filter": st.filter_kind,
         "propagation": st.propagation,
@@ -252,13 +248,42 @@ def team_product(
 
         sett["gm_piece_step_s"] = float(piece_step(st, res.ref.states, res.ref.primary))
         sett["gm_nodes_per_piece"] = int(GM_NODES)
-    control = None
-    if res.control is not None:
-        pc0 = st.P0_control if st.P0_control is not None else st.P0_true
-        if res.control.shape[-1] > pc0.shape[0]:  # the exact model's noise states: control[0] is its a priori
-            pc0 = res.control[0]
-        sg = np.sqrt(np.clip(np.diagonal(res.control, axis1=1, axis2=2), 0.0, None))
-        control = ControlHistory(res.control, sg, np.asarray(res.control_epoch, dtype=np.int64), np.asarray(pc0))
+    return sett
+
+
+def _control_history(res: TeamResult) -> ControlHistory | None:
+    """The guidance's control covariance history, or None without guidance."""
+    if res.control is None:
+        return None
+    st = res.study
+    pc0 = st.P0_control if st.P0_control is not None else st.P0_true
+    if res.control.shape[-1] > pc0.shape[0]:  # the exact model's noise states: control[0] is its a priori
+        pc0 = res.control[0]
+    sg = np.sqrt(np.clip(np.diagonal(res.control, axis1=1, axis2=2), 0.0, None))
+    return ControlHistory(res.control, sg, np.asarray(res.control_epoch, dtype=np.int64), np.asarray(pc0))
+
+
+def team_product(
+    res: TeamResult, *, reference_source: str, settings: dict | None = None, provenance: dict | None = None
+) -> TeamProduct:
+    """The frozen, labelled :class:`~fracas.products.TeamProduct` of a run.
+
+    ``settings``: extra descriptive entries (the print options, the trajectory deck's path
+    and hash) merged into the product's settings; ``provenance``: deck text, path, versions.
+    """
+    st = res.study
+    events = st.schedule.events
+    n = res.Pa_plus.shape[1]
+    sa = event_status(res.Pa_plus, res.psd_problems, "assumed")
+    assumed = _history(res.Pa_minus, res.Pa_plus, res.Q_assumed, _initial_cov(st, n, st.P0_assumed), events, sa)
+    true = None
+    if res.Pt_plus is not None:
+        stt = event_status(res.Pt_plus, res.psd_problems, "true")
+        true = _history(res.Pt_minus, res.Pt_plus, res.Q_true, _initial_cov(st, n, st.P0_true), events, stt)
+    log = _measurement_log(res)
+    preds = _prediction_list(res)
+    sett = _settings(res, reference_source, settings)
+    control = _control_history(res)
     return TeamProduct(
         title=st.title,
         source=st.source,

@@ -3,6 +3,7 @@ FILTER, KSGAIN, WLSGAN, USRGAN), in covariance or square-root (W-matrix) form.""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import partial
 
 import jax
@@ -13,8 +14,8 @@ from fracas import _jax  # noqa: F401
 from fracas.errors import ConfigError
 from fracas.filters import covariance as cov
 from fracas.filters import square_root as sqr
+from fracas.team.noise_base import bucket
 from fracas.team.study import Study
-from fracas.team.transitions import bucket
 
 __all__ = ["run_filter", "filter_scan", "reset_state_block", "reset_arrays"]
 
@@ -38,6 +39,75 @@ def reset_state_block(P, flag, cov6):
     keep = jnp.concatenate([jnp.zeros(6, dtype=P.dtype), jnp.ones(n - 6, dtype=P.dtype)])
     Pr = (P * keep[:, None] * keep[None, :]).at[:6, :6].set(cov6)
     return jnp.where(flag > 0.0, Pr, P)
+
+
+def _add_exec(P: jax.Array, x: jax.Array, nx: int) -> jax.Array:
+    """P with the execution-error covariance ``x`` (nx, nx) added to its state block."""
+    return P.at[:nx, :nx].add(x)
+
+
+def _assumed_update(
+    A: jax.Array,
+    Pnc: jax.Array,
+    phi: jax.Array,
+    qa: jax.Array,
+    h: jax.Array,
+    ra: jax.Array,
+    xa: jax.Array,
+    fl: jax.Array,
+    rc: jax.Array,
+    *,
+    layout: cov.Layout,
+    kind: str,
+    square_root: bool,
+    user_gain: Callable | None,
+    eye_n: jax.Array,
+    nx: int,
+) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array, jax.Array]:
+    """The assumed side of one event (traced inside :func:`_scan`'s step): time update, reset,
+    gain, measurement update and execution errors; (Pa_m, Pa_p, the carried A, K, Pnc)."""
+    if square_root:
+        Wa = sqr.sqrt_time_update(A, phi, qa)
+        # refactor only at a reset (lax.cond: the Cholesky is not paid on every step)
+        Wa = jax.lax.cond(fl > 0.0, lambda W: sqr.factor(reset_state_block(W @ W.T, fl, rc)), lambda W: W, Wa)
+        Pa_m = Wa @ Wa.T
+        if kind == "kalman_schmidt":
+            K = sqr.sqrt_kalman_schmidt_gain(Wa, h, ra, layout)
+        else:
+            K, Pnc = _gain(kind, user_gain, layout, Pa_m, Pnc, h, ra)
+        Wa1 = sqr.sqrt_time_update(sqr.sqrt_joseph_update(Wa, h, ra, K), eye_n, xa)
+        Pa_p = Wa1 @ Wa1.T
+        A1 = Wa1
+    else:
+        Pa_m = reset_state_block(cov.time_update(A, phi, qa), fl, rc)
+        K, Pnc = _gain(kind, user_gain, layout, Pa_m, Pnc, h, ra)
+        Pa_p = _add_exec(cov.joseph_update(Pa_m, h, ra, K), xa, nx)
+        A1 = Pa_p
+    return Pa_m, Pa_p, A1, K, Pnc
+
+
+def _true_update(
+    T: jax.Array,
+    phit: jax.Array,
+    qt: jax.Array,
+    h: jax.Array,
+    rt: jax.Array,
+    xt: jax.Array,
+    K: jax.Array,
+    *,
+    square_root: bool,
+    eye_n: jax.Array,
+    nx: int,
+) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """The true side of one event with the assumed side's gain K (generalized covariance;
+    traced inside :func:`_scan`'s step): (Pt_m, Pt_p, the carried T)."""
+    if square_root:
+        Wt = sqr.sqrt_time_update(T, phit, qt)
+        Wt1 = sqr.sqrt_time_update(sqr.sqrt_joseph_update(Wt, h, rt, K), eye_n, xt)
+        return Wt @ Wt.T, Wt1 @ Wt1.T, Wt1
+    Pt_m = cov.time_update(T, phit, qt)
+    Pt_p = _add_exec(cov.joseph_update(Pt_m, h, rt, K), xt, nx)
+    return Pt_m, Pt_p, Pt_p
 
 
 @partial(jax.jit, static_argnames=("layout", "kind", "gencov", "square_root", "user_gain"))
@@ -81,9 +151,7 @@ def _scan(
         reset_cov = jnp.zeros((Qa.shape[0], 6, 6), dtype=Qa.dtype)
     nx = Qa.shape[-1]
     same_phi = phi_t is None  # Python-level: the usual program scans one transition per event
-
-    def add_exec(P, x):
-        return P.at[:nx, :nx].add(x)
+    opts = {"square_root": square_root, "eye_n": eye_n, "nx": nx}
 
     def step(carry, ev):
         A, T, Pnc = carry
@@ -91,33 +159,12 @@ def _scan(
         phit = phi if same_phi else ev[10]
         if kind == "wls":
             Pnc = cov.wls_time_update(Pnc, phi, layout)
-        if square_root:
-            Wa = sqr.sqrt_time_update(A, phi, qa)
-            # refactor only at a reset (lax.cond: the Cholesky is not paid on every step)
-            Wa = jax.lax.cond(fl > 0.0, lambda W: sqr.factor(reset_state_block(W @ W.T, fl, rc)), lambda W: W, Wa)
-            Pa_m = Wa @ Wa.T
-            if kind == "kalman_schmidt":
-                K = sqr.sqrt_kalman_schmidt_gain(Wa, h, ra, layout)
-            else:
-                K, Pnc = _gain(kind, user_gain, layout, Pa_m, Pnc, h, ra)
-            Wa1 = sqr.sqrt_time_update(sqr.sqrt_joseph_update(Wa, h, ra, K), eye_n, xa)
-            Pa_p = Wa1 @ Wa1.T
-            A1 = Wa1
-        else:
-            Pa_m = reset_state_block(cov.time_update(A, phi, qa), fl, rc)
-            K, Pnc = _gain(kind, user_gain, layout, Pa_m, Pnc, h, ra)
-            Pa_p = add_exec(cov.joseph_update(Pa_m, h, ra, K), xa)
-            A1 = Pa_p
+        Pa_m, Pa_p, A1, K, Pnc = _assumed_update(
+            A, Pnc, phi, qa, h, ra, xa, fl, rc, layout=layout, kind=kind, user_gain=user_gain, **opts
+        )
         _, J = cov.innovation(Pa_m, h, ra)
         if gencov:
-            if square_root:
-                Wt = sqr.sqrt_time_update(T, phit, qt)
-                Wt1 = sqr.sqrt_time_update(sqr.sqrt_joseph_update(Wt, h, rt, K), eye_n, xt)
-                Pt_m, Pt_p, T1 = Wt @ Wt.T, Wt1 @ Wt1.T, Wt1
-            else:
-                Pt_m = cov.time_update(T, phit, qt)
-                Pt_p = add_exec(cov.joseph_update(Pt_m, h, rt, K), xt)
-                T1 = Pt_p
+            Pt_m, Pt_p, T1 = _true_update(T, phit, qt, h, rt, xt, K, **opts)
         else:
             Pt_m = Pt_p = T1 = T
         return (A1, T1, Pnc), (Pa_m, Pa_p, Pt_m, Pt_p, jnp.sqrt(jnp.diagonal(J)))

@@ -42,10 +42,10 @@ from fracas.errors import ResultsFileError
 from fracas.io.hdf5 import (
     Checked,
     atomic_h5,
-    attr_int,
     attr_text,
     open_h5,
     read_provenance,
+    schema_version,
     write,
     write_provenance,
     write_strings,
@@ -124,6 +124,17 @@ def write_rendezvous_results(path: str | os.PathLike, product: RendezvousProduct
     return p
 
 
+def _check_kind_and_version(f: h5py.File, src: str) -> None:
+    """ResultsFileError unless ``f`` is a rendezvous results file of a schema this fracas reads."""
+    kind = attr_text(f, "file_kind")
+    if kind != FILE_KIND:
+        raise ResultsFileError(
+            f"{src}: not a fracas rendezvous results file (file_kind = {f.attrs.get('file_kind')!r}, "
+            f"expected {FILE_KIND!r})"
+        )
+    schema_version(f, src, RENDEZVOUS_SCHEMA, ResultsFileError, "rendezvous results file")
+
+
 def read_rendezvous_results(path: str | os.PathLike, *, verify: bool = True) -> RendezvousProduct:
     """Read a rendezvous results file; ResultsFileError (one line, naming the file and the
     dataset) when it is missing, not HDF5, damaged (integrity header), another kind, of
@@ -132,22 +143,7 @@ def read_rendezvous_results(path: str | os.PathLike, *, verify: bool = True) -> 
     if not os.path.exists(path):
         raise ResultsFileError(f"{src}: no such results file")
     with open_h5(path, ResultsFileError, "rendezvous results file", checksum=verify) as f:
-        kind = attr_text(f, "file_kind")
-        if kind != FILE_KIND:
-            raise ResultsFileError(
-                f"{src}: not a fracas rendezvous results file (file_kind = {f.attrs.get('file_kind')!r}, "
-                f"expected {FILE_KIND!r})"
-            )
-        raw = f.attrs.get("schema_version")
-        version = attr_int(
-            f,
-            "schema_version",
-            ResultsFileError(f"{src}: attribute schema_version is {type(raw).__name__} ({raw!r}), expected an integer"),
-        )
-        if version is None or not 1 <= version <= RENDEZVOUS_SCHEMA:
-            raise ResultsFileError(
-                f"{src}: rendezvous results file schema_version = {version}, this fracas reads 1 to {RENDEZVOUS_SCHEMA}"
-            )
+        _check_kind_and_version(f, src)
         c = Checked(f, src, ResultsFileError, verify=verify)
         if not isinstance(f.get("rendezvous"), h5py.Group):
             raise c.fail("rendezvous", "missing, expected the rendezvous group (incomplete file?)")

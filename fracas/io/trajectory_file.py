@@ -18,6 +18,7 @@ Reading and writing go through :class:`TrajectoryData`; failures are
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 import h5py
@@ -58,11 +59,15 @@ __all__ = [
 ]
 
 
-def _labels_units(state: bool, labels: tuple[str, ...], units: tuple[str, ...]):
+def _labels_units(
+    state: bool, labels: tuple[str, ...], units: tuple[str, ...]
+) -> tuple[tuple[str, ...], tuple[str, ...]]:
     return (STATE_LABELS, STATE_UNITS) if state else (tuple(labels), tuple(units))
 
 
-def _write_matrix(g: h5py.Group, name: str, data: np.ndarray, col_labels, col_units, meaning: str) -> None:
+def _write_matrix(
+    g: h5py.Group, name: str, data: np.ndarray, col_labels: Sequence[str], col_units: Sequence[str], meaning: str
+) -> None:
     write(
         g,
         name,
@@ -154,6 +159,26 @@ def write_trajectory_file(path: str | os.PathLike, data: TrajectoryData) -> Path
     return dest
 
 
+def _read_sensitivities(c: Checked, f: h5py.File, n: int) -> SensitivityData:
+    """/sensitivities of a file with ``n`` output times, checked."""
+    h = f["sensitivities"]
+    par = c.num("sensitivities/par", (n, 7, None))
+    n_p = par.shape[-1]
+    if "sensitivities/t_s" in f:
+        c.num("sensitivities/t_s", (n,))
+    sens = SensitivityData(
+        stm=c.num("sensitivities/stm", (n, 7, 7)),
+        stm_step=c.num("sensitivities/stm_step", (n, 7, 7)),
+        par=par,
+        par_step=c.num("sensitivities/par_step", (n, 7, n_p)),
+        param_labels=tuple(attr_strs(h["par"], "col_labels")) if n_p else (),
+        param_units=tuple(attr_strs(h["par"], "col_units")) if n_p else (),
+    )
+    if len(sens.param_labels) != n_p:
+        raise c.fail("sensitivities/par", f"{len(sens.param_labels)} col_labels, expected {n_p}")
+    return sens
+
+
 def read_trajectory_file(path: str | os.PathLike, *, verify: bool = True) -> TrajectoryData:
     """Read a file written by :func:`write_trajectory_file`.
 
@@ -189,23 +214,7 @@ def read_trajectory_file(path: str | os.PathLike, *, verify: bool = True) -> Tra
             c.num("trajectory/primary_index", (None,), integer=True)
             status = c.scalar("trajectory/status", integer=True)
             # an unknown code is kept: status_text() names it "unknown status N"
-            sens = None
-            if "sensitivities" in f:
-                h = f["sensitivities"]
-                par = c.num("sensitivities/par", (n, 7, None))
-                n_p = par.shape[-1]
-                if "sensitivities/t_s" in f:
-                    c.num("sensitivities/t_s", (n,))
-                sens = SensitivityData(
-                    stm=c.num("sensitivities/stm", (n, 7, 7)),
-                    stm_step=c.num("sensitivities/stm_step", (n, 7, 7)),
-                    par=par,
-                    par_step=c.num("sensitivities/par_step", (n, 7, n_p)),
-                    param_labels=tuple(attr_strs(h["par"], "col_labels")) if n_p else (),
-                    param_units=tuple(attr_strs(h["par"], "col_units")) if n_p else (),
-                )
-                if len(sens.param_labels) != n_p:
-                    raise c.fail("sensitivities/par", f"{len(sens.param_labels)} col_labels, expected {n_p}")
+            sens = _read_sensitivities(c, f, n) if "sensitivities" in f else None
             epoch_tdb = attr_text(g, "epoch_tdb") or ""
             return TrajectoryData(
                 epoch_et_s=c.scalar("trajectory/epoch_et_s"),

@@ -52,12 +52,8 @@ Results layout (every dataset carries ``units`` and ``data_sha256``)::
       percentiles/<name>      attrs name (exact), order; q (k,) (percent), value (k,)
       final/target_names, target_units, time_s (s), team_target_cov (m, m)
 
-Checkpoint layout::
-
-    /                         file_kind = "fracas-tsim-checkpoint", schema_version, plan_key
-      block_<index>/<field>   the completed block's arrays (integer or float64)
-
-(a "/" in a name becomes "|" in a group's key; the exact name is the group's ``name`` attr)
+(the checkpoint file, :mod:`fracas.io.tsim_checkpoint`, is re-exported here; a "/" in a name
+becomes "|" in a group's key; the exact name is the group's ``name`` attr)
 """
 
 from __future__ import annotations
@@ -85,6 +81,8 @@ from fracas.io.hdf5 import (
     write_provenance,
     write_strings,
 )
+from fracas.io.tsim_checkpoint import read_tsim_checkpoint, write_tsim_checkpoint
+from fracas.io.tsim_schema import _FIELDS, _KIND, CHECKPOINT_SCHEMA, TSIM_SCHEMA, VERDICTS, _group, _json, _open_checked
 from fracas.products import TsimManeuver, TsimProduct
 
 __all__ = [
@@ -96,32 +94,6 @@ __all__ = [
     "TSIM_SCHEMA",
     "CHECKPOINT_SCHEMA",
 ]
-
-TSIM_SCHEMA = 1
-CHECKPOINT_SCHEMA = 1
-_KIND = "fracas-tsim-results"
-_CKPT_KIND = "fracas-tsim-checkpoint"
-VERDICTS = ("consistent", "nonlinear", "biased", "not compared")
-
-#: per-mission field -> (units, integer, description)
-_FIELDS: dict[str, tuple[str, bool, str]] = {
-    "mission": ("1", True, "mission index"),
-    "status": ("1", True, "0 ok, 1 near success, 2 hopeless maneuver, 3 integration failed"),
-    "failed_maneuver": ("1", True, "index of the maneuver that ended the mission (-1: none)"),
-    "iterations": ("1", True, "guidance iterations per maneuver"),
-    "initial_deviation": ("labels", False, "initial augmented-state deviation (units of /tsim/labels)"),
-    "state_deviation": ("km, km/s, kg", False, "true state deviation (r, v, m) at each maneuver"),
-    "knowledge_error": ("labels", False, "knowledge error at each maneuver (units of /tsim/labels)"),
-    "correction": ("control units", False, "commanded correction per maneuver (its control units)"),
-    "execution_error": ("control units", False, "execution error per maneuver (its control units)"),
-    "dv_km_s": ("km/s", False, "|dV| of each maneuver"),
-    "dv_total_km_s": ("km/s", False, "total |dV|"),
-    "target_error": ("final target units", False, "final target error"),
-    "maneuver_status": ("1", True, "per maneuver: 0 ok, 1 near success, 2 hopeless"),
-    "linear_design_miss": ("target units", False, "impulsive: the linear design's miss on the estimated trajectory"),
-    "design_miss": ("target units", False, "impulsive: the flown design's miss on the estimated trajectory"),
-    "final_mass_kg": ("kg", False, "final mass"),
-}
 
 
 def _key(name: str) -> str:
@@ -157,10 +129,8 @@ def _simple(val: Any) -> bool:
 # --------------------------------------------------------------------------- writing
 
 
-def write_tsim_results(path: str | os.PathLike, product: TsimProduct) -> Path:
-    """Write ``product`` to ``path`` atomically (a crash leaves any old file intact)."""
-    p = Path(path)
-    prov = dict(product.provenance)
+def _provenance_parts(prov: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(the items /provenance holds as attributes, the rest: JSON text in tsim/provenance_extra)."""
     std = {
         k: v
         for k, v in prov.items()
@@ -169,6 +139,71 @@ def write_tsim_results(path: str | os.PathLike, product: TsimProduct) -> Path:
         or (k not in ("deck_text", "libraries") and _simple(v))
     }
     extra = {k: v for k, v in prov.items() if k not in std}
+    return std, extra
+
+
+def _write_table(g: h5py.Group, product: TsimProduct) -> None:
+    """tsim/missions: the per-mission table, one dataset per field."""
+    t = g.create_group("missions")
+    set_attr(t, "fields", [str(k) for k in product.table])
+    for name, arr in product.table.items():
+        units, _, desc = _FIELDS.get(name, ("1", False, ""))
+        a = np.asarray(arr)
+        if a.dtype.kind not in "iu":
+            a = a.astype(np.float64)
+        extra_attrs = {"description": desc} if desc else {}
+        write(t, name, a, units, **extra_attrs)
+
+
+def _write_maneuvers(g: h5py.Group, maneuvers: list[TsimManeuver]) -> None:
+    """tsim/maneuvers/<j>_<name>: one group per maneuver."""
+    mg = g.create_group("maneuvers")
+    for j, m in enumerate(maneuvers):
+        h = mg.create_group(f"{j}_{_key(m.name)}")
+        h.attrs["index"] = j
+        write(h, "name", str(m.name), "none")
+        write(h, "type", str(m.type), "none")
+        write(h, "law", str(m.law), "none")
+        write(h, "time_s", np.float64(m.time_s), "s")
+        write(h, "target_time_s", np.float64(m.target_time_s), "s")
+        write_strings(h, "control_labels", m.control_labels)
+        write_strings(h, "control_units", m.control_units)
+        write_strings(h, "target_names", m.target_names)
+        write_strings(h, "target_units", m.target_units)
+        mc = len(m.control_labels)
+        write(h, "team_correction_cov", np.asarray(m.team_correction_cov, float).reshape(mc, mc), "control units^2")
+        write(h, "team_dv_mean_km_s", np.float64(m.team_dv_mean_km_s), "km/s")
+        write(h, "team_dv_99_km_s", np.float64(m.team_dv_99_km_s), "km/s")
+        mt = len(m.target_names)
+        write(h, "team_target_cov_after", np.asarray(m.team_target_cov_after, float).reshape(mt, mt), "target units^2")
+        write(h, "failures", np.int64(m.failures), "1", description="missions it ended (hopeless)")
+        write(h, "near", np.int64(m.near), "1", description="designs accepted as near successes")
+
+
+def _write_statistics(g: h5py.Group, product: TsimProduct) -> None:
+    """tsim/statistics and tsim/percentiles: one group per output, in order."""
+    sg = g.create_group("statistics")
+    for i, (name, (count, mean, cov)) in enumerate(product.statistics.items()):
+        h = sg.create_group(_key(name))
+        h.attrs["name"] = str(name)
+        h.attrs["order"] = i
+        h.attrs["count"] = int(count)
+        mean = np.atleast_1d(np.asarray(mean, float))
+        write(h, "mean", mean, "output units")
+        write(h, "covariance", np.asarray(cov, float).reshape(mean.size, mean.size), "output units^2")
+    pg = g.create_group("percentiles")
+    for i, (name, table) in enumerate(product.percentiles.items()):
+        h = pg.create_group(_key(name))
+        h.attrs["name"] = str(name)
+        h.attrs["order"] = i
+        write(h, "q", np.asarray([float(q) for q in table], float), "percent")
+        write(h, "value", np.asarray([float(v) for v in table.values()], float), "output units")
+
+
+def write_tsim_results(path: str | os.PathLike, product: TsimProduct) -> Path:
+    """Write ``product`` to ``path`` atomically (a crash leaves any old file intact)."""
+    p = Path(path)
+    std, extra = _provenance_parts(dict(product.provenance))
     with atomic_h5(p) as f:
         f.attrs["file_kind"] = _KIND
         f.attrs["schema_version"] = TSIM_SCHEMA
@@ -186,54 +221,9 @@ def write_tsim_results(path: str | os.PathLike, product: TsimProduct) -> Path:
         write(g, "timing", _dumps(product.timing), "none", description="seconds")
         write(g, "provenance_extra", _dumps(extra), "none")
         write(g, "consistency", _dumps(list(product.consistency)), "none", description="JSON list of rows")
-        t = g.create_group("missions")
-        set_attr(t, "fields", [str(k) for k in product.table])
-        for name, arr in product.table.items():
-            units, _, desc = _FIELDS.get(name, ("1", False, ""))
-            a = np.asarray(arr)
-            if a.dtype.kind not in "iu":
-                a = a.astype(np.float64)
-            extra_attrs = {"description": desc} if desc else {}
-            write(t, name, a, units, **extra_attrs)
-        mg = g.create_group("maneuvers")
-        for j, m in enumerate(product.maneuvers):
-            h = mg.create_group(f"{j}_{_key(m.name)}")
-            h.attrs["index"] = j
-            write(h, "name", str(m.name), "none")
-            write(h, "type", str(m.type), "none")
-            write(h, "law", str(m.law), "none")
-            write(h, "time_s", np.float64(m.time_s), "s")
-            write(h, "target_time_s", np.float64(m.target_time_s), "s")
-            write_strings(h, "control_labels", m.control_labels)
-            write_strings(h, "control_units", m.control_units)
-            write_strings(h, "target_names", m.target_names)
-            write_strings(h, "target_units", m.target_units)
-            mc = len(m.control_labels)
-            write(h, "team_correction_cov", np.asarray(m.team_correction_cov, float).reshape(mc, mc), "control units^2")
-            write(h, "team_dv_mean_km_s", np.float64(m.team_dv_mean_km_s), "km/s")
-            write(h, "team_dv_99_km_s", np.float64(m.team_dv_99_km_s), "km/s")
-            mt = len(m.target_names)
-            write(
-                h, "team_target_cov_after", np.asarray(m.team_target_cov_after, float).reshape(mt, mt), "target units^2"
-            )
-            write(h, "failures", np.int64(m.failures), "1", description="missions it ended (hopeless)")
-            write(h, "near", np.int64(m.near), "1", description="designs accepted as near successes")
-        sg = g.create_group("statistics")
-        for i, (name, (count, mean, cov)) in enumerate(product.statistics.items()):
-            h = sg.create_group(_key(name))
-            h.attrs["name"] = str(name)
-            h.attrs["order"] = i
-            h.attrs["count"] = int(count)
-            mean = np.atleast_1d(np.asarray(mean, float))
-            write(h, "mean", mean, "output units")
-            write(h, "covariance", np.asarray(cov, float).reshape(mean.size, mean.size), "output units^2")
-        pg = g.create_group("percentiles")
-        for i, (name, table) in enumerate(product.percentiles.items()):
-            h = pg.create_group(_key(name))
-            h.attrs["name"] = str(name)
-            h.attrs["order"] = i
-            write(h, "q", np.asarray([float(q) for q in table], float), "percent")
-            write(h, "value", np.asarray([float(v) for v in table.values()], float), "output units")
+        _write_table(g, product)
+        _write_maneuvers(g, product.maneuvers)
+        _write_statistics(g, product)
         fg = g.create_group("final")
         write_strings(fg, "target_names", product.final_target_names)
         write_strings(fg, "target_units", product.final_target_units)
@@ -244,36 +234,6 @@ def write_tsim_results(path: str | os.PathLike, product: TsimProduct) -> Path:
 
 
 # --------------------------------------------------------------------------- reading
-
-
-def _open_checked(p: Path, f: h5py.File, kind: str, schema: int, what: str, verify: bool) -> Checked:
-    got = attr_text(f, "file_kind")
-    if got != kind:
-        raise ResultsFileError(
-            f"{p}: not a fracas {what} (file_kind = {f.attrs.get('file_kind')!r}, expected {kind!r})"
-        )
-    version = attr_int(f, "schema_version")
-    if version is None or version < 1 or version > schema:
-        shown = version if version is not None else repr(f.attrs.get("schema_version"))
-        raise ResultsFileError(f"{p}: schema_version = {shown}, this fracas reads 1 to {schema}")
-    return Checked(f, p, ResultsFileError, verify=verify)
-
-
-def _group(c: Checked, name: str) -> h5py.Group:
-    if name not in c.f or not isinstance(c.f[name], h5py.Group):
-        raise c.fail(name, "missing, expected a group (incomplete file?)")
-    return c.f[name]
-
-
-def _json(c: Checked, name: str, kind: type) -> Any:
-    text = c.text(name)
-    try:
-        val = json.loads(text)
-    except ValueError as exc:
-        raise c.fail(name, f"not valid JSON ({exc}), expected JSON text") from None
-    if not isinstance(val, kind):
-        raise c.fail(name, f"JSON {type(val).__name__}, expected a JSON {'object' if kind is dict else 'list'}")
-    return val
 
 
 def _ordered(c: Checked, group: str) -> list[tuple[str, str]]:
@@ -499,59 +459,3 @@ def tsim_settings(path: str | os.PathLike, *, verify: bool = True) -> dict:
             return _json(c, "tsim/settings", dict)
     except OSError as exc:
         raise ResultsFileError(f"{p}: cannot read as HDF5 ({one_line(exc)}), expected a TSIM results file") from None
-
-
-# --------------------------------------------------------------------------- checkpoint
-
-
-def write_tsim_checkpoint(path: str | os.PathLike, plan_key: str, blocks: dict[int, dict[str, np.ndarray]]) -> Path:
-    """Atomically rewrite the checkpoint at ``path``: one group per completed block index
-    holding that block's arrays (integer or float64), attribute ``plan_key``."""
-    p = Path(path)
-    with atomic_h5(p) as f:
-        f.attrs["file_kind"] = _CKPT_KIND
-        f.attrs["schema_version"] = CHECKPOINT_SCHEMA
-        f.attrs["plan_key"] = str(plan_key)
-        for index in sorted(blocks):
-            g = f.create_group(f"block_{int(index)}")
-            for name, arr in blocks[index].items():
-                a = np.asarray(arr)
-                if a.dtype.kind not in "iu":
-                    a = a.astype(np.float64)
-                write(g, name, a, _FIELDS.get(name, ("1",))[0])
-    return p
-
-
-def read_tsim_checkpoint(
-    path: str | os.PathLike, plan_key: str, *, verify: bool = True
-) -> dict[int, dict[str, np.ndarray]]:
-    """The completed blocks of a checkpoint ({} when ``path`` does not exist); a one-line
-    ResultsFileError for a damaged file or one written by a different run (``plan_key``)."""
-    p = Path(path)
-    if not p.exists():
-        return {}
-    try:
-        with open_h5(p, ResultsFileError, "TSIM checkpoint file", checksum=verify) as f:
-            c = _open_checked(p, f, _CKPT_KIND, CHECKPOINT_SCHEMA, "TSIM checkpoint file", verify)
-            key = attr_text(f, "plan_key")
-            if key is None:
-                raise ResultsFileError(f"{p}: no text attribute 'plan_key', expected the run's plan key")
-            if key != str(plan_key):
-                raise ResultsFileError(
-                    f"{p}: checkpoint belongs to a different run (plan_key {key[:16]}..., expected "
-                    f"{str(plan_key)[:16]}...); delete it to start afresh"
-                )
-            out: dict[int, dict[str, np.ndarray]] = {}
-            for gname in f:
-                head, _, idx = gname.partition("_")
-                if head != "block" or not idx.isdigit() or not isinstance(f[gname], h5py.Group):
-                    raise c.fail(gname, "unexpected entry, expected a group 'block_<index>'")
-                arrays = {}
-                for name in f[gname]:
-                    where = f"{gname}/{name}"
-                    ds = c.dataset(where)
-                    arrays[name] = c.num(where, None, integer=ds.dtype.kind in "iu")
-                out[int(idx)] = arrays
-            return dict(sorted(out.items()))
-    except OSError as exc:
-        raise ResultsFileError(f"{p}: cannot read as HDF5 ({one_line(exc)}), expected a TSIM checkpoint file") from None

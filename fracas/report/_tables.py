@@ -1,8 +1,11 @@
-"""The table helpers the TEAM printouts share (:mod:`fracas.report.team`,
-:mod:`fracas.report.guidance`): one compact number format, rich tables that fit a terminal
-(text columns fold, number columns never wrap), one velocity unit per printout."""
+"""The table helpers the TEAM printouts and plots share (:mod:`fracas.report.team`,
+:mod:`fracas.report.guidance`, :mod:`fracas.report.guidance_plots`): one compact number
+format, rich tables that fit a terminal (text columns fold, number columns never wrap), one
+velocity unit per printout (ΔV in its own unit)."""
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
@@ -21,12 +24,25 @@ def _unit(u: str, velocity_unit: str) -> tuple[float, str]:
     return (_vfactor(velocity_unit), velocity_unit) if u == "km/s" else (1.0, u)
 
 
+def _dv(x_km_s: float, dv_unit: str) -> float:
+    """A ΔV of ``x_km_s`` km/s in ``dv_unit``."""
+    return float(x_km_s) * _vfactor(dv_unit)
+
+
+def _output_unit(name: str, unit: str, velocity_unit: str, dv_unit: str) -> tuple[float, str]:
+    """(factor, unit shown) of a budget output: a ΔV (name with "dv"/"ΔV") in km/s goes to
+    ``dv_unit``, another velocity to ``velocity_unit``."""
+    if unit == "km/s" and ("dv" in name.lower() or "δv" in name.lower()):
+        return _vfactor(dv_unit), dv_unit
+    return _unit(unit, velocity_unit)
+
+
 def _fmt(x: float) -> str:
     """The one compact number format of the tables (at most 10 characters)."""
     return f"{x:.4g}" if np.isfinite(x) else ("nan" if np.isnan(x) else f"{x}")
 
 
-def _table(title: str, boxed: bool = True):
+def _table(title: str, boxed: bool = True) -> Any:
     from rich import box
     from rich.table import Table
 
@@ -40,11 +56,11 @@ def _table(title: str, boxed: bool = True):
     )
 
 
-def _num_col(t, header: str) -> None:
+def _num_col(t: Any, header: str) -> None:
     t.add_column(header, justify="right", no_wrap=True)
 
 
-def _text_col(t, header: str, justify: str = "left") -> None:
+def _text_col(t: Any, header: str, justify: str = "left") -> None:
     t.add_column(header, justify=justify, overflow="fold")
 
 

@@ -10,28 +10,26 @@ deck's ``[print]`` asks for and each eigenvector event's table with correlations
 table fits an 80-column terminal: text columns (labels, roles, units, events) wrap, numbers
 are printed in a fixed compact format in columns that never wrap or cut.  One unit per
 quantity across a printout: positions in km, velocities in ``velocity_unit``.
+
+The knowledge-history plot and :func:`plot_all` live in :mod:`fracas.report.team_plots`, the
+short forms (:func:`summary_dict`, :func:`quiet_line`, :func:`process_noise_line`) in
+:mod:`fracas.report.team_summary`; both are re-exported here.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
-from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from fracas.constants import DAY_S
 from fracas.report._tables import VELOCITY_UNITS, _fmt, _num_col, _table, _text_col, _unit, _vfactor
-from fracas.report.guidance import (
-    bplane_figure,
-    budget_figure,
-    correlation_figure,
-    dv_figure,
-    mark_guidance,
-    print_budget,
-    print_guidance,
-    save_figure,
-)
+from fracas.report.guidance import print_budget, print_guidance
+from fracas.report.team_plots import plot_all, plot_team, team_figure, team_figures
+from fracas.report.team_summary import process_noise_line, quiet_line, summary_dict
 from fracas.status import RunStatus, status_text
 
 __all__ = [
@@ -86,7 +84,7 @@ def _breakable_where_too_wide(rows: list[list[str]], width: int) -> list[list[st
     return [[r[0].replace("[", " ["), r[1].replace("_", " "), *r[2:]] for r in rows]
 
 
-def load(path) -> dict:
+def load(path: Any) -> dict:
     """The results file's contents (a one-line error if it is missing or not a results file)."""
     from fracas.io.team_results import read_team_results
 
@@ -104,7 +102,7 @@ def _trace_rss(P: np.ndarray, blk: slice) -> float:
         return float(np.sqrt(max(np.trace(P[blk, blk]), 0.0))) if np.isfinite(np.trace(P[blk, blk])) else math.nan
 
 
-def _eigen_at(h: dict, k: int):
+def _eigen_at(h: dict, k: int) -> tuple[np.ndarray, ...]:
     """(sigma, corr, pos axes, pos eigvec, vel axes, vel eigvec) of history ``h`` at event k."""
     eg = h["eigenvector_events"]
     i = int(np.nonzero(eg["index"] == k)[0][0])
@@ -130,7 +128,7 @@ def covariance_table(
     title: str,
     correlations: bool = True,
     velocity_unit: str = "mm/s",
-):
+) -> tuple[Any, Any]:
     """Standard deviations and the state correlation matrix (like App. 9.3 Table 2) of
     history ``h`` at eigenvector event ``k``, and the position/velocity semi-axes (km and
     ``velocity_unit``); two :class:`rich.table.Table`."""
@@ -168,53 +166,6 @@ def covariance_table(
     return t, eig
 
 
-def summary_dict(r: dict) -> dict:
-    """A JSON-able summary of a TEAM results file (``fracas run --json``)."""
-    at = r["attrs"]
-    m = r["measurements"]
-    used = np.asarray(m["used"], dtype=bool)
-
-    def block(h):
-        sig = np.asarray(h["sigma"][-1])
-        return {
-            "position_rss_km": float(np.sqrt(np.sum(sig[:3] ** 2))),
-            "velocity_rss_km_s": float(np.sqrt(np.sum(sig[3:6] ** 2))),
-            "sigma": dict(zip(r["labels"], map(float, sig))),
-        }
-
-    out = {
-        "title": str(at["title"]),
-        "filter": str(at["filter"]),
-        "propagation": str(at["propagation"]),
-        "reference": str(at["reference"]),
-        "events": int(len(r["times_s"])),
-        "measurements_used": int(used.sum()),
-        "measurements_skipped": int((~used).sum()),
-        "final_time_days": float(r["times_s"][-1] / DAY_S),
-        "assumed": block(r["assumed"]),
-        "psd_problems": len(r["psd_problems"]),
-        "status": int(at.get("status", 0)),
-        "status_text": str(at.get("status_text", "")),
-        "timing_s": {k: round(float(v), 4) for k, v in r["timing"].items()},
-    }
-    if "true" in r:
-        out["true"] = block(r["true"])
-    out["file"] = r["path"]
-    return out
-
-
-def quiet_line(r: dict, velocity_unit: str = "mm/s", file_label: str = "written") -> str:
-    """The one-line summary (``--quiet``): events, measurements used, final assumed RSS, file
-    (``file_label``: "written" after a run, the file's kind when a report reads it)."""
-    s = summary_dict(r)
-    v = s["assumed"]["velocity_rss_km_s"] * _vfactor(velocity_unit)
-    line = (
-        f"{s['events']} events, {s['measurements_used']} measurements; final assumed RSS "
-        f"{s['assumed']['position_rss_km']:.4g} km, {v:.4g} {velocity_unit}; {file_label}: {r['path']}"
-    )
-    return line
-
-
 def _event_status(r: dict, which: str) -> np.ndarray:
     """Per-event status of history ``which`` (the file's event_status; older files: from
     psd_problems and the stored matrices)."""
@@ -247,82 +198,42 @@ def _log_rows(events: list[list[str]], every: int, verbosity: str, bad: set[int]
     return sorted(keep)
 
 
-def process_noise_line(at) -> str:
-    """The process noise the run applied (the filter's model; issue 24), in one line: the
-    Gauss-Markov thrust noise by component (1-sigma, tau), white acceleration noise, and how
-    it was propagated (PHI's model, or PDOT with its RK4 steps).  Empty without any noise."""
-    sig = np.ravel(np.asarray(at.get("thrust_noise_sigma", []), float))
-    tau = np.ravel(np.asarray(at.get("thrust_noise_tau_s", []), float))
-    q = float(at.get("white_noise_km2_s3", 0.0) or 0.0)
-    parts = []
-    if sig.size == 3 and np.any(sig > 0):
-        # one 80-column line: proportionality ("scale"), in-plane and out-of-plane pointing
-        names = ("scale", "in", "out")
-        scale = (1.0, np.degrees(1.0), np.degrees(1.0))
-        unit = ("", "°", "°")
-        comps = [
-            f"{n} {sig[i] * scale[i]:.3g}{unit[i]}/{tau[i] / DAY_S:.3g} d" for i, n in enumerate(names) if sig[i] > 0
-        ]
-        parts.append("thrust 1σ/τ: " + ", ".join(comps))
-    if q > 0:
-        parts.append(f"white {q:.3g} km²/s³ {at.get('white_noise_direction', 'full')}")
-    if not parts:
-        return ""
-    how = str(at.get("process_noise", ""))
-    if how in ("grid", "interval") and sig.size == 3 and np.any(sig > 0):
-        # FRACAS's effective Q̃, approximate (docs/team_results.md); as short as the old names
-        how = {"grid": "DYNO", "interval": "DYNO int"}[how]
-    if how == "pdot":
-        lo, hi = at.get("pdot_step_min_s"), at.get("pdot_step_max_s")
-        how = "PDOT" + (f" steps {float(lo):.3g}-{float(hi):.3g} s" if lo is not None else "")
-    return f"noise ({how}) " + "; ".join(parts)
+@dataclasses.dataclass(frozen=True)
+class _Printout:
+    """What the sections of :func:`print_team` share: the results ``r``, the console, the
+    velocity unit and its factor, each schedule time's events, the covariance histories
+    (assumed, then true with generalized covariance) and their per-event status."""
+
+    r: dict
+    con: Any
+    vu: str
+    vf: float
+    events: list[list[str]]
+    gencov: bool
+    hist: list[tuple[str, dict]]
+    status: dict[str, np.ndarray]
+    bad: set[int]
 
 
-def print_team(
-    r: dict,
-    console=None,
-    *,
-    verbosity: str = "normal",
-    velocity_unit: str = "mm/s",
-    width: int | None = None,
-    max_log_rows: int = 16,
-    file_label: str = "written",
-) -> None:
-    """The FRACAS-style printout of a results file ``r`` (:func:`load`).
-
-    ``verbosity``: ``"quiet"`` (:func:`quiet_line`), ``"normal"`` (study, parameters, an
-    event log of at most about ``max_log_rows`` rows -- thrust switches, eigenvector,
-    prediction and punch events, the first and last measurement and every N-th --, the
-    final assumed/true 1σ table, predictions, warnings) or ``"verbose"`` (every event the
-    deck's ``[print] every`` asks for and every eigenvector event's tables, the printout
-    before the levels existed; the default of this function, the command line's default is
-    ``"normal"``).  ``velocity_unit``: one of :data:`VELOCITY_UNITS`, used for every velocity
-    in the printout.  ``console``: a :class:`rich.console.Console` (default: stdout, ``width``
-    columns, else the terminal's width, 160 when not a terminal).
-    """
-    from rich.console import Console
-    from rich.markup import escape
-
-    if verbosity not in VERBOSITY:
-        raise ValueError(f"verbosity must be one of {', '.join(VERBOSITY)}, not {verbosity!r}")
-    vf = _vfactor(velocity_unit)
-    vu = velocity_unit
-    con = console or Console(width=width or (None if sys.stdout.isatty() else 160))
-    if verbosity == "quiet":
-        con.print(quiet_line(r, vu), markup=False, highlight=False, soft_wrap=True)
-        return
-    at, pr = r["attrs"], r["print"]
-    labels, units, roles = r["labels"], r["units"], r["roles"]
+def _printout(r: dict, con: Any, vu: str, vf: float) -> _Printout:
     events = [e.split("+") for e in r["event_types"]]
-    times = r["times_s"]
-    K = len(times)
     A, T = r["assumed"], r.get("true")
     gencov = T is not None
-    nx = int(at.get("n_state", 7))
     hist = [("assumed", A)] + ([("true", T)] if gencov else [])
     status = {w: _event_status(r, w) for w, _ in hist}
     bad = {int(k) for st in status.values() for k in np.nonzero(st)[0]}
+    return _Printout(r, con, vu, vf, events, gencov, hist, status, bad)
 
+
+def _print_study(p: _Printout) -> None:
+    """The heading, the run's settings and the augmented parameters' 1σ."""
+    from rich.markup import escape
+
+    r, con, vu, gencov = p.r, p.con, p.vu, p.gencov
+    at = r["attrs"]
+    labels, units, roles = r["labels"], r["units"], r["roles"]
+    A, T = r["assumed"], r.get("true")
+    nx = int(at.get("n_state", 7))
     con.rule(f"[bold]TEAM[/bold] {escape(str(at['title']))}")
     con.print(
         escape(
@@ -356,6 +267,12 @@ def print_team(
         pt.add_row(*(escape(c) for c in row))
     con.print(pt)
 
+
+def _print_event_log(p: _Printout, verbosity: str, max_log_rows: int) -> None:
+    """The event log: RSS 1σ after each event shown (:func:`_log_rows`)."""
+    r, con, vu, vf, events, gencov, hist, bad = p.r, p.con, p.vu, p.vf, p.events, p.gencov, p.hist, p.bad
+    pr, times = r["print"], r["times_s"]
+    K = len(times)
     m = r["measurements"]
     used = np.asarray(m["used"], dtype=bool)
     used_at: dict[int, int] = {}
@@ -383,6 +300,14 @@ def print_team(
     ev.caption = _EVENT_LEGEND
     ev.caption_justify = "left"
     con.print(ev)
+
+
+def _print_noise(p: _Printout) -> None:
+    """The process noise applied (:func:`process_noise_line`) and, when the deck's ``[print]``
+    asks for it, its range at the propagation events."""
+    r, con, vu, vf, events = p.r, p.con, p.vu, p.vf, p.events
+    at, pr, A = r["attrs"], r["print"], r["assumed"]
+    K = len(r["times_s"])
     noise_line = process_noise_line(at)
     if noise_line:
         con.print(noise_line)
@@ -395,58 +320,87 @@ def print_team(
                 f"{vu} per interval"
             )
 
-    if verbosity == "verbose":
-        for k in range(K):
-            if not (set(_EIGEN_EVENTS) & set(events[k])):
-                continue
-            for which, h in hist:
-                t, eig = covariance_table(
-                    h,
-                    k,
-                    labels,
-                    units,
-                    escape(f"{which} knowledge at t = {times[k] / DAY_S:.4f} d ({'+'.join(events[k])})"),
-                    bool(int(pr.get("correlations", 1))),
-                    velocity_unit=vu,
-                )
-                con.print(t)
-                con.print(eig)
-    else:
-        ft = _table(f"final knowledge at t = {times[-1] / DAY_S:.4f} d (1σ)", boxed=False)
-        for c in ("label", "unit"):
-            _text_col(ft, c)
-        _num_col(ft, "assumed")
-        if gencov:
-            _num_col(ft, "true")
-        for i, lab in enumerate(labels):
-            if roles[i] == "noise_state":  # stationary, never estimated: in --verbose's tables
-                continue
-            f, u = _unit(units[i], vu)
-            ft.add_row(escape(lab), escape(u), *(_fmt(h["sigma"][-1][i] * f) for _w, h in hist))
-        con.print(ft)
-        for which, h in hist:
-            eg = h["eigenvector_events"]
-            if K - 1 in np.asarray(eg["index"]).tolist():
-                _s, _c, pa, _pv, va, _vv = _eigen_at(h, K - 1)
-                con.print(
-                    f"{which} 1σ semi-axes at the end: position {', '.join(_fmt(x) for x in pa[::-1])} km; "
-                    f"velocity {', '.join(_fmt(x * vf) for x in va[::-1])} {vu}"
-                )
 
-    for p in r["predictions"]:
-        line = f"prediction {p['time_from_s'] / DAY_S:.4f} d -> {p['time_to_s'] / DAY_S:.4f} d: "
-        if p["status"]:
+def _print_eigen_tables(p: _Printout) -> None:
+    """``"verbose"``: every eigenvector event's tables (:func:`covariance_table`)."""
+    from rich.markup import escape
+
+    r, con, vu, events, hist = p.r, p.con, p.vu, p.events, p.hist
+    labels, units, pr, times = r["labels"], r["units"], r["print"], r["times_s"]
+    K = len(times)
+    for k in range(K):
+        if not (set(_EIGEN_EVENTS) & set(events[k])):
+            continue
+        for which, h in hist:
+            t, eig = covariance_table(
+                h,
+                k,
+                labels,
+                units,
+                escape(f"{which} knowledge at t = {times[k] / DAY_S:.4f} d ({'+'.join(events[k])})"),
+                bool(int(pr.get("correlations", 1))),
+                velocity_unit=vu,
+            )
+            con.print(t)
+            con.print(eig)
+
+
+def _print_final_knowledge(p: _Printout) -> None:
+    """The final knowledge 1σ (assumed, true) and the semi-axes at the end."""
+    from rich.markup import escape
+
+    r, con, vu, vf, gencov, hist = p.r, p.con, p.vu, p.vf, p.gencov, p.hist
+    labels, units, roles, times = r["labels"], r["units"], r["roles"], r["times_s"]
+    K = len(times)
+    ft = _table(f"final knowledge at t = {times[-1] / DAY_S:.4f} d (1σ)", boxed=False)
+    for c in ("label", "unit"):
+        _text_col(ft, c)
+    _num_col(ft, "assumed")
+    if gencov:
+        _num_col(ft, "true")
+    for i, lab in enumerate(labels):
+        if roles[i] == "noise_state":  # stationary, never estimated: in --verbose's tables
+            continue
+        f, u = _unit(units[i], vu)
+        ft.add_row(escape(lab), escape(u), *(_fmt(h["sigma"][-1][i] * f) for _w, h in hist))
+    con.print(ft)
+    for which, h in hist:
+        eg = h["eigenvector_events"]
+        if K - 1 in np.asarray(eg["index"]).tolist():
+            _s, _c, pa, _pv, va, _vv = _eigen_at(h, K - 1)
+            con.print(
+                f"{which} 1σ semi-axes at the end: position {', '.join(_fmt(x) for x in pa[::-1])} km; "
+                f"velocity {', '.join(_fmt(x * vf) for x in va[::-1])} {vu}"
+            )
+
+
+def _print_predictions(p: _Printout) -> None:
+    """One line per prediction: the RSS 1σ at its target time."""
+    from rich.markup import escape
+
+    r, con, vu, vf = p.r, p.con, p.vu, p.vf
+    for pred in r["predictions"]:
+        line = f"prediction {pred['time_from_s'] / DAY_S:.4f} d -> {pred['time_to_s'] / DAY_S:.4f} d: "
+        if pred["status"]:
             con.print(escape(line + "not computed: the trajectory ends before the target time"))
             continue
-        Pa, Pt = p["assumed"], p["true"]
+        Pa, Pt = pred["assumed"], pred["true"]
         line += f"assumed RSS {_fmt(_rss(Pa, slice(0, 3)))} km, {_fmt(_rss(Pa, slice(3, 6)) * vf)} {vu}"
         if Pt is not None:
             line += f"; true RSS {_fmt(_rss(Pt, slice(0, 3)))} km, {_fmt(_rss(Pt, slice(3, 6)) * vf)} {vu}"
         con.print(escape(line))
 
-    print_guidance(r, con, verbosity=verbosity, velocity_unit=vu)
-    print_budget(r, con, verbosity=verbosity, velocity_unit=vu)
 
+def _print_warnings(p: _Printout) -> None:
+    """Measurements skipped or unusable, covariances not positive semi-definite, events
+    whose covariance failed, and the run's status."""
+    from rich.markup import escape
+
+    r, con, events, hist, status = p.r, p.con, p.events, p.hist, p.status
+    at, times = r["attrs"], r["times_s"]
+    K = len(times)
+    m = r["measurements"]
+    used = np.asarray(m["used"], dtype=bool)
     mask = float(at.get("min_elevation_deg", 0.0))
     trk = np.asarray(m["tracking"])
     parts, none_used = [], []
@@ -481,89 +435,50 @@ def print_team(
     code = int(at.get("status", 0))
     if code:
         con.print(f"[red]status {code}:[/red] {escape(str(at.get('status_text', status_text(code))))}")
-    con.print(f"{file_label}: {r['path']}", markup=False, highlight=False, overflow="ignore")
 
 
-def team_figure(r: dict, velocity_unit: str = "mm/s"):
-    """Position and velocity RSS 1σ and parameter 1σ (relative to a priori) against time, a
-    matplotlib figure; velocities in ``velocity_unit`` (the printout's).
+def print_team(
+    r: dict,
+    console: Any = None,
+    *,
+    verbosity: str = "normal",
+    velocity_unit: str = "mm/s",
+    width: int | None = None,
+    max_log_rows: int = 16,
+    file_label: str = "written",
+) -> None:
+    """The FRACAS-style printout of a results file ``r`` (:func:`load`).
 
-    With guidance events in the file (``r["guidance"]``), vertical lines mark them; with a
-    control covariance (``r["control"]``), its RSS 1σ (the actual dispersion about the
-    reference) is a third curve.  Without either the figure is what it always was."""
-    import matplotlib
+    ``verbosity``: ``"quiet"`` (:func:`quiet_line`), ``"normal"`` (study, parameters, an
+    event log of at most about ``max_log_rows`` rows -- thrust switches, eigenvector,
+    prediction and punch events, the first and last measurement and every N-th --, the
+    final assumed/true 1σ table, predictions, warnings) or ``"verbose"`` (every event the
+    deck's ``[print] every`` asks for and every eigenvector event's tables, the printout
+    before the levels existed; the default of this function, the command line's default is
+    ``"normal"``).  ``velocity_unit``: one of :data:`VELOCITY_UNITS`, used for every velocity
+    in the printout.  ``console``: a :class:`rich.console.Console` (default: stdout, ``width``
+    columns, else the terminal's width, 160 when not a terminal).
+    """
+    from rich.console import Console
 
-    matplotlib.use("Agg")
-
-    import matplotlib.pyplot as plt
-
+    if verbosity not in VERBOSITY:
+        raise ValueError(f"verbosity must be one of {', '.join(VERBOSITY)}, not {verbosity!r}")
     vf = _vfactor(velocity_unit)
-    nx = int(r["attrs"].get("n_state", 7))
-    t = r["times_s"] / DAY_S
-    fig, ax = plt.subplots(3, 1, figsize=(8, 9), sharex=True)
-    for which, style in (("assumed", "-"), ("true", "--")):
-        if which not in r:
-            continue
-        P = r[which]["P_plus"]
-        pos = np.sqrt(np.clip(np.einsum("kii->k", P[:, :3, :3]), 0, None))
-        vel = np.sqrt(np.clip(np.einsum("kii->k", P[:, 3:6, 3:6]), 0, None)) * vf
-        ax[0].semilogy(t, pos, style, label=which)
-        ax[1].semilogy(t, vel, style, label=which)
-    if r.get("control") is not None:
-        P = np.asarray(r["control"]["P_plus"])
-        pos = np.sqrt(np.clip(np.einsum("kii->k", P[:, :3, :3]), 0, None))
-        vel = np.sqrt(np.clip(np.einsum("kii->k", P[:, 3:6, 3:6]), 0, None)) * vf
-        ax[0].semilogy(t, pos, ":", label="control (actual dispersion)")
-        ax[1].semilogy(t, vel, ":", label="control (actual dispersion)")
-    ax[0].set_ylabel("position RSS 1σ (km)")
-    ax[1].set_ylabel(f"velocity RSS 1σ ({velocity_unit})")
-    A = r["assumed"]
-    for i, lab in enumerate(r["labels"]):
-        prior = A["a_priori_sigma"][i]
-        if i >= nx and prior > 0 and r["roles"][i] == "solve_for":
-            ax[2].plot(t, A["sigma"][:, i] / prior, label=lab)
-    ax[2].set_ylabel("solve-for 1σ / a priori")
-    ax[2].set_xlabel("days from the trajectory epoch")
-    if r.get("guidance"):
-        mark_guidance(r, ax)
-    for a in ax:
-        a.grid(True, alpha=0.3)
-        a.legend(fontsize=8)
-    fig.suptitle(f"TEAM knowledge: {r['attrs']['title']}")
-    fig.tight_layout()
-    return fig
-
-
-def plot_team(r: dict, png: str | Path, velocity_unit: str = "mm/s") -> Path:
-    """Write :func:`team_figure` as a PNG at ``png`` (atomically); returns the path."""
-    return save_figure(team_figure(r, velocity_unit), png)
-
-
-def plot_all(r: dict, png: str | Path, velocity_unit: str = "mm/s", dv_unit: str = "m/s") -> list[Path]:
-    """Every plot of a results file: the knowledge history at ``png`` (:func:`plot_team`)
-    and, where they apply, ``<stem>_bplane.png`` (guidance events targeting B·T and B·R),
-    ``<stem>_correlation.png`` (an eigenvector event), ``<stem>_budget.png`` (an error
-    budget) and ``<stem>_dv.png`` (guidance events) beside it; the paths written, in that
-    order, each atomically.  Velocities in ``velocity_unit`` and ΔV in ``dv_unit``, the
-    printout's (:func:`print_team`)."""
-    png = Path(png)
-    out = [plot_team(r, png, velocity_unit)]
-    for suffix, fig in team_figures(r, velocity_unit, dv_unit, knowledge=False)[1:]:
-        out.append(save_figure(fig, png.with_name(f"{png.stem}_{suffix}.png")))
-    return out
-
-
-def team_figures(r: dict, velocity_unit: str = "mm/s", dv_unit: str = "m/s", knowledge: bool = True) -> list:
-    """(suffix, figure) of every plot :func:`plot_all` writes ("" for the knowledge
-    history, first), built and not saved; the knowledge history is built only if
-    ``knowledge`` (else its entry is ("", None))."""
-    figs = [("", team_figure(r, velocity_unit) if knowledge else None)]
-    for suffix, fig in (
-        ("bplane", bplane_figure(r)),
-        ("correlation", correlation_figure(r)),
-        ("budget", budget_figure(r, velocity_unit, dv_unit)),
-        ("dv", dv_figure(r, dv_unit)),
-    ):
-        if fig is not None:
-            figs.append((suffix, fig))
-    return figs
+    vu = velocity_unit
+    con = console or Console(width=width or (None if sys.stdout.isatty() else 160))
+    if verbosity == "quiet":
+        con.print(quiet_line(r, vu), markup=False, highlight=False, soft_wrap=True)
+        return
+    p = _printout(r, con, vu, vf)
+    _print_study(p)
+    _print_event_log(p, verbosity, max_log_rows)
+    _print_noise(p)
+    if verbosity == "verbose":
+        _print_eigen_tables(p)
+    else:
+        _print_final_knowledge(p)
+    _print_predictions(p)
+    print_guidance(r, con, verbosity=verbosity, velocity_unit=vu)
+    print_budget(r, con, verbosity=verbosity, velocity_unit=vu)
+    _print_warnings(p)
+    con.print(f"{file_label}: {r['path']}", markup=False, highlight=False, overflow="ignore")

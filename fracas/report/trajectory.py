@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -35,7 +36,7 @@ def _valid(data: TrajectoryData) -> np.ndarray:
     return np.isfinite(np.asarray(data.t_s, dtype=np.float64))
 
 
-def summary_table(data: TrajectoryData):
+def summary_table(data: TrajectoryData) -> Any:
     """A :class:`rich.table.Table` summarising ``data`` (states, mass used, steps, status).
 
     Fits an 80-column terminal: one row per vector component, numbers in columns that never
@@ -78,7 +79,9 @@ def summary_table(data: TrajectoryData):
     return t
 
 
-def print_summary(data: TrajectoryData, path: str | Path | None = None, console=None, width: int | None = None) -> None:
+def print_summary(
+    data: TrajectoryData, path: str | Path | None = None, console: Any = None, width: int | None = None
+) -> None:
     """Print :func:`summary_table` to ``console`` (a :class:`rich.console.Console`; stdout by
     default, ``width`` columns or the terminal's)."""
     from rich.console import Console
@@ -136,45 +139,15 @@ MAX_REVOLUTIONS_DRAWN = 20
 _SHOWN_REVOLUTIONS = 7
 
 
-def trajectory_figure(data: TrajectoryData):
-    """The trajectory plot as a matplotlib :class:`~matplotlib.figure.Figure` (Agg canvas).
-
-    Left: the x-y projection (ICRF) drawn through the samples with the conics between them
-    (:func:`fracas.report._conic.dense_path`); a path of more than
-    :data:`MAX_REVOLUTIONS_DRAWN` revolutions (a spiral) shows a few evenly spaced
-    revolutions, first and last included, coloured by time.  Right, against time: radius
-    with the osculating semi-major axis, eccentricity, inclination (to the ecliptic about
-    the Sun, to the ICRF equator otherwise) and mass."""
+def _draw_xy(
+    fig: Any, ax: Any, data: TrajectoryData, r: np.ndarray, t_day: np.ndarray, prim: np.ndarray, scale: float, unit: str
+) -> None:
+    """The x-y projection about each primary (a few revolutions of a spiral, coloured by time)."""
     from matplotlib import colormaps
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
-    from matplotlib.figure import Figure
 
-    ok = _valid(data)
-    t_s = np.asarray(data.t_s, dtype=np.float64)[ok]
-    r = np.asarray(data.r_km, dtype=np.float64)[ok]
-    v = np.asarray(data.v_km_s, dtype=np.float64)[ok]
-    m = np.asarray(data.mass_kg, dtype=np.float64)[ok]
-    prim = (
-        np.asarray(data.primary, dtype=object)[ok]
-        if len(data.primary) == len(ok)
-        else np.array([data.centre] * ok.sum(), dtype=object)
-    )
-    t_s, r, v, m, prim = dense_path(t_s, r, v, m, prim, _mu_of)
-    t_day = t_s / DAY_S
-    rmag = np.linalg.norm(r, axis=-1) if r.size else np.zeros(0)
-    big = rmag.size and float(np.nanmax(rmag)) > 0.05 * AU_KM
-    scale, unit = (AU_KM, "AU") if big else (1.0, "km")
     names = list(dict.fromkeys(prim.tolist()))
-
-    fig = Figure(figsize=(12, 7.5), layout="constrained")
-    FigureCanvasAgg(fig)
-    grid = fig.add_gridspec(4, 2, width_ratios=(1.15, 1.0))
-    ax = fig.add_subplot(grid[:, 0])
-    right = [fig.add_subplot(grid[0, 1])]
-    right += [fig.add_subplot(grid[j, 1], sharex=right[0]) for j in (1, 2, 3)]
-    ax_r, ax_e, ax_i, ax_m = right
     notes = []
     for c, name in enumerate(names):
         sel = prim == name
@@ -206,6 +179,21 @@ def trajectory_figure(data: TrajectoryData):
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize=8)
 
+
+def _draw_elements(
+    right: list[Any],
+    r: np.ndarray,
+    v: np.ndarray,
+    m: np.ndarray,
+    t_day: np.ndarray,
+    rmag: np.ndarray,
+    prim: np.ndarray,
+    scale: float,
+    unit: str,
+) -> None:
+    """Against time: radius and osculating a, e, i (averaged per revolution on a spiral), mass."""
+    ax_r, ax_e, ax_i, ax_m = right
+    names = list(dict.fromkeys(prim.tolist()))
     ref = "ICRF equator"
     for c, name in enumerate(names):
         sel = prim == name
@@ -247,6 +235,44 @@ def trajectory_figure(data: TrajectoryData):
         a_.ticklabel_format(axis="y", useOffset=False)
     for a_ in right[:-1]:
         a_.tick_params(labelbottom=False)
+
+
+def trajectory_figure(data: TrajectoryData) -> Any:
+    """The trajectory plot as a matplotlib :class:`~matplotlib.figure.Figure` (Agg canvas).
+
+    Left: the x-y projection (ICRF) drawn through the samples with the conics between them
+    (:func:`fracas.report._conic.dense_path`); a path of more than
+    :data:`MAX_REVOLUTIONS_DRAWN` revolutions (a spiral) shows a few evenly spaced
+    revolutions, first and last included, coloured by time.  Right, against time: radius
+    with the osculating semi-major axis, eccentricity, inclination (to the ecliptic about
+    the Sun, to the ICRF equator otherwise) and mass."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    ok = _valid(data)
+    t_s = np.asarray(data.t_s, dtype=np.float64)[ok]
+    r = np.asarray(data.r_km, dtype=np.float64)[ok]
+    v = np.asarray(data.v_km_s, dtype=np.float64)[ok]
+    m = np.asarray(data.mass_kg, dtype=np.float64)[ok]
+    prim = (
+        np.asarray(data.primary, dtype=object)[ok]
+        if len(data.primary) == len(ok)
+        else np.array([data.centre] * ok.sum(), dtype=object)
+    )
+    t_s, r, v, m, prim = dense_path(t_s, r, v, m, prim, _mu_of)
+    t_day = t_s / DAY_S
+    rmag = np.linalg.norm(r, axis=-1) if r.size else np.zeros(0)
+    big = rmag.size and float(np.nanmax(rmag)) > 0.05 * AU_KM
+    scale, unit = (AU_KM, "AU") if big else (1.0, "km")
+
+    fig = Figure(figsize=(12, 7.5), layout="constrained")
+    FigureCanvasAgg(fig)
+    grid = fig.add_gridspec(4, 2, width_ratios=(1.15, 1.0))
+    ax = fig.add_subplot(grid[:, 0])
+    right = [fig.add_subplot(grid[0, 1])]
+    right += [fig.add_subplot(grid[j, 1], sharex=right[0]) for j in (1, 2, 3)]
+    _draw_xy(fig, ax, data, r, t_day, prim, scale, unit)
+    _draw_elements(right, r, v, m, t_day, rmag, prim, scale, unit)
     fig.suptitle(data.title or "trajectory")
     return fig
 

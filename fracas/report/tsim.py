@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import textwrap
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -139,7 +140,7 @@ def summary_text(product: TsimProduct, width: int = 80) -> str:
 # --------------------------------------------------------------------------- plots
 
 
-def _ellipse(cov: np.ndarray, k: float, center=(0.0, 0.0), npts: int = 181) -> tuple[np.ndarray, np.ndarray]:
+def _ellipse(cov: np.ndarray, k: float, center: Any = (0.0, 0.0), npts: int = 181) -> tuple[np.ndarray, np.ndarray]:
     """(x, y) of the k-sigma ellipse of a 2x2 covariance about ``center`` (report.guidance.ellipse_points)."""
     pts = ellipse_points(cov, k, npts) + np.asarray(center, dtype=float)
     return pts[:, 0], pts[:, 1]
@@ -149,7 +150,7 @@ def _label(name: str, unit: str) -> str:
     return f"{_BPLANE.get(name, name)} error ({unit})"
 
 
-def _empty(ax, text: str) -> None:
+def _empty(ax: Any, text: str) -> None:
     ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes)
 
 
@@ -158,26 +159,10 @@ def _wrapped(text: str, width_in: float, fontsize: float = 10.0) -> str:
     return "\n".join(textwrap.wrap(text, chars))
 
 
-def tsim_figures(product: TsimProduct) -> list:
-    """The three TSIM figures (matplotlib, not saved): the target-plane scatter (first two
-    final target components, TEAM's 1σ and 3σ ellipses, the sample 1σ ellipse dashed), the
-    ΔV histograms (m/s) and the target-error histograms (velocities in mm/s)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figs = []
-    ok = successful(product)
-    names = product.final_target_names
-    f, units = _scales(product)
-    te = _target_errors(product, ok) * f[None, :] if len(names) else _target_errors(product, ok)
-    team_cov = np.asarray(product.team_target_cov, float)
-    if team_cov.size and len(names):
-        team_cov = team_cov * np.outer(f, f)
-    title = product.title or Path(product.source).name
-
-    # (a) target plane
+def _target_plane_figure(
+    plt: Any, te: np.ndarray, team_cov: np.ndarray, names: list[str], units: list[str], title: str
+) -> Any:
+    """(a) the target plane: the missions' first two final target errors, TEAM's ellipses."""
     fig, ax = plt.subplots(figsize=(6.5, 6.3), layout="constrained")
     if len(names) >= 2 and te.shape[0]:
         ax.plot(te[:, 0], te[:, 1], ".", ms=3, alpha=0.5, label=f"TSIM ({te.shape[0]} missions)")
@@ -201,9 +186,11 @@ def tsim_figures(product: TsimProduct) -> list:
         _empty(ax, "no successful missions" if len(names) >= 2 else "fewer than two final targets")
     plane = "B-plane" if list(names[:2]) == ["b_dot_t", "b_dot_r"] else "target plane"
     ax.set_title(_wrapped(f"TSIM {plane}: {title}", 6.0), fontsize=10)
-    figs.append(fig)
+    return fig
 
-    # (b) ΔV histograms
+
+def _dv_figure(plt: Any, product: TsimProduct, ok: np.ndarray, title: str) -> Any:
+    """(b) the ΔV histograms, one per maneuver (m/s), TEAM's and TSIM's mean and 99 %."""
     nj = max(len(product.maneuvers), 1)
     ncol = min(3, nj)
     nrow = (nj + ncol - 1) // ncol
@@ -231,9 +218,13 @@ def tsim_figures(product: TsimProduct) -> list:
     if handles:
         fig.legend(*handles, loc="outside lower center", ncol=3, fontsize=7)
     fig.suptitle(_wrapped(f"TSIM ΔV per maneuver: {title}", 4.8 * ncol, 11), fontsize="medium")
-    figs.append(fig)
+    return fig
 
-    # (c) target-error histograms
+
+def _errors_figure(
+    plt: Any, te: np.ndarray, team_cov: np.ndarray, names: list[str], units: list[str], title: str
+) -> Any:
+    """(c) the final target-error histograms, TEAM's normal density over each."""
     nm = max(len(names), 1)
     ncol = min(3, nm)
     nrow = (nm + ncol - 1) // ncol
@@ -259,8 +250,31 @@ def tsim_figures(product: TsimProduct) -> list:
         if not names:
             _empty(ax, "no final targets")
     fig.suptitle(_wrapped(f"TSIM final target errors: {title}", 4.8 * ncol, 11), fontsize="medium")
-    figs.append(fig)
-    return figs
+    return fig
+
+
+def tsim_figures(product: TsimProduct) -> list:
+    """The three TSIM figures (matplotlib, not saved): the target-plane scatter (first two
+    final target components, TEAM's 1σ and 3σ ellipses, the sample 1σ ellipse dashed), the
+    ΔV histograms (m/s) and the target-error histograms (velocities in mm/s)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ok = successful(product)
+    names = product.final_target_names
+    f, units = _scales(product)
+    te = _target_errors(product, ok) * f[None, :] if len(names) else _target_errors(product, ok)
+    team_cov = np.asarray(product.team_target_cov, float)
+    if team_cov.size and len(names):
+        team_cov = team_cov * np.outer(f, f)
+    title = product.title or Path(product.source).name
+    return [
+        _target_plane_figure(plt, te, team_cov, names, units, title),
+        _dv_figure(plt, product, ok, title),
+        _errors_figure(plt, te, team_cov, names, units, title),
+    ]
 
 
 def plot_tsim(product: TsimProduct, path: str | Path) -> list[Path]:

@@ -68,12 +68,12 @@ def sweep_deck(folder: Path, name: str, stm: Path, vary) -> object:
 def cluster(n: int):
     from distributed import Client, LocalCluster
 
-    from fracas.sweep import _plugin
+    from fracas.cluster import worker_plugin
 
     t0 = time.perf_counter()
     c = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None)
     cl = Client(c)
-    cl.register_plugin(_plugin())
+    cl.register_plugin(worker_plugin())
     cl.wait_for_workers(n)
     return c, cl, time.perf_counter() - t0
 

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from fracas import pipeline
+from fracas import cluster, pipeline
 from fracas.config.trajectory import deck_error
 from fracas.config.tsim import TsimDeck, load_tsim_deck, tsim_problems, tsim_team_deck
 from fracas.errors import DeckError
@@ -125,7 +125,7 @@ def _team_for(cfg: TsimDeck, say, output_dir: Path | None = None):
     TEAM deck, trajectory deck and STM file (a second TSIM run on them, e.g. the other half
     of a split run, reuses it)."""
     from fracas.build.team import build_case
-    from fracas.sweep import vary_many
+    from fracas.sweep_plan import vary_many
 
     team_deck = tsim_team_deck(cfg)
     changes = {**cfg.insim.team_changes, "errcon.guidance_model": "tsim"}
@@ -144,49 +144,32 @@ def _team_for(cfg: TsimDeck, say, output_dir: Path | None = None):
     return _TEAM_RUNS[key]
 
 
-# One core per worker process: XLA's CPU thread pool and the BLAS libraries would otherwise
-# each take every core, and N workers on N cores would oversubscribe them.
-_WORKER_ENV = {
-    "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
-    "OMP_NUM_THREADS": "1",
-    "OPENBLAS_NUM_THREADS": "1",
-    "MKL_NUM_THREADS": "1",
-}
-
-
-def _run_local(plan, todo: list[list[int]], record) -> None:
-    for task in todo:
-        record(fly_blocks(plan, task))
-
-
-def _run_dask(plan, todo: list[list[int]], record, workers: int | None, scheduler: str | None) -> int:
-    from distributed import as_completed
-
-    from fracas.errors import FracasError
-    from fracas.sweep import _plugin, start_cluster
-
-    cluster = None
-    try:
-        cluster, client = start_cluster(workers, len(todo), scheduler, env=_WORKER_ENV, timeout="10s")
-    except Exception as exc:  # noqa: BLE001  (an address that does not answer, a worker that cannot start)
-        where = f"the Dask scheduler at {scheduler}" if scheduler else "a Dask LocalCluster"
-        raise FracasError(f"could not start {where}: {type(exc).__name__}: {exc}") from None
-    try:
-        client.register_plugin(_plugin())
-        n_workers = len(client.scheduler_info().get("workers", {})) or 1
-        remote = client.scatter(plan, broadcast=True)
-        futures = [client.submit(fly_blocks, remote, task, pure=False) for task in todo]
-        for fut in as_completed(futures):
-            record(fut.result())
-        return n_workers
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+def _fly(
+    plan: Any,
+    todo: list[list[int]],
+    record: Callable[[dict[int, dict[str, np.ndarray]]], None],
+    workers: int | None,
+    scheduler: str | None,
+    force_dask: bool,
+) -> int:
+    """Fly the tasks ``todo`` (lists of blocks), recording each as it completes: in this
+    process (``workers`` None or 1, no scheduler, not ``force_dask``), else on a Dask
+    LocalCluster of single-threaded workers or the scheduler at ``scheduler``
+    (:mod:`fracas.cluster`; the plan sent to every worker once).  Returns the workers used."""
+    local = scheduler is None and not force_dask and (workers is None or workers <= 1)
+    if local:
+        pool = cluster.Pool()
+    else:
+        pool = cluster.start(workers, len(todo), scheduler, env=cluster.SINGLE_THREAD_ENV, timeout="10s", one_line=True)
+    with pool:
+        shared = pool.share(plan)
+        for done in pool.as_completed([(fly_blocks, (shared, task)) for task in todo], catch=False):
+            record(done.result)
+        return pool.n_workers
 
 
 def run_tsim(
-    deck,
+    deck: str | Path | TsimDeck,
     output: str | Path | None = None,
     *,
     workers: int | None = None,
@@ -196,7 +179,7 @@ def run_tsim(
     stop_after_tasks: int | None = None,
     batch_missions: int | None = None,
     force_dask: bool = False,
-):
+) -> tuple[Any, Path]:
     """Run a TSIM deck (path or TsimDeck); returns (TsimProduct, results path).
 
     ``workers``: None or 1 runs in this process; N ≥ 2 starts a Dask LocalCluster of N
@@ -207,11 +190,7 @@ def run_tsim(
     even for one worker (the scaling benchmark's 1-worker row).
     """
     from fracas.build.tsim import build_plan
-    from fracas.io.hdf5 import provenance
     from fracas.io.tsim_results import tsim_statistics, write_tsim_results
-    from fracas.products import TsimManeuver, TsimProduct
-    from fracas.tsim import summary
-    from fracas.tsim.plan import STATUS_HOPELESS, STATUS_NEAR
 
     say = on_stage or (lambda s: None)
     t0 = time.perf_counter()
@@ -219,11 +198,7 @@ def run_tsim(
     problems = tsim_problems(cfg)
     if problems:
         raise deck_error(problems)
-    out = Path(output) if output is not None else (
-        cfg.resolve(cfg.output.results) if cfg.output.results else pipeline.default_output(cfg.source_path)
-    )  # fmt: skip
-    if output is None and not cfg.output.results:
-        out = out.with_name(out.stem + "_tsim.h5")
+    out = _results_path(cfg, output)
     check_output_path(out, "results file")
     ckpt = checkpoint_path(out)
     check_output_path(ckpt / "task_00000000.h5", "checkpoint file")
@@ -259,14 +234,47 @@ def run_tsim(
         progress(min(len(done) * plan.block, total), total)
     n_workers = 1
     if todo:
-        if scheduler is None and not force_dask and (workers is None or workers <= 1):
-            _run_local(plan, todo, record)
-        else:
-            n_workers = _run_dask(plan, todo, record, workers, scheduler)
+        n_workers = _fly(plan, todo, record, workers, scheduler, force_dask)
     t3 = time.perf_counter()
     if len(done) < plan.n_blocks:
         return None, ckpt
     table = assemble(plan, done)
+    timing = {"team_s": t1 - t0, "plan_s": t2 - t1, "missions_s": t3 - t2}
+    product = _product(cfg, plan, team, table, earlier, n_workers, timing)
+    say("writing the results file")
+    write_tsim_results(out, product)
+    _remove_checkpoints(ckpt)
+    product.timing["total_s"] = time.perf_counter() - t0
+    return product, out
+
+
+def _results_path(cfg: TsimDeck, output: str | Path | None) -> Path:
+    """``output``, else the deck's ``[output] results``, else ``out/<deck stem>_tsim.h5``."""
+    out = Path(output) if output is not None else (
+        cfg.resolve(cfg.output.results) if cfg.output.results else pipeline.default_output(cfg.source_path)
+    )  # fmt: skip
+    if output is None and not cfg.output.results:
+        out = out.with_name(out.stem + "_tsim.h5")
+    return out
+
+
+def _product(
+    cfg: TsimDeck,
+    plan: Any,
+    team: Any,
+    table: dict[str, np.ndarray],
+    earlier: list,
+    n_workers: int,
+    timing: dict[str, float],
+) -> Any:
+    """The TsimProduct of a finished run: the per-mission ``table``, its statistics (merged
+    with the ``earlier`` runs'), percentiles, consistency and counts, each maneuver's
+    figures against TEAM's, the settings and ``timing``."""
+    from fracas.io.hdf5 import provenance
+    from fracas.products import TsimManeuver, TsimProduct
+    from fracas.tsim import summary
+    from fracas.tsim.plan import STATUS_HOPELESS, STATUS_NEAR
+
     stats = summary.merge_a_priori(summary.statistics_of(plan, table), [s for _, s in earlier])
     counts = summary.counts_of(plan, table)
     counts["a_priori"] = int(sum(c for c, _ in earlier))
@@ -285,7 +293,7 @@ def run_tsim(
                 near=int(np.sum(table["maneuver_status"][:, j] == STATUS_NEAR)),
             )
         )  # fmt: skip
-    product = TsimProduct(
+    return TsimProduct(
         title=cfg.title or team.title,
         source=str(cfg.source_path),
         epoch_et_s=float(plan.epoch_et_s),
@@ -315,14 +323,9 @@ def run_tsim(
             "guidance_model": "tsim",
             "laws": {m.name: m.law for m in plan.maneuvers},
         },  # fmt: skip
-        timing={"team_s": t1 - t0, "plan_s": t2 - t1, "missions_s": t3 - t2},
+        timing=timing,
         provenance=provenance(cfg.source_text, cfg.source_path),
     )
-    say("writing the results file")
-    write_tsim_results(out, product)
-    _remove_checkpoints(ckpt)
-    product.timing["total_s"] = time.perf_counter() - t0
-    return product, out
 
 
 def table_bytes(plan) -> int:

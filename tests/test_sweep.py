@@ -579,6 +579,7 @@ def _bad_sweep(d: Path, case: str) -> Path:
 def no_work(monkeypatch):
     """Every way a sweep starts work (an STM build, a study run, a batched group, a
     reference, a Dask cluster) fails the test if it is called."""
+    import fracas.cluster as cluster_mod
     import fracas.sweep as sweep_mod
 
     def forbidden(*_a, **_k):
@@ -586,8 +587,10 @@ def no_work(monkeypatch):
 
     for name in ("run_team", "build_stm", "load_team", "reference_from_stm"):
         monkeypatch.setattr(pipeline, name, forbidden)
-    for name in ("run_one", "run_group", "start_cluster", "_run_dask"):
+    for name in ("run_one", "run_group", "_run_tasks"):
         monkeypatch.setattr(sweep_mod, name, forbidden)
+    for name in ("start", "start_cluster"):
+        monkeypatch.setattr(cluster_mod, name, forbidden)
 
 
 @pytest.mark.parametrize("case", sorted(BAD_SWEEPS))

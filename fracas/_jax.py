@@ -30,6 +30,7 @@ from __future__ import annotations
 import operator
 import os
 import sys
+from typing import SupportsIndex
 
 __all__ = ["configure", "set_host_devices", "worker_setup", "ENV_HOST_DEVICES"]
 
@@ -58,7 +59,7 @@ def _cpu_device_count() -> int:
     return len(jax.devices("cpu"))
 
 
-def _count(n, where: str) -> int:
+def _count(n: str | SupportsIndex, where: str) -> int:
     """``n`` (an int, a numpy integer or a decimal string) as an int >= 1, else ValueError."""
     try:
         k = int(n.strip()) if isinstance(n, str) else operator.index(n)

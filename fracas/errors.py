@@ -18,7 +18,7 @@ class FracasError(Exception):
 
     exit_code = 2
 
-    def __init__(self, *args, problems: list[str] | None = None):
+    def __init__(self, *args: object, problems: list[str] | None = None) -> None:
         if args and isinstance(args[0], str) and ("\n" in args[0] or "\r" in args[0]):
             args = (" ".join(args[0].split()), *args[1:])  # one line, whatever a library said
         super().__init__(*args)
@@ -49,7 +49,7 @@ class OutputPathError(FracasError):
 
     ``reason``: the cause alone, without the path (for callers that name the deck field)."""
 
-    def __init__(self, *args, reason: str = "", **kw):
+    def __init__(self, *args: object, reason: str = "", **kw: list[str] | None) -> None:
         super().__init__(*args, **kw)
         self.reason = reason or (str(args[0]) if args else "")
 

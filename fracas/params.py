@@ -28,6 +28,25 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, cast
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+    from typing import Protocol
+
+    class _ModelShape(Protocol):
+        """What the label functions read of a force model (:class:`fracas.dynamics.model.ForceModel`
+        has it; so may any object with these three attributes)."""
+
+        @property
+        def bodies(self) -> Sequence[str]: ...
+
+        @property
+        def n_arcs(self) -> int: ...
+
+        @property
+        def n_impulses(self) -> int: ...
+
 
 __all__ = [
     "ParamKind",
@@ -123,7 +142,7 @@ class ParamKind:
     max_sigma: float | tuple[float | None, ...] | None = None
     relative: bool = False
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.index not in INDEX_KINDS:
             raise ValueError(f"parameter kind {self.name!r}: index {self.index!r} not in {INDEX_KINDS}")
         if not self.field:
@@ -131,7 +150,7 @@ class ParamKind:
 
     def unit_at(self, idx: tuple[int, ...]) -> str:
         """Unit of the entry at ``idx`` (the index tuple :func:`parse_label` returns)."""
-        return self.unit[idx[1]] if self.index == INDEX_BODY_ELEMENT else self.unit
+        return self.unit[idx[1]] if self.index == INDEX_BODY_ELEMENT else cast(str, self.unit)
 
 
 #: the Params fields of an arc's pointing law (``ForceModel.steering``), in the core's order: the
@@ -223,7 +242,7 @@ PARAMETER_KINDS: dict[str, ParamKind] = {k.name: k for k in _KINDS}
 _BY_FIELD = {k.field: k for k in _KINDS}
 
 
-def _units(index: str) -> dict[str, str]:
+def _units(index: str) -> dict[str, str | tuple[str, ...]]:
     return {k.name: k.unit for k in _KINDS if k.index == index}
 
 
@@ -235,7 +254,7 @@ _IMPULSE_UNITS = {**_units(INDEX_IMPULSE), **_units(INDEX_IMPULSE_AXIS)}
 _LABEL = re.compile(r"^([a-z_0-9]+)(?:\[([^\]]+)\])?$")
 
 
-def parse_label(label: str, model) -> tuple[str, tuple[int, ...]]:
+def parse_label(label: str, model: _ModelShape) -> tuple[str, tuple[int, ...]]:
     """(Params field, index tuple) of a label; KeyError with a helpful message if unknown.
 
     ``model``: anything with ``bodies`` (names), ``n_arcs`` and ``n_impulses`` (a
@@ -248,29 +267,30 @@ def parse_label(label: str, model) -> tuple[str, tuple[int, ...]]:
     parts = [s.strip() for s in idx.split(",")] if idx else []
     kind = PARAMETER_KINDS.get(name)
     index = kind.index if kind is not None else None
+    field = kind.field if kind is not None else ""  # "" never returned: each return needs a known kind
     if index == INDEX_SCALAR and not parts:
-        return kind.field, ()
+        return field, ()
     if index == INDEX_BODY and len(parts) == 1:
         if parts[0] not in model.bodies:
             raise KeyError(f"parameter {label!r}: body {parts[0]!r} is not in the force model {model.bodies}")
-        return kind.field, (model.bodies.index(parts[0]),)
+        return field, (model.bodies.index(parts[0]),)
     if index == INDEX_BODY_ELEMENT and len(parts) == 2:
         if parts[0] not in model.bodies or parts[1] not in ELEMENT_NAMES:
             raise KeyError(f"parameter {label!r}: expected body_elements[<body>,<{'|'.join(ELEMENT_NAMES)}>]")
-        return kind.field, (model.bodies.index(parts[0]), ELEMENT_NAMES.index(parts[1]))
+        return field, (model.bodies.index(parts[0]), ELEMENT_NAMES.index(parts[1]))
     if index == INDEX_ARC and len(parts) == 1 and parts[0].isdigit():
         k = int(parts[0])
         if k >= model.n_arcs:
             raise KeyError(f"parameter {label!r}: arc {k} does not exist ({model.n_arcs} thrust arcs)")
-        return kind.field, (k,)
+        return field, (k,)
     if index in (INDEX_IMPULSE, INDEX_IMPULSE_AXIS) and parts and parts[0].isdigit():
         k = int(parts[0])
         if k >= model.n_impulses:
             raise KeyError(f"parameter {label!r}: impulse {k} does not exist ({model.n_impulses} impulses)")
         if index == INDEX_IMPULSE and len(parts) == 1:
-            return kind.field, (k,)
+            return field, (k,)
         if index == INDEX_IMPULSE_AXIS and len(parts) == 2 and parts[1] in "012" and len(parts[1]) == 1:
-            return kind.field, (k, int(parts[1]))
+            return field, (k, int(parts[1]))
     raise KeyError(
         f"unknown parameter {label!r}; known: {sorted(_SCALAR_UNITS)}, "
         f"{sorted(_BODY_UNITS)}[body], body_elements[body,element], {sorted(_ARC_UNITS)}[arc], "
@@ -278,13 +298,15 @@ def parse_label(label: str, model) -> tuple[str, tuple[int, ...]]:
     )
 
 
-def parameter_kind(label: str, model) -> ParamKind:
+def parameter_kind(label: str, model: _ModelShape) -> ParamKind:
     """The :class:`ParamKind` of a label (validated against ``model`` like :func:`parse_label`)."""
     parse_label(label, model)
-    return PARAMETER_KINDS[_LABEL.match(label.strip()).group(1)]
+    m = _LABEL.match(label.strip())
+    assert m is not None  # parse_label accepted it
+    return PARAMETER_KINDS[m.group(1)]
 
 
-def param_unit(label: str, model) -> str:
+def param_unit(label: str, model: _ModelShape) -> str:
     """Unit string of a label (canonical units)."""
     field, idx = parse_label(label, model)
     return _BY_FIELD[field].unit_at(idx)
@@ -374,6 +396,7 @@ def parse_control(name: str, n_arcs: int, n_impulses: int) -> tuple[ControlKind,
     kind = CONTROL_KINDS.get(m.group(1)) if m else None
     if kind is None:
         raise KeyError(f"unknown control {name!r}; known: {', '.join(CONTROL_KINDS)} (arc and impulse kinds take [k])")
+    assert m is not None  # the kind came from it
     parts = [s.strip() for s in m.group(2).split(",")] if m.group(2) else []
     want = {"none": 0, "arc": 1, "impulse": 1, "impulse_axis": 2}[kind.index]
     if len(parts) != want or not all(p.isdigit() for p in parts):

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import enum
 from collections.abc import Iterable
+from typing import SupportsInt
 
 __all__ = [
     "RunStatus",
@@ -81,7 +82,7 @@ STATUS_TEXT: dict[int, str] = {int(s): s.text for s in RunStatus}
 PROPAGATION_STATUSES = (RunStatus.OK, RunStatus.STOPPED, RunStatus.MAX_STEPS, RunStatus.NONFINITE)
 
 
-def status_text(code) -> str:
+def status_text(code: SupportsInt) -> str:
     """Text of ``code`` (a :class:`RunStatus`, an int, a numpy integer); ``"unknown status N"``
     for an integer that is no :class:`RunStatus`."""
     try:
@@ -90,7 +91,7 @@ def status_text(code) -> str:
         return f"unknown status {code}"
 
 
-def batch_status_summary(codes: Iterable) -> dict:
+def batch_status_summary(codes: Iterable[SupportsInt]) -> dict:
     """Count the codes of a batch: ``{RunStatus.OK: 98, RunStatus.NONFINITE: 2}``.
 
     ``codes``: any iterable of integers (a list, the ``(N,)`` ``status`` array of
@@ -103,6 +104,7 @@ def batch_status_summary(codes: Iterable) -> dict:
         counts[c] = counts.get(c, 0) + 1
     out: dict = {}
     for c in sorted(counts):
+        key: RunStatus | int
         try:
             key = RunStatus(c)
         except ValueError:

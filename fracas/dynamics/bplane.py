@@ -22,10 +22,13 @@ Conventions (standard, e.g. Kizner 1961; Vallado sec. 12.7):
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
 
 from fracas import _jax  # noqa: F401  (float64 + compilation cache before any array)
 
@@ -47,16 +50,18 @@ class BPlane(NamedTuple):
     r_hat: jnp.ndarray  # unit R
 
 
-def _dot(x, y):
+def _dot(x: Array, y: Array) -> Array:
     return jnp.sum(x * y, axis=-1)
 
 
-def _norm(x):
+def _norm(x: Array) -> Array:
     return jnp.sqrt(_dot(x, x))
 
 
 @jax.jit
-def b_plane(r, v, mu, ref_pole=(0.0, 0.0, 1.0)) -> BPlane:
+def b_plane(
+    r: ArrayLike, v: ArrayLike, mu: ArrayLike, ref_pole: ArrayLike | Sequence[float] = (0.0, 0.0, 1.0)
+) -> BPlane:
     """B-plane parameters of the hyperbolic approach state (r km, v km/s) relative to a
     body of gravitational parameter ``mu`` (km^3/s^2) (FRACAS BPLANE).
 
@@ -119,7 +124,7 @@ def b_plane(r, v, mu, ref_pole=(0.0, 0.0, 1.0)) -> BPlane:
 
     nan = jnp.nan
 
-    def sel(x):
+    def sel(x: Array) -> Array:
         mask = hyp if x.ndim == hyp.ndim else hyp[..., None]
         return jnp.where(mask, x, nan)
 

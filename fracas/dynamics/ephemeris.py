@@ -45,11 +45,13 @@ import math
 import os
 from collections.abc import Sequence
 from fractions import Fraction
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import Array
+from jax.typing import ArrayLike
 
 from fracas import (
     _jax,  # noqa: F401  (float64, compilation cache)
@@ -57,6 +59,9 @@ from fracas import (
 )
 from fracas.errors import ConfigError
 from fracas.timescales import calendar_to_et, et_to_calendar  # noqa: F401  (re-exported)
+
+if TYPE_CHECKING:
+    from jplephem.ephem import Ephemeris
 
 # --- coverage ------------------------------------------------------------------------
 # Published DE421 span (de421.bsp / JPL header): JD 2414864.5 .. 2471184.5 TDB
@@ -118,7 +123,7 @@ class EphemerisTable(NamedTuple):
 
 # --- source data (lazy, cached) ------------------------------------------------------
 @functools.lru_cache(maxsize=1)
-def _de421():
+def _de421() -> Ephemeris:
     """The jplephem legacy ``Ephemeris`` over the de421 package (constants only are read here)."""
     import de421
     from jplephem.ephem import Ephemeris
@@ -331,7 +336,7 @@ def table_bodies(table: EphemerisTable) -> tuple[str, ...]:
 
 
 # --- evaluation (pure JAX) -------------------------------------------------------------
-def _chebyshev(coef, x, n_coef):
+def _chebyshev(coef: Array, x: Array, n_coef: int) -> tuple[Array, Array]:
     """Clenshaw sums  f = sum_k c_k T_k(x)  and  f' = sum_k c_k T_k'(x);  coef (..., 3, n), x (...).
 
     b_k = c_k + 2x b_{k+1} - b_{k+2},  f = c_0 + x b_1 - b_2, and its x-derivative
@@ -351,7 +356,7 @@ def _chebyshev(coef, x, n_coef):
     return coef[..., 0] + x * b1 - b2, b1 + x * d1 - d2
 
 
-def _segment_and_x(table: EphemerisTable, et):
+def _segment_and_x(table: EphemerisTable, et: Array) -> tuple[Array, Array]:
     """Per body (segment index k, normalised time x in [-1, 1] inside coverage)."""
     dt = et - table.et_start
     k = jnp.clip(jnp.floor(dt / table.seg_len), 0.0, (table.nseg - 1).astype(dt.dtype))
@@ -360,20 +365,20 @@ def _segment_and_x(table: EphemerisTable, et):
     return k.astype(jnp.int32), x
 
 
-def _states_at(table: EphemerisTable, k, x):
+def _states_at(table: EphemerisTable, k: Array, x: Array) -> tuple[Array, Array]:
     """Position (nb, 3) and velocity (nb, 3) of each body ``b`` in its segment ``k[b]`` at ``x[b]``."""
     coef = table.coef[table.offset + k]  # (nb, 3, n)
     pos, dpos = _chebyshev(coef, x, table.coef.shape[-1])
     return pos, dpos * (2.0 / table.seg_len)[:, None]
 
 
-def _body_states_scalar(table: EphemerisTable, et):
+def _body_states_scalar(table: EphemerisTable, et: Array) -> tuple[Array, Array]:
     k, x = _segment_and_x(table, et)
     return _states_at(table, k, x)
 
 
 @jax.jit
-def body_states(table: EphemerisTable, et_s):
+def body_states(table: EphemerisTable, et_s: ArrayLike) -> tuple[Array, Array]:
     """Heliocentric ICRF position (km) and velocity (km/s) of every body of ``table``.
 
     ``et_s``: TDB s past J2000 (float64), a scalar -> ``(pos (nb, 3), vel (nb, 3))``; an

@@ -19,10 +19,12 @@ reverse-mode AD give the exact implicit derivative dx/d(r0, v0, tau, mu).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax import Array
 
 from fracas import _jax  # noqa: F401  (float64, compilation cache)
 from fracas.dynamics.forces import dot3
@@ -31,7 +33,7 @@ _SERIES_XI = 0.1  # |xi| below which C, S come from their Taylor series (no canc
 _MAX_ITER = 60
 
 
-def _stumpff_series(xi, n_terms: int = 9):
+def _stumpff_series(xi: Array, n_terms: int = 9) -> tuple[Array, Array]:
     """Taylor series C = sum (-xi)^k/(2k+2)!, S = sum (-xi)^k/(2k+3)! (remainder < 1e-20 for |xi| < 0.1)."""
     c = jnp.zeros_like(xi)
     s = jnp.zeros_like(xi)
@@ -45,7 +47,7 @@ def _stumpff_series(xi, n_terms: int = 9):
     return c, s
 
 
-def stumpff(xi):
+def stumpff(xi: Array) -> tuple[Array, Array]:
     """Stumpff functions C(xi) = (1 - cos sqrt xi)/xi and S(xi) = (sqrt xi - sin sqrt xi)/xi^1.5.
 
     Written without cancellation: 1 - cos y = 2 sin^2(y/2) (and cosh y - 1 = 2 sinh^2(y/2)),
@@ -71,7 +73,7 @@ def stumpff(xi):
 _REDUCTIONS = 5  # stumpff_reduced: series at xi/4^5, exact to |xi| <= 1024 (y <= 32 rad)
 
 
-def stumpff_reduced(xi):
+def stumpff_reduced(xi: Array) -> tuple[Array, Array]:
     """C(xi), S(xi) with no transcendental function: the 9-term Taylor series at xi/4^5 and five
     angle doublings (y -> 2y, xi -> 4 xi), for either sign of xi:
 
@@ -90,7 +92,14 @@ def stumpff_reduced(xi):
     return c2, c3
 
 
-def _time_of_x(x, r0, sigma0, alpha, sqrt_mu, stumpff_fn=stumpff):
+def _time_of_x(
+    x: Array,
+    r0: Array,
+    sigma0: Array,
+    alpha: Array,
+    sqrt_mu: Array,
+    stumpff_fn: Callable[[Array], tuple[Array, Array]] = stumpff,
+) -> tuple[Array, Array, Array, Array, Array]:
     """sqrt(mu)*tau(x), r(x) and dr/dx for the universal Kepler equation."""
     xi = alpha * x * x
     c, s = stumpff_fn(xi)
@@ -101,7 +110,7 @@ def _time_of_x(x, r0, sigma0, alpha, sqrt_mu, stumpff_fn=stumpff):
     return f, r, drdx, c, s
 
 
-def initial_guess(r0, sigma0, alpha, sqrt_mu, tau):
+def initial_guess(r0: Array, sigma0: Array, alpha: Array, sqrt_mu: Array, tau: float | Array) -> Array:
     """Starting x: sqrt(mu) tau alpha for ellipses, Vallado's log form for hyperbolas."""
     x_ell = sqrt_mu * tau * alpha
     a = 1.0 / jnp.where(alpha < 0, alpha, -1.0)  # negative semi-major axis (guarded)
@@ -116,7 +125,15 @@ def initial_guess(r0, sigma0, alpha, sqrt_mu, tau):
     return jnp.where(jnp.isfinite(x0), x0, x_par)
 
 
-def solve_universal_x(r0, sigma0, alpha, sqrt_mu, tau, x_start, rtol=1e-15):
+def solve_universal_x(
+    r0: Array,
+    sigma0: Array,
+    alpha: Array,
+    sqrt_mu: Array,
+    tau: float | Array,
+    x_start: Array,
+    rtol: float = 1e-15,
+) -> tuple[Array, Array]:
     """Root x of sqrt(mu) tau(x) = sqrt(mu) tau by Laguerre-Conway (n = 5), gradient-free.
 
     Returns (x, n_iter).  Converged when |dx| <= rtol * max(|x|, 1) or after 60 iterations.
@@ -124,11 +141,11 @@ def solve_universal_x(r0, sigma0, alpha, sqrt_mu, tau, x_start, rtol=1e-15):
     target = sqrt_mu * tau
     n = 5.0
 
-    def cond(c):
+    def cond(c: tuple[Array, Array, Array]) -> Array:
         x, dx, k = c
         return (jnp.abs(dx) > rtol * jnp.maximum(jnp.abs(x), 1.0)) & (k < _MAX_ITER)
 
-    def body(c):
+    def body(c: tuple[Array, Array, Array]) -> tuple[Array, Array, Array]:
         x, _, k = c
         f, r, drdx, _, _ = _time_of_x(x, r0, sigma0, alpha, sqrt_mu)
         fx = f - target
@@ -154,7 +171,13 @@ class ConicState(NamedTuple):
 
 
 def kepler_fg(
-    r0_vec, v0_vec, tau, mu, x_start=None, n_newton: int | None = None, short_arc: bool = False
+    r0_vec: Array,
+    v0_vec: Array,
+    tau: float | Array,
+    mu: float | Array,
+    x_start: Array | None = None,
+    n_newton: int | None = None,
+    short_arc: bool = False,
 ) -> ConicState:
     """Propagate (r0, v0) on its conic by ``tau`` seconds (any sign; any conic) (FRACAS CONIC).
 
@@ -200,13 +223,13 @@ def kepler_fg(
     return ConicState(r_vec, v_vec, x, f_l, g_l, fdot, gdot)
 
 
-def kepler(r0_vec, v0_vec, tau, mu):
+def kepler(r0_vec: Array, v0_vec: Array, tau: float | Array, mu: float | Array) -> tuple[Array, Array]:
     """Conic state (r km, v km/s) after ``tau`` seconds (convenience wrapper of kepler_fg)."""
     out = kepler_fg(r0_vec, v0_vec, tau, mu)
     return out.r, out.v
 
 
-def predict_universal_anomaly(x, r_vec, v_vec, mu, sqrt_mu, dtau):
+def predict_universal_anomaly(x: Array, r_vec: Array, v_vec: Array, mu: Array, sqrt_mu: Array, dtau: Array) -> Array:
     """Universal anomaly dtau seconds after the conic point (r, v) with anomaly x, to third
     order: dx/dt = sqrt(mu)/r, d2x/dt2 = -sqrt(mu) rdot/r^2,
     d3x/dt3 = -sqrt(mu)(rddot/r^2 - 2 rdot^2/r^3), rddot = (v^2 - rdot^2)/r - mu/r^2."""

@@ -19,11 +19,15 @@ following cos u (flipping at the antinodes, Edelbaum's steering) when ``arc_fram
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from fracas import constants
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
+    from jax import Array
 
 STOP_TIME = "time"
 STOP_SOI_ENTRY = "soi_entry"
@@ -147,55 +151,56 @@ class ForceModel:
 
 
 class Params(NamedTuple):
-    """Every dynamic number of a propagation (a pytree of float64 arrays).
+    """Every dynamic number of a propagation (a pytree of float64 arrays: numpy arrays as
+    :func:`default_params` builds them, jax arrays in traced code, whence the annotations).
 
     Units: mu km^3/s^2; radius km; pole unit vectors; power kW; exhaust velocity km/s;
     angles rad; times s from the propagation epoch; dv km/s; area m^2; isp s.
     Per-body arrays have length ``len(ForceModel.bodies)``; per-arc arrays ``n_arcs``.
     """
 
-    mu: np.ndarray  # (nb,) GM of each body
-    j2: np.ndarray  # (nb,) unnormalised J2
-    radius: np.ndarray  # (nb,) equatorial radius (J2 reference radius)
-    pole: np.ndarray  # (nb, 3) unit pole vectors (ICRF)
-    soi_radius: np.ndarray  # (nb,) sphere-of-influence radius (inf for the Sun)
-    parent: np.ndarray  # (nb,) index of the parent body (-1 for none); float for pytree uniformity
-    area_m2: np.ndarray  # () SRP area
-    cr: np.ndarray  # () reflectivity coefficient (1 absorber .. 2 mirror)
-    power_kw: np.ndarray  # () base power: at 1 AU (solar) or at t = 0 (nuclear)
-    power_decay_s: np.ndarray  # () nuclear e-folding time
-    efficiency: np.ndarray  # () thruster efficiency eta
-    exhaust_velocity_km_s: np.ndarray  # () c
-    thrust_scale: np.ndarray  # () overall thrust proportionality (1 nominal)
-    bias_in_rad: np.ndarray  # () overall in-plane pointing bias
-    bias_out_rad: np.ndarray  # () overall out-of-plane pointing bias
-    arc_t_on: np.ndarray  # (na,)
-    arc_t_off: np.ndarray  # (na,)
-    arc_alpha: np.ndarray  # (na,) in-plane angle / right ascension
-    arc_beta: np.ndarray  # (na,) out-of-plane angle / declination
-    arc_throttle: np.ndarray  # (na,) thrust level factor
-    arc_frame: np.ndarray  # (na,) 0 velocity frame, 1 inertial, 2 velocity + yaw switch (float codes)
-    arc_thrust_scale: np.ndarray  # (na,) per-arc proportionality (1 nominal)
-    arc_bias_in_rad: np.ndarray  # (na,)
-    arc_bias_out_rad: np.ndarray  # (na,)
+    mu: Array  # (nb,) GM of each body
+    j2: Array  # (nb,) unnormalised J2
+    radius: Array  # (nb,) equatorial radius (J2 reference radius)
+    pole: Array  # (nb, 3) unit pole vectors (ICRF)
+    soi_radius: Array  # (nb,) sphere-of-influence radius (inf for the Sun)
+    parent: Array  # (nb,) index of the parent body (-1 for none); float for pytree uniformity
+    area_m2: Array  # () SRP area
+    cr: Array  # () reflectivity coefficient (1 absorber .. 2 mirror)
+    power_kw: Array  # () base power: at 1 AU (solar) or at t = 0 (nuclear)
+    power_decay_s: Array  # () nuclear e-folding time
+    efficiency: Array  # () thruster efficiency eta
+    exhaust_velocity_km_s: Array  # () c
+    thrust_scale: Array  # () overall thrust proportionality (1 nominal)
+    bias_in_rad: Array  # () overall in-plane pointing bias
+    bias_out_rad: Array  # () overall out-of-plane pointing bias
+    arc_t_on: Array  # (na,)
+    arc_t_off: Array  # (na,)
+    arc_alpha: Array  # (na,) in-plane angle / right ascension
+    arc_beta: Array  # (na,) out-of-plane angle / declination
+    arc_throttle: Array  # (na,) thrust level factor
+    arc_frame: Array  # (na,) 0 velocity frame, 1 inertial, 2 velocity + yaw switch (float codes)
+    arc_thrust_scale: Array  # (na,) per-arc proportionality (1 nominal)
+    arc_bias_in_rad: Array  # (na,)
+    arc_bias_out_rad: Array  # (na,)
     # pointing that varies within an arc (``ForceModel.steering``): Legendre coefficients of the
     # in-plane and out-of-plane angles in the arc's normalised time s in [-1, 1] (rad); the angle
     # is arc_alpha + p1 P1(s) + p2 P2(s) + p3 P3(s), so arc_alpha stays the arc's mean angle
-    arc_alpha_p1: np.ndarray  # (na,)
-    arc_alpha_p2: np.ndarray  # (na,)
-    arc_alpha_p3: np.ndarray  # (na,)
-    arc_beta_p1: np.ndarray  # (na,)
-    arc_beta_p2: np.ndarray  # (na,)
-    arc_beta_p3: np.ndarray  # (na,)
-    impulse_t: np.ndarray  # (ni,) time of each impulsive dV
-    impulse_dv: np.ndarray  # (ni, 3) dV in the frame of impulse_frame
-    impulse_frame: np.ndarray  # (ni,) 0 velocity frame, 1 inertial
-    impulse_isp_s: np.ndarray  # () specific impulse of the impulsive engine
-    body_elements: np.ndarray  # (nb, 6) heliocentric conic elements a km, e, i, raan, argp, M rad (EPHEM bodies)
-    body_elements_et: np.ndarray  # (nb,) TDB seconds past J2000 at which body_elements hold
+    arc_alpha_p1: Array  # (na,)
+    arc_alpha_p2: Array  # (na,)
+    arc_alpha_p3: Array  # (na,)
+    arc_beta_p1: Array  # (na,)
+    arc_beta_p2: Array  # (na,)
+    arc_beta_p3: Array  # (na,)
+    impulse_t: Array  # (ni,) time of each impulsive dV
+    impulse_dv: Array  # (ni, 3) dV in the frame of impulse_frame
+    impulse_frame: Array  # (ni,) 0 velocity frame, 1 inertial
+    impulse_isp_s: Array  # () specific impulse of the impulsive engine
+    body_elements: Array  # (nb, 6) heliocentric conic elements a km, e, i, raan, argp, M rad (EPHEM bodies)
+    body_elements_et: Array  # (nb,) TDB seconds past J2000 at which body_elements hold
 
 
-def default_params(model: ForceModel, **overrides) -> Params:
+def default_params(model: ForceModel, **overrides: npt.ArrayLike) -> Params:
     """Params with catalogue values for ``model.bodies`` and no thrust; keyword overrides."""
     nb, na, ni = len(model.bodies), model.n_arcs, model.n_impulses
     cat = [constants.BODIES[b] for b in model.bodies]

@@ -23,6 +23,7 @@ revolution (di/dt = r cos u f_h / h), beta < 0 lowers it.
 from __future__ import annotations
 
 import jax.numpy as jnp
+from jax import Array
 
 from fracas import (
     _jax,  # noqa: F401
@@ -31,26 +32,26 @@ from fracas import (
 from fracas.dynamics.forces import dot3
 
 
-def power_kw(p0_kw, r_from_sun_km, t_s, decay_s, solar: bool):
+def power_kw(p0_kw: Array, r_from_sun_km: Array | None, t_s: float | Array, decay_s: Array, solar: bool) -> Array:
     """Available power (kW): solar (1/r^2 from 1 AU) or nuclear (exponential decay) (FRACAS POWER)."""
     if solar:
-        rr = dot3(r_from_sun_km, r_from_sun_km)
+        rr = dot3(r_from_sun_km, r_from_sun_km)  # type: ignore[arg-type]  # given whenever solar
         return p0_kw * constants.AU_KM**2 / rr
     return p0_kw * jnp.exp(-t_s / decay_s)
 
 
-def thrust_magnitude(power, efficiency, exhaust_velocity_km_s):
+def thrust_magnitude(power: Array, efficiency: Array, exhaust_velocity_km_s: Array) -> Array:
     """Thrust T = 2 eta P / c in kg km/s^2 (= kN) for P in kW and c in km/s (FRACAS EP)."""
     return 2e-3 * efficiency * power / exhaust_velocity_km_s
 
 
-def velocity_frame(r, v):
+def velocity_frame(r: Array, v: Array) -> Array:
     """EP's rotation matrix [v_hat, (h x v)_hat, h_hat] (columns), h = r x v (FRACAS EP)."""
     x, y, z = _frame_axes(r, v)
     return jnp.stack([x, y, z], axis=1)
 
 
-def _frame_axes(r, v, h=None):
+def _frame_axes(r: Array, v: Array, h: Array | None = None) -> tuple[Array, Array, Array]:
     """The three axes of :func:`velocity_frame` (unit vectors by sqrt(1/|.|^2): no float64
     rsqrt, which XLA CPU does not vectorise; one division for both norms)."""
     h = jnp.cross(r, v) if h is None else h
@@ -61,13 +62,15 @@ def _frame_axes(r, v, h=None):
     return x, jnp.cross(z, x), z
 
 
-def angles_to_unit(alpha, beta):
+def angles_to_unit(alpha: Array, beta: Array) -> Array:
     """[cos b cos a, cos b sin a, sin b]: unit vector from in-plane / out-of-plane angles (rad)."""
     cb = jnp.cos(beta)
     return jnp.stack([cb * jnp.cos(alpha), cb * jnp.sin(alpha), jnp.sin(beta)])
 
 
-def thrust_direction(r, v, alpha, beta, frame, u_angles=None):
+def thrust_direction(
+    r: Array, v: Array, alpha: Array, beta: Array, frame: Array, u_angles: Array | None = None
+) -> Array:
     """Unit thrust vector in the inertial frame.
 
     ``frame`` (float code, as ``Params.arc_frame``): 0 velocity frame, 1 inertial RA/Dec

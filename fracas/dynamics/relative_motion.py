@@ -16,13 +16,15 @@ rad/s.  Pure JAX, float64.
 from __future__ import annotations
 
 import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
 
 from fracas import _jax  # noqa: F401  (float64 before any array exists)
 
 __all__ = ["cw_stm", "hill_axes", "to_hill", "from_hill"]
 
 
-def cw_stm(n, dt):
+def cw_stm(n: ArrayLike, dt: ArrayLike) -> Array:
     """Clohessy-Wiltshire STM (6, 6) for the Hill-frame state (x, y, z, xd, yd, zd) over dt s,
     mean motion n rad/s::
 
@@ -44,7 +46,7 @@ def cw_stm(n, dt):
     return jnp.stack([jnp.stack([jnp.asarray(e, dtype=jnp.float64) for e in row]) for row in rows])
 
 
-def hill_axes(r, v):
+def hill_axes(r: ArrayLike, v: ArrayLike) -> tuple[Array, Array]:
     """Rows (x radial, y along-track, z normal) of the Hill frame (3, 3) and its angular
     velocity omega (3,) rad/s, for a reference at r km, v km/s."""
     r = jnp.asarray(r, dtype=jnp.float64)
@@ -56,7 +58,7 @@ def hill_axes(r, v):
     return jnp.stack([ix, iy, iz]), h / jnp.dot(r, r)
 
 
-def to_hill(x_ref, x):
+def to_hill(x_ref: ArrayLike, x: ArrayLike) -> Array:
     """Hill-frame relative state (6,) of inertial state ``x`` about ``x_ref`` (both (6,))."""
     x_ref = jnp.asarray(x_ref, dtype=jnp.float64)
     x = jnp.asarray(x, dtype=jnp.float64)
@@ -65,7 +67,7 @@ def to_hill(x_ref, x):
     return jnp.concatenate([C @ dr, C @ (dv - jnp.cross(w, dr))])
 
 
-def from_hill(x_ref, rel):
+def from_hill(x_ref: ArrayLike, rel: ArrayLike) -> Array:
     """Inertial state (6,) whose Hill-frame state about ``x_ref`` is ``rel`` (inverse of to_hill)."""
     x_ref = jnp.asarray(x_ref, dtype=jnp.float64)
     rel = jnp.asarray(rel, dtype=jnp.float64)

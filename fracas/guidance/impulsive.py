@@ -39,10 +39,13 @@ post-guidance covariance is the report's reset to the knowledge instead (see
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
 
 from fracas import _jax  # noqa: F401  (float64 before any array exists)
 from fracas.guidance.low_thrust import weighted_correction_matrix
@@ -93,7 +96,9 @@ def velocity_selector(n: int) -> jax.Array:
     return jnp.zeros((n, 3)).at[_VEL, :].set(jnp.eye(3))
 
 
-def cross_covariance(p_control, p_knowledge, mode: str = "report", cross=None) -> jax.Array:
+def cross_covariance(
+    p_control: ArrayLike, p_knowledge: ArrayLike, mode: str = "report", cross: ArrayLike | None = None
+) -> jax.Array:
     """C_xe = E[δX eᵀ] of the model ``mode`` (digest §B.3 table); ``cross`` for ``tracked``."""
     p_k = jnp.asarray(p_knowledge)
     if mode == "report":
@@ -109,7 +114,9 @@ def cross_covariance(p_control, p_knowledge, mode: str = "report", cross=None) -
     raise ValueError(f"unknown mode {mode!r}; expected one of {MODES}")
 
 
-def estimate_deviation_covariance(p_control, p_knowledge, mode: str = "report", cross=None) -> jax.Array:
+def estimate_deviation_covariance(
+    p_control: ArrayLike, p_knowledge: ArrayLike, mode: str = "report", cross: ArrayLike | None = None
+) -> jax.Array:
     """P̃ = cov δX̂ = P_c − C_xe − C_xeᵀ + P_k (digest (G-0), default ``report``: P̃ = P_c).
 
     FRACAS GUIDM §5.3.6 uses P_c ("pessimistic", report L1700); ``orthogonal`` gives the
@@ -122,7 +129,12 @@ def estimate_deviation_covariance(p_control, p_knowledge, mode: str = "report", 
     return p_c - c - c.T + p_k
 
 
-def guidance_matrix(psi, weights=None, tolerances=None, rtol: float = 1e-12) -> GuidanceMatrix:
+def guidance_matrix(
+    psi: ArrayLike,
+    weights: ArrayLike | Sequence[float] | None = None,
+    tolerances: ArrayLike | Sequence[float] | None = None,
+    rtol: float = 1e-12,
+) -> GuidanceMatrix:
     """Γ = Ψ_v^{+W} Ψ, the linear impulsive guidance matrix (digest (G-3); GUIDM §5.3.6).
 
     psi: Ψ (m×n), targets with respect to the state at the guidance epoch (TARMAT §5.4.9);
@@ -146,22 +158,22 @@ def guidance_matrix(psi, weights=None, tolerances=None, rtol: float = 1e-12) -> 
     return GuidanceMatrix(gamma=gamma, rank=rank)
 
 
-def dv_covariance(gamma, p_tilde) -> jax.Array:
+def dv_covariance(gamma: ArrayLike, p_tilde: ArrayLike) -> jax.Array:
     """P_ΔV = Γ P̃ Γᵀ (digest (G-5)), km²/s²; P̃ from :func:`estimate_deviation_covariance`."""
     gamma = jnp.asarray(gamma)
     return gamma @ jnp.asarray(p_tilde) @ gamma.T
 
 
-def _pointing_variance(sigma_beta1, sigma_beta2):
+def _pointing_variance(sigma_beta1: ArrayLike, sigma_beta2: ArrayLike) -> Array:
     return 0.5 * (jnp.square(sigma_beta1) + jnp.square(sigma_beta2))
 
 
 def gates_covariance(
-    dv,
-    sigma_p=SIGMA_PROPORTIONALITY,
-    sigma_beta1=SIGMA_POINTING_RAD,
-    sigma_beta2=SIGMA_POINTING_RAD,
-    sigma_res=SIGMA_RESOLUTION_KM_S,
+    dv: ArrayLike,
+    sigma_p: ArrayLike = SIGMA_PROPORTIONALITY,
+    sigma_beta1: ArrayLike = SIGMA_POINTING_RAD,
+    sigma_beta2: ArrayLike = SIGMA_POINTING_RAD,
+    sigma_res: ArrayLike = SIGMA_RESOLUTION_KM_S,
 ) -> jax.Array:
     """Execution-error covariance of one commanded ΔV d (km/s), Gates (1963) (digest (G-6)).
 
@@ -178,12 +190,12 @@ def gates_covariance(
 
 
 def execution_error_covariance(
-    dv_nominal,
-    p_dv,
-    sigma_p=SIGMA_PROPORTIONALITY,
-    sigma_beta1=SIGMA_POINTING_RAD,
-    sigma_beta2=SIGMA_POINTING_RAD,
-    sigma_res=SIGMA_RESOLUTION_KM_S,
+    dv_nominal: ArrayLike,
+    p_dv: ArrayLike,
+    sigma_p: ArrayLike = SIGMA_PROPORTIONALITY,
+    sigma_beta1: ArrayLike = SIGMA_POINTING_RAD,
+    sigma_beta2: ArrayLike = SIGMA_POINTING_RAD,
+    sigma_res: ArrayLike = SIGMA_RESOLUTION_KM_S,
 ) -> jax.Array:
     """Σ_ex, the Gates covariance averaged over the commanded ΔV = d₀ + δ, δ ~ N(0, P_ΔV).
 
@@ -202,7 +214,13 @@ def execution_error_covariance(
 
 
 def post_guidance_covariance(
-    p_control, p_knowledge, gamma, sigma_exec, mode: str = "report", cross=None, n_state: int = 6
+    p_control: ArrayLike,
+    p_knowledge: ArrayLike,
+    gamma: ArrayLike,
+    sigma_exec: ArrayLike,
+    mode: str = "report",
+    cross: ArrayLike | None = None,
+    n_state: int = 6,
 ) -> jax.Array:
     """P_c⁺, the control covariance just after the impulse (digest (G-7); GUIDM §5.3.6).
 
@@ -229,7 +247,13 @@ def post_guidance_covariance(
 
 
 def post_correction_covariance(
-    p_control, p_knowledge, g_mat, mode: str = "report", cross=None, n_state: int = 6, reset: str = "state"
+    p_control: ArrayLike,
+    p_knowledge: ArrayLike,
+    g_mat: ArrayLike,
+    mode: str = "report",
+    cross: ArrayLike | None = None,
+    n_state: int = 6,
+    reset: str = "state",
 ) -> jax.Array:
     """P_c⁺ of any linear correction δX⁺ = (I − G)δX + G e, execution errors excluded
     (digest (G-7) with BΓ → G: G = BΓ for an impulse, Φ⁻¹SΓ_U for a low-thrust arc
@@ -255,7 +279,7 @@ def post_correction_covariance(
     return a @ p_c @ a.T + g_mat @ p_k @ g_mat.T + cross_term + cross_term.T
 
 
-def target_covariance(psi, p) -> jax.Array:
+def target_covariance(psi: ArrayLike, p: ArrayLike) -> jax.Array:
     """P_T = Ψ P Ψᵀ (digest (G-8)): the target covariance before (P = P_c) or after (P_c⁺)."""
     psi = jnp.asarray(psi)
     return psi @ jnp.asarray(p) @ psi.T

@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
 
 from fracas import _jax  # noqa: F401  (float64 before any array exists)
 from fracas.dynamics.kepler import kepler
@@ -33,17 +35,19 @@ INTERCEPT_TOLERANCE_KM = 1e-8
 _ITER = 40
 
 
-def _arc(r, v, tof, mu):
+def _arc(r: Array, v: Array, tof: float | Array, mu: float | Array) -> Array:
     rf, vf = kepler(r, v, tof, mu)
     return jnp.concatenate([rf, vf])
 
 
-def _jac(r, v, tof, mu):
+def _jac(r: Array, v: Array, tof: float | Array, mu: float | Array) -> Array:
     return jax.jacfwd(lambda x: _arc(x[:3], x[3:], tof, mu))(jnp.concatenate([r, v]))
 
 
 @jax.jit
-def intercept(x_chaser, x_target, tof_s, mu):
+def intercept(
+    x_chaser: ArrayLike, x_target: ArrayLike, tof_s: ArrayLike, mu: ArrayLike
+) -> tuple[Array, Array, Array, Array]:
     """(dV (3,) km/s, v_1 (3,) km/s, miss km, status) of the intercept from x_chaser (6,) at
     t_m to the target's position tof_s later (module docstring)."""
     x_chaser = jnp.asarray(x_chaser, dtype=jnp.float64)
@@ -53,7 +57,7 @@ def intercept(x_chaser, x_target, tof_s, mu):
     r_a, v_a = x_chaser[:3], x_chaser[3:6]
     r_tf = _arc(x_target[:3], x_target[3:6], tof_s, mu)[:3]
 
-    def body(_, v1):
+    def body(_: int, v1: Array) -> Array:
         f = _arc(r_a, v1, tof_s, mu)[:3] - r_tf
         J = _jac(r_a, v1, tof_s, mu)[:3, 3:]
         step = jnp.linalg.solve(J, f)
@@ -69,7 +73,9 @@ def intercept(x_chaser, x_target, tof_s, mu):
 
 
 @jax.jit
-def intercept_sensitivity(x_chaser, x_target, v1, tof_s, mu):
+def intercept_sensitivity(
+    x_chaser: ArrayLike, x_target: ArrayLike, v1: ArrayLike, tof_s: float | Array, mu: float | Array
+) -> Array:
     """M (3, 12): d dV / d [x_A; x_T] at the converged intercept v1 (module docstring)."""
     x_chaser = jnp.asarray(x_chaser, dtype=jnp.float64)
     x_target = jnp.asarray(x_target, dtype=jnp.float64)

@@ -22,16 +22,23 @@ c km/s.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import Array
+from jax.typing import ArrayLike
 
 from fracas import _jax  # noqa: F401  (float64 before any array exists)
 from fracas.dynamics.parameters import get_values
 from fracas.guidance.target_kinds import CONTROL_UNITS, LOW_THRUST_CONTROLS
 from fracas.integrate import encke
 from fracas.integrate.propagate import propagate_with_sensitivities
+
+if TYPE_CHECKING:
+    from fracas.dynamics.model import Params
+    from fracas.integrate.problem import Problem
 
 __all__ = [
     "LOW_THRUST_CONTROLS",
@@ -76,7 +83,7 @@ def _arc_of(label: str) -> tuple[str, int]:
     return name, int(rest.rstrip("]")) if rest else -1
 
 
-def _arc_thrust_rate(problem, params, t, x, primary: int, arc: int) -> np.ndarray:
+def _arc_thrust_rate(problem: Problem, params: Params, t: float, x: np.ndarray, primary: int, arc: int) -> np.ndarray:
     """f_j = [0; T û/m; −T/c] (7,): the state rate that thrust arc ``arc`` alone adds at (t, x)
     (thrust and pointing of that arc, power at t; FRACAS EP)."""
     model = problem.model
@@ -92,7 +99,8 @@ def _arc_thrust_rate(problem, params, t, x, primary: int, arc: int) -> np.ndarra
     )
     z = jnp.zeros(())
     ctl_off = encke.StepControls(z, z, z, z)
-    pos, _ = encke.body_states(model, params, problem.ephem, problem.epoch_et_s + t)
+    # Problem.ephem is declared `object | None` (an EphemerisTable or None)
+    pos, _ = encke.body_states(model, params, problem.ephem, problem.epoch_et_s + t)  # type: ignore[arg-type]
     r, v = jnp.asarray(x[0:3]), jnp.asarray(x[3:6])
     _, f_on, md_on = encke.perturbation(model, params, t, r, v, primary, pos, ctl_on)
     _, f_off, md_off = encke.perturbation(model, params, t, r, v, primary, pos, ctl_off)
@@ -102,7 +110,7 @@ def _arc_thrust_rate(problem, params, t, x, primary: int, arc: int) -> np.ndarra
     return out
 
 
-def control_sensitivity(problem, t_from_s: float, t_to_s: float, labels: Sequence[str]):
+def control_sensitivity(problem: Problem, t_from_s: float, t_to_s: float, labels: Sequence[str]) -> tuple[Array, Array]:
     """S = ∂[r, v, m](t_to)/∂U (7×M), X(t_from) held fixed, and Φ(t_to, t_from) (7×7) (digest (L-1)).
 
     problem: a :class:`fracas.integrate.problem.Problem` (x0 at t = 0); labels: parameter
@@ -157,7 +165,13 @@ def control_sensitivity(problem, t_from_s: float, t_to_s: float, labels: Sequenc
 
 
 # ---------------------------------------------------------------- correction matrix (L-2)
-def weighted_correction_matrix(k_mat, lam, weights=None, tolerances=None, rtol: float = 1e-12):
+def weighted_correction_matrix(
+    k_mat: ArrayLike,
+    lam: ArrayLike,
+    weights: ArrayLike | Sequence[float] | None = None,
+    tolerances: ArrayLike | Sequence[float] | None = None,
+    rtol: float = 1e-12,
+) -> tuple[Array, Array]:
     """Γ_U = K^{+W} Λ (M×n) and the rank of the weighted K (digest (L-2), (G-3); GUIDM §5.3.6).
 
     k_mat: K (m×M), targets per control; lam: Λ (m×n), targets per state deviation;
@@ -189,7 +203,15 @@ def weighted_correction_matrix(k_mat, lam, weights=None, tolerances=None, rtol: 
 
 # ----------------------------------------------------------------------- cost (L-4)
 def correction_cost_jacobians(
-    controls: Sequence[str], a_i, a_c, m_i, m_c, c, thrust_i, thrust_c, proportionality=1.0
+    controls: Sequence[str],
+    a_i: float | Array,
+    a_c: float | Array,
+    m_i: float | Array,
+    m_c: float | Array,
+    c: float | Array,
+    thrust_i: float | Array,
+    thrust_c: float | Array,
+    proportionality: float | Array = 1.0,
 ) -> tuple[jax.Array, jax.Array]:
     """J_ΔV (M,) and J_m (M,): first-order ΔV and propellant change per unit of each control (digest (L-4)).
 
@@ -228,7 +250,9 @@ def correction_cost_jacobians(
 
 
 # ------------------------------------------------------------------ execution errors
-def execution_covariance(controls: Sequence[str], p_u, fraction=0.01, floor=None) -> jax.Array:
+def execution_covariance(
+    controls: Sequence[str], p_u: ArrayLike, fraction: ArrayLike = 0.01, floor: ArrayLike | None = None
+) -> jax.Array:
     """Execution-error covariance (M×M) of a low-thrust correction δU: a fracas choice.
 
     The report gives no low-thrust execution model.  fracas takes each control's correction

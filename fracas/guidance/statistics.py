@@ -25,22 +25,27 @@ eigenvalues of P_ΔV (negative rounding clipped to 0).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from scipy import optimize, special, stats
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
 
 __all__ = ["dv_eigenvalues", "mean_dv_magnitude", "rms_dv_magnitude", "dv_magnitude_cdf", "dv_magnitude_quantile"]
 
 _NODES = 96
 
 
-def dv_eigenvalues(p_dv) -> np.ndarray:
+def dv_eigenvalues(p_dv: npt.ArrayLike) -> np.ndarray:
     """Eigenvalues of the symmetric part of P_ΔV (3×3, km²/s²), ascending, clipped at 0."""
     p = np.asarray(p_dv, dtype=np.float64)
     lam = np.linalg.eigvalsh(0.5 * (p + p.T))
     return np.clip(lam, 0.0, None)
 
 
-def mean_dv_magnitude(p_dv) -> float:
+def mean_dv_magnitude(p_dv: npt.ArrayLike) -> float:
     """E|ΔV| = 2(2/π)^{1/2} R_G(λ₁, λ₂, λ₃) (digest (G-9), exact; replaces Hoffman–Young), km/s.
 
     Isotropic σ²I gives the Maxwell mean 2σ(2/π)^{1/2}; one eigenvalue σ² gives σ(2/π)^{1/2}.
@@ -50,12 +55,12 @@ def mean_dv_magnitude(p_dv) -> float:
     return float(2.0 * np.sqrt(2.0 / np.pi) * special.elliprg(*lam))
 
 
-def rms_dv_magnitude(p_dv) -> float:
+def rms_dv_magnitude(p_dv: npt.ArrayLike) -> float:
     """(E|ΔV|²)^{1/2} = (tr P_ΔV)^{1/2}, km/s."""
     return float(np.sqrt(np.sum(dv_eigenvalues(p_dv))))
 
 
-def _sphere_rule(nodes: int):
+def _sphere_rule(nodes: int) -> tuple[np.ndarray, np.ndarray]:
     z, wz = np.polynomial.legendre.leggauss(nodes)
     phi = 2.0 * np.pi * np.arange(2 * nodes) / (2 * nodes)
     sin_t = np.sqrt(1.0 - z * z)
@@ -66,14 +71,14 @@ def _sphere_rule(nodes: int):
     return n, w
 
 
-def _cdf_scaled(v, lam_scaled, n, w):
+def _cdf_scaled(v: float, lam_scaled: np.ndarray, n: np.ndarray, w: np.ndarray) -> float:
     s = (n * n) @ lam_scaled
     with np.errstate(divide="ignore"):
         arg = np.where(s > 0.0, v / np.sqrt(np.where(s > 0.0, s, 1.0)), np.inf)
     return float(w @ stats.chi.cdf(arg, 3))
 
 
-def dv_magnitude_cdf(p_dv, v, nodes: int = _NODES) -> float:
+def dv_magnitude_cdf(p_dv: npt.ArrayLike, v: float, nodes: int = _NODES) -> float:
     """P(|ΔV| ≤ v) for ΔV ~ N(0, P_ΔV) by the sphere quadrature of the module docstring."""
     lam = dv_eigenvalues(p_dv)
     lmax = lam[-1]
@@ -83,7 +88,7 @@ def dv_magnitude_cdf(p_dv, v, nodes: int = _NODES) -> float:
     return _cdf_scaled(v / np.sqrt(lmax), lam / lmax, n, w)
 
 
-def dv_magnitude_quantile(p_dv, q: float = 0.99, nodes: int = _NODES) -> float:
+def dv_magnitude_quantile(p_dv: npt.ArrayLike, q: float = 0.99, nodes: int = _NODES) -> float:
     """The q-quantile of |ΔV| (default 0.99, the "99 % ΔV"), km/s, exact to ~1e-12 relative.
 
     Method in the module docstring (quadrature over directions of the χ(3) CDF, root by

@@ -25,10 +25,13 @@ Units: km, km/s, s, rad; μ in km³/s².  State order [x, y, z, vx, vy, vz] (the
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import partial
 
 import jax
 import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
 
 from fracas import _jax  # noqa: F401  (float64 before any array exists)
 from fracas.dynamics.bplane import b_plane
@@ -48,7 +51,7 @@ _BPLANE = ("b_dot_t", "b_dot_r")
 _TIMES = ("time_of_flight", "closest_approach_time")
 
 
-def _time_to_periapsis(el, mu):
+def _time_to_periapsis(el: Array, mu: ArrayLike) -> Array:
     """Time (s) from the state to periapsis on its conic: −M/n, elliptic M wrapped to [−π, π)
     (the nearest periapsis; negative once past it), hyperbolic M as it is."""
     a, e, m_anom = el[0], el[1], el[5]
@@ -59,7 +62,13 @@ def _time_to_periapsis(el, mu):
 
 
 @partial(jax.jit, static_argnums=(0,))
-def target_values(names: tuple[str, ...], state_rel, t_f_s, mu, ref_pole=(0.0, 0.0, 1.0)) -> jax.Array:
+def target_values(
+    names: tuple[str, ...],
+    state_rel: ArrayLike,
+    t_f_s: float | Array,
+    mu: ArrayLike,
+    ref_pole: ArrayLike | Sequence[float] = (0.0, 0.0, 1.0),
+) -> jax.Array:
     """Values (m,) of the targets ``names`` (TARMAT; :data:`TARGET_KINDS`) at the target time.
 
     state_rel: (6,) or (7,) state relative to the target body (km, km/s[, kg]; mass unused);
@@ -80,9 +89,9 @@ def target_values(names: tuple[str, ...], state_rel, t_f_s, mu, ref_pole=(0.0, 0
         elif name in _ELEMENT_INDEX:
             out.append(el[_ELEMENT_INDEX[name]])
         elif name == "b_dot_t":
-            out.append(bp.b_dot_t)
+            out.append(bp.b_dot_t)  # type: ignore[union-attr]  # bp is set for every B-plane target
         elif name == "b_dot_r":
-            out.append(bp.b_dot_r)
+            out.append(bp.b_dot_r)  # type: ignore[union-attr]
         elif name in _TIMES:
             out.append(t_f_s + _time_to_periapsis(el, mu))
         elif name == "closest_approach_radius":
@@ -106,7 +115,7 @@ def target_values(names: tuple[str, ...], state_rel, t_f_s, mu, ref_pole=(0.0, 0
         elif name == "vinf":
             out.append(jnp.sqrt(jnp.sum(v * v) - 2.0 * mu / jnp.sqrt(jnp.sum(r * r))))
         elif name in ("vinf_x", "vinf_y", "vinf_z"):
-            out.append(bp.v_inf * bp.s_hat["xyz".index(name[-1])])
+            out.append(bp.v_inf * bp.s_hat["xyz".index(name[-1])])  # type: ignore[union-attr]
         elif name == "final_time":
             out.append(jnp.asarray(t_f_s, jnp.float64))
         else:  # pragma: no cover  (check_targets covers TARGET_KINDS)
@@ -115,7 +124,13 @@ def target_values(names: tuple[str, ...], state_rel, t_f_s, mu, ref_pole=(0.0, 0
 
 
 @partial(jax.jit, static_argnums=(0,))
-def target_jacobian(names: tuple[str, ...], state_rel, t_f_s, mu, ref_pole=(0.0, 0.0, 1.0)) -> jax.Array:
+def target_jacobian(
+    names: tuple[str, ...],
+    state_rel: ArrayLike,
+    t_f_s: ArrayLike,
+    mu: ArrayLike,
+    ref_pole: ArrayLike | Sequence[float] = (0.0, 0.0, 1.0),
+) -> jax.Array:
     """A_T = ∂T/∂X_f (m×7) by forward-mode AD of :func:`target_values` (TARMAT, digest (G-2)).
 
     Columns [x, y, z, vx, vy, vz, mass]; the mass column is zero.  Units: row unit of the
@@ -127,7 +142,7 @@ def target_jacobian(names: tuple[str, ...], state_rel, t_f_s, mu, ref_pole=(0.0,
 
 
 @jax.jit
-def target_matrix(a_t, phi_f_c, theta_f_c) -> tuple[jax.Array, jax.Array]:
+def target_matrix(a_t: ArrayLike, phi_f_c: ArrayLike, theta_f_c: ArrayLike) -> tuple[jax.Array, jax.Array]:
     """Ψ = A_T Φ(t_f, t_c) (m×7) and Ψ_p = A_T Θ(t_f, t_c) (m×p) (TARMAT §5.4.9, digest (G-2)).
 
     a_t: (m×7) from :func:`target_jacobian`; phi_f_c: the 7-state (r, v, m) transition
@@ -139,7 +154,7 @@ def target_matrix(a_t, phi_f_c, theta_f_c) -> tuple[jax.Array, jax.Array]:
 
 
 @jax.jit
-def element_position_partials(elements, mu) -> jax.Array:
+def element_position_partials(elements: ArrayLike, mu: ArrayLike) -> jax.Array:
     """∂(x, y, z)/∂(a, e, i, Ω, ω, M) (3×6) in closed form, FRACAS TARPRL §5.3.20 (ellipse).
 
     With u = ω + ν, r = a(1 − e cos E) and X/r = [cosΩ cos u − sinΩ sin u cos i,

@@ -10,6 +10,7 @@ catalogue names below are loaded eagerly, the JAX ones on first access.
 """
 
 import importlib
+from typing import Any
 
 from fracas.measurements.kinds import (
     KINDS,
@@ -53,7 +54,7 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> Any:
     if name in _LAZY:
         value = getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
         globals()[name] = value
@@ -63,5 +64,5 @@ def __getattr__(name: str):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def __dir__():
+def __dir__() -> list[str]:
     return sorted(set(globals()) | set(__all__) | set(_SUBMODULES))

@@ -39,6 +39,7 @@ This module imports no JAX.
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 __all__ = [
@@ -389,7 +390,7 @@ def measurement_label_unit(label: str) -> str:
     return STATION_LABELS.get(name) or GLOBAL_LABELS[name]
 
 
-def check_measurement_label(label: str, station_names) -> None:
+def check_measurement_label(label: str, station_names: Iterable[str]) -> None:
     """Raise KeyError, naming the valid forms and stations, unless ``label`` is a valid
     measurement-parameter label whose station (if any) is in ``station_names``."""
     names = sorted(station_names)

@@ -37,6 +37,8 @@ unit partial (TRAKM eq. 8 and the closing remark on angle biases), which
 from __future__ import annotations
 
 import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
 
 from fracas import _jax  # noqa: F401  (x64 first)
 from fracas.measurements import kinds
@@ -75,15 +77,17 @@ KINDS = kinds.KINDS
 N_STATIONS = kinds.N_STATIONS
 
 
-def _f64(x):
+def _f64(x: ArrayLike) -> Array:
     return jnp.asarray(x, dtype=jnp.float64)
 
 
-def _zeros3():
+def _zeros3() -> Array:
     return jnp.zeros(3, dtype=jnp.float64)
 
 
-def _rel(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
+def _rel(
+    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
+) -> tuple[Array, Array]:
     """Station-relative position p and velocity w (sc - earth computed first, so two
     stations share its rounding)."""
     d_r = _f64(sc_r) - _f64(earth_r)
@@ -91,7 +95,7 @@ def _rel(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
     return d_r - _f64(st_r), d_v - _f64(st_v)
 
 
-def _range_rate_terms(p, w):
+def _range_rate_terms(p: Array, w: Array) -> tuple[Array, Array, Array]:
     rho = jnp.linalg.norm(p)
     u = p / rho
     rdot = jnp.dot(u, w)
@@ -99,13 +103,17 @@ def _range_rate_terms(p, w):
 
 
 # --- 2-way range and Doppler (TRAKM eqs. 1-8) --------------------------------------
-def range2(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
+def range2(
+    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
+) -> Array:
     """2-way range rho = |sc_r - earth_r - st_r| (km) (FRACAS TRAKM, eq. 1 model)."""
     p, _ = _rel(sc_r, sc_v, earth_r, earth_v, st_r, st_v)
     return jnp.linalg.norm(p)
 
 
-def range2_partials(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
+def range2_partials(
+    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
+) -> tuple[Array, Array]:
     """d rho / d(sc r, v) = (u, 0) (TRAKM eq. 1); d rho / d(st r, v) = (-u, 0) (eq. 2)."""
     p, _ = _rel(sc_r, sc_v, earth_r, earth_v, st_r, st_v)
     u = p / jnp.linalg.norm(p)
@@ -113,19 +121,23 @@ def range2_partials(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
     return h_sc, -h_sc
 
 
-def doppler2(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
+def doppler2(
+    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
+) -> Array:
     """2-way Doppler as range rate rho_dot = u . (sc_v - earth_v - st_v) (km/s) (TRAKM)."""
     p, w = _rel(sc_r, sc_v, earth_r, earth_v, st_r, st_v)
     return jnp.dot(p, w) / jnp.linalg.norm(p)
 
 
-def _doppler_grad_r(rho, u, w, rdot):
+def _doppler_grad_r(rho: Array, u: Array, w: Array, rdot: Array) -> Array:
     """d rho_dot / d p = w^T (I - u u^T) / rho (TRAKM eqs. 4 and 7; the scanned eq. 4 lost
     the projector: it is rho_dot_vec^T du/dp with du/dp = (I - u u^T)/rho)."""
     return (w - rdot * u) / rho
 
 
-def doppler2_partials(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
+def doppler2_partials(
+    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
+) -> tuple[Array, Array]:
     """d rho_dot / d(sc r, v) = ((w - rho_dot u)/rho, u) (TRAKM eqs. 3-5, 7); station: minus
     that (eq. 6)."""
     p, w = _rel(sc_r, sc_v, earth_r, earth_v, st_r, st_v)
@@ -135,25 +147,61 @@ def doppler2_partials(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
 
 
 # --- 3-way (QVLBI) range and Doppler (TRAKM eqs. 9-10) -----------------------------
-def range3(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
+def range3(
+    sc_r: ArrayLike,
+    sc_v: ArrayLike,
+    earth_r: ArrayLike,
+    earth_v: ArrayLike,
+    st1_r: ArrayLike,
+    st1_v: ArrayLike,
+    st2_r: ArrayLike,
+    st2_v: ArrayLike,
+) -> Array:
     """3-way range rho_3 = rho_1 + rho_2 (km) (TRAKM eq. 9; c dt is a separate bias)."""
     return range2(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v) + range2(sc_r, sc_v, earth_r, earth_v, st2_r, st2_v)
 
 
-def range3_partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
+def range3_partials(
+    sc_r: ArrayLike,
+    sc_v: ArrayLike,
+    earth_r: ArrayLike,
+    earth_v: ArrayLike,
+    st1_r: ArrayLike,
+    st1_v: ArrayLike,
+    st2_r: ArrayLike,
+    st2_v: ArrayLike,
+) -> tuple[Array, Array, Array]:
     """Sum of the two stations' 2-way partials (TRAKM text after eq. 10)."""
     h1, s1 = range2_partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v)
     h2, s2 = range2_partials(sc_r, sc_v, earth_r, earth_v, st2_r, st2_v)
     return h1 + h2, s1, s2
 
 
-def doppler3(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
+def doppler3(
+    sc_r: ArrayLike,
+    sc_v: ArrayLike,
+    earth_r: ArrayLike,
+    earth_v: ArrayLike,
+    st1_r: ArrayLike,
+    st1_v: ArrayLike,
+    st2_r: ArrayLike,
+    st2_v: ArrayLike,
+) -> Array:
     """3-way Doppler rho_dot_3 = rho_dot_1 + rho_dot_2 (km/s) (TRAKM eq. 10, rebuilt: the
     scan prints ranges on the right-hand side; c df/f is a separate bias)."""
     return doppler2(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v) + doppler2(sc_r, sc_v, earth_r, earth_v, st2_r, st2_v)
 
 
-def doppler3_partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
+def doppler3_partials(
+    sc_r: ArrayLike,
+    sc_v: ArrayLike,
+    earth_r: ArrayLike,
+    earth_v: ArrayLike,
+    st1_r: ArrayLike,
+    st1_v: ArrayLike,
+    st2_r: ArrayLike,
+    st2_v: ArrayLike,
+) -> tuple[Array, Array, Array]:
     """Sum of the two stations' 2-way Doppler partials (TRAKM text after eq. 10)."""
     h1, s1 = doppler2_partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v)
     h2, s2 = doppler2_partials(sc_r, sc_v, earth_r, earth_v, st2_r, st2_v)
@@ -161,7 +209,16 @@ def doppler3_partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
 
 
 # --- differenced range and Doppler (TRAKM eqs. 11-16), cancellation-free -----------
-def _diff_terms(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
+def _diff_terms(
+    sc_r: ArrayLike,
+    sc_v: ArrayLike,
+    earth_r: ArrayLike,
+    earth_v: ArrayLike,
+    st1_r: ArrayLike,
+    st1_v: ArrayLike,
+    st2_r: ArrayLike,
+    st2_v: ArrayLike,
+) -> dict[str, Array]:
     """Common terms of the differenced kinds, free of the rho_1 - rho_2 cancellation.
 
     TRAKM eqs. 14-16, with eq. 15 rebuilt exactly (the scan dropped the normalisation):
@@ -195,14 +252,32 @@ def _diff_terms(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
     }
 
 
-def diff_range(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
+def diff_range(
+    sc_r: ArrayLike,
+    sc_v: ArrayLike,
+    earth_r: ArrayLike,
+    earth_v: ArrayLike,
+    st1_r: ArrayLike,
+    st1_v: ArrayLike,
+    st2_r: ArrayLike,
+    st2_v: ArrayLike,
+) -> Array:
     """Differenced range rho_1 - rho_2 (km) (TRAKM eq. 11; c dt is a separate bias),
     evaluated as dr^T (p1 + p2) / (rho1 + rho2) (eqs. 14-15 rebuilt): no digits are lost
     to the cancellation of two ~1e8 km ranges."""
     return _diff_terms(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v)["drho"]
 
 
-def diff_range_partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
+def diff_range_partials(
+    sc_r: ArrayLike,
+    sc_v: ArrayLike,
+    earth_r: ArrayLike,
+    earth_v: ArrayLike,
+    st1_r: ArrayLike,
+    st1_v: ArrayLike,
+    st2_r: ArrayLike,
+    st2_v: ArrayLike,
+) -> tuple[Array, Array, Array]:
     """d/d sc = (u1 - u2, 0) with u1 - u2 from eq. 16 (TRAKM eq. 13); d/d st1 = (-u1, 0),
     d/d st2 = (u2, 0)."""
     t = _diff_terms(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v)
@@ -210,13 +285,31 @@ def diff_range_partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v
     return (jnp.concatenate([t["du"], z]), jnp.concatenate([-t["u1"], z]), jnp.concatenate([t["u2"], z]))
 
 
-def diff_doppler(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
+def diff_doppler(
+    sc_r: ArrayLike,
+    sc_v: ArrayLike,
+    earth_r: ArrayLike,
+    earth_v: ArrayLike,
+    st1_r: ArrayLike,
+    st1_v: ArrayLike,
+    st2_r: ArrayLike,
+    st2_v: ArrayLike,
+) -> Array:
     """Differenced Doppler rho_dot_1 - rho_dot_2 (km/s) (TRAKM eq. 12; c df/f a separate
     bias), as (u1 - u2).w1 + u2.(st2_v - st1_v) with u1 - u2 from eq. 16."""
     return _diff_terms(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v)["drdot"]
 
 
-def diff_doppler_partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v):
+def diff_doppler_partials(
+    sc_r: ArrayLike,
+    sc_v: ArrayLike,
+    earth_r: ArrayLike,
+    earth_v: ArrayLike,
+    st1_r: ArrayLike,
+    st1_v: ArrayLike,
+    st2_r: ArrayLike,
+    st2_v: ArrayLike,
+) -> tuple[Array, Array, Array]:
     """Partials of :func:`diff_doppler`, the spacecraft ones cancellation-free.
 
     With g_i = (w_i - rho_dot_i u_i)/rho_i (d rho_dot_i / d p_i), the difference g1 - g2 is
@@ -236,7 +329,9 @@ def diff_doppler_partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2
 
 
 # --- azimuth and elevation (TRAKM eqs. 17-31, rebuilt topocentric) ------------------
-def _topocentric(sc_r, earth_r, st_r):
+def _topocentric(
+    sc_r: ArrayLike, earth_r: ArrayLike, st_r: ArrayLike
+) -> tuple[Array, Array, Array, Array, Array, Array, Array, Array]:
     """Spherical-Earth local frame at the station: up = st_r/|st_r|, east = unit(z x up),
     north = up x east; returns p, rho, |st_r|, up, east, north, cos/sin geocentric lat."""
     p = _f64(sc_r) - _f64(earth_r) - _f64(st_r)
@@ -249,7 +344,9 @@ def _topocentric(sc_r, earth_r, st_r):
     return p, jnp.linalg.norm(p), smag, up, east, north, cphi, up[2]
 
 
-def elevation(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
+def elevation(
+    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
+) -> Array:
     """Elevation beta (rad) above the station's horizon plane (normal to the geocentric
     station radius, spherical Earth): sin beta = u . up (TRAKM eq. 17/18), evaluated as
     atan2(p.up, |p - (p.up) up|) for full accuracy near the zenith."""
@@ -258,7 +355,9 @@ def elevation(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
     return jnp.arctan2(e, jnp.linalg.norm(p - e * up))
 
 
-def elevation_partials(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
+def elevation_partials(
+    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
+) -> tuple[Array, Array]:
     """Analytic partials of :func:`elevation` (TRAKM eqs. 19-20, rebuilt):
 
         d beta / d sc_r = (up - sin b u) / (rho cos b)
@@ -277,7 +376,9 @@ def elevation_partials(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
     return h_sc, h_st
 
 
-def azimuth(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
+def azimuth(
+    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
+) -> Array:
     """Azimuth alpha (rad, in [0, 2 pi)), from local north toward east:
     alpha = atan2(p.east, p.north) (standard topocentric definition; replaces the
     geocentric-ecliptic construction of TRAKM eqs. 21-23)."""
@@ -285,7 +386,9 @@ def azimuth(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
     return jnp.mod(jnp.arctan2(jnp.dot(p, east), jnp.dot(p, north)), 2.0 * jnp.pi)
 
 
-def azimuth_partials(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
+def azimuth_partials(
+    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
+) -> tuple[Array, Array]:
     """Analytic partials of :func:`azimuth` (replacing TRAKM eqs. 24-30).
 
     With n = p.north, E = p.east, e = p.up, h^2 = n^2 + E^2 and geocentric latitude phi:
@@ -308,7 +411,7 @@ def azimuth_partials(sc_r, sc_v, earth_r, earth_v, st_r, st_v):
 
 
 # --- spacecraft-based optical data (TRAKM eqs. 32-39) ------------------------------
-def star_planet_angle(sc_r, body_r, star_unit):
+def star_planet_angle(sc_r: ArrayLike, body_r: ArrayLike, star_unit: ArrayLike) -> Array:
     """Star-planet angle gamma (rad): cos gamma = d . u_p, u_p = unit(body_r - sc_r), d the
     star unit vector (TRAKM eq. 32); evaluated as atan2(|d x u_p|, d . u_p)."""
     q = _f64(body_r) - _f64(sc_r)
@@ -317,7 +420,7 @@ def star_planet_angle(sc_r, body_r, star_unit):
     return jnp.arctan2(jnp.linalg.norm(jnp.cross(d, u)), jnp.dot(d, u))
 
 
-def star_planet_angle_partials(sc_r, body_r, star_unit):
+def star_planet_angle_partials(sc_r: ArrayLike, body_r: ArrayLike, star_unit: ArrayLike) -> tuple[Array, Array]:
     """d gamma / d sc_r = (d - cos g u_p) / (rho sin g) (TRAKM eq. 33), d/d sc_v = 0 (eq. 34),
     d gamma / d body_r = minus that (eq. 35, before chaining with d body_r / d params)."""
     q = _f64(body_r) - _f64(sc_r)
@@ -331,14 +434,16 @@ def star_planet_angle_partials(sc_r, body_r, star_unit):
     return jnp.concatenate([g, _zeros3()]), -g
 
 
-def planet_diameter(sc_r, body_r, body_radius_km):
+def planet_diameter(sc_r: ArrayLike, body_r: ArrayLike, body_radius_km: ArrayLike) -> Array:
     """Apparent planet diameter delta (rad): sin(delta/2) = R_p / rho, rho = |body_r - sc_r|
     (TRAKM eq. 36)."""
     rho = jnp.linalg.norm(_f64(body_r) - _f64(sc_r))
     return 2.0 * jnp.arcsin(_f64(body_radius_km) / rho)
 
 
-def planet_diameter_partials(sc_r, body_r, body_radius_km):
+def planet_diameter_partials(
+    sc_r: ArrayLike, body_r: ArrayLike, body_radius_km: ArrayLike
+) -> tuple[Array, Array, Array]:
     """Partials of :func:`planet_diameter` (TRAKM eqs. 37-39; eq. 37 rebuilt, the scan is
     garbled):
 

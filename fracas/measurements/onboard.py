@@ -47,6 +47,8 @@ reference (numpy or JAX arrays alike).
 from __future__ import annotations
 
 import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
 
 from fracas import _jax  # noqa: F401  (x64 first)
 from fracas.dynamics.relative_motion import hill_axes
@@ -74,20 +76,20 @@ __all__ = [
 _N_GEODETIC_ITER = 8  # fixed-point iterations for the geodetic latitude (converged to eps near Earth)
 
 
-def _f64(x):
+def _f64(x: ArrayLike) -> Array:
     return jnp.asarray(x, dtype=jnp.float64)
 
 
-def _unit(x):
+def _unit(x: Array) -> Array:
     return x / jnp.linalg.norm(x)
 
 
-def _zeros3():
+def _zeros3() -> Array:
     return jnp.zeros(3, dtype=jnp.float64)
 
 
 # --- frames -------------------------------------------------------------------------
-def lvlh_axes(r, v):
+def lvlh_axes(r: ArrayLike, v: ArrayLike) -> Array:
     """Local-vertical/velocity frame of a state (r km, v km/s relative to the body), rows
     (i_t forward, i_h orbit normal, i_r up): i_r = r/|r|, i_h = unit(r x v), i_t = i_h x i_r
     (right-handed: i_t x i_h = i_r).  A [[tracking]] entry's ``sensor_axes`` with
@@ -95,7 +97,7 @@ def lvlh_axes(r, v):
     return hill_axes(_f64(r), _f64(v))[0][jnp.array([1, 2, 0])]  # Hill rows (radial, along, normal) reordered
 
 
-def horizon_sensor_axes(r, v, azimuth_rad, depression_rad):
+def horizon_sensor_axes(r: ArrayLike, v: ArrayLike, azimuth_rad: ArrayLike, depression_rad: ArrayLike) -> Array:
     """Horizon-sensor axes (rows i_xm = boresight x_M, i_ym, i_zm = i_2) for a vertical scan
     plane at azimuth phi (UNF phi, counter-clockwise from the forward direction seen from
     above: i_phi = cos phi i_t + sin phi i_h) and a boresight depressed by ``depression_rad``
@@ -109,21 +111,21 @@ def horizon_sensor_axes(r, v, azimuth_rad, depression_rad):
 
 
 # --- the unified angles (UNF c = 2, 3) ------------------------------------------------
-def unified_angles(r_rho, axes):
+def unified_angles(r_rho: ArrayLike, axes: ArrayLike) -> tuple[Array, Array]:
     """(beta, theta) of a relative position r_rho (km) on sensor axes (rows i_xm, i_ym, i_zm):
     beta = atan2(z, x), theta = atan2(y, rho_a), rho_a = sqrt(x^2 + z^2) (rad, (-pi, pi])."""
     x, y, z = _f64(axes) @ _f64(r_rho)
     return jnp.arctan2(z, x), jnp.arctan2(y, jnp.sqrt(x * x + z * z))
 
 
-def beta_gradient(r_rho, axes):
+def beta_gradient(r_rho: ArrayLike, axes: ArrayLike) -> Array:
     """d beta / d r_rho = (x i_zm - z i_xm) / rho_a^2 (1/km)."""
     axes = _f64(axes)
     x, _, z = axes @ _f64(r_rho)
     return (x * axes[2] - z * axes[0]) / (x * x + z * z)
 
 
-def theta_gradient(r_rho, axes):
+def theta_gradient(r_rho: ArrayLike, axes: ArrayLike) -> Array:
     """d theta / d r_rho = (rho_a i_ym - y i_rho_a) / rho^2, i_rho_a = (x i_xm + z i_zm)/rho_a (1/km)."""
     axes = _f64(axes)
     x, y, z = axes @ _f64(r_rho)
@@ -132,18 +134,18 @@ def theta_gradient(r_rho, axes):
     return (rho_a * axes[1] - y * i_a) / (rho_a * rho_a + y * y)
 
 
-def misalignment_partials(g, r_rho, axes):
+def misalignment_partials(g: ArrayLike, r_rho: ArrayLike, axes: ArrayLike) -> Array:
     """dq/dphi on the sensor's own axes: ((g x r_rho) . i_xm, . i_ym, . i_zm) (rad/rad), for a
     small rotation phi = sum phi_k i_k of the sensor axes (i' = i + phi x i; digest A.3.5)."""
     return _f64(axes) @ jnp.cross(_f64(g), _f64(r_rho))
 
 
-def sensor_beta(sc_r, target_r, axes):
+def sensor_beta(sc_r: ArrayLike, target_r: ArrayLike, axes: ArrayLike) -> Array:
     """UNF c = 2, beta: atan2(z, x) of r_rho = target_r - sc_r on the sensor axes (rad)."""
     return unified_angles(_f64(target_r) - _f64(sc_r), axes)[0]
 
 
-def sensor_beta_partials(sc_r, target_r, axes):
+def sensor_beta_partials(sc_r: ArrayLike, target_r: ArrayLike, axes: ArrayLike) -> tuple[Array, Array, Array]:
     """(d beta/d sc (r, v) (6,), d beta/d target_r (3,), d beta/d phi (3,)): the spacecraft
     row is -g (relative measurement, b = -b_T), the target's +g."""
     r_rho = _f64(target_r) - _f64(sc_r)
@@ -151,12 +153,12 @@ def sensor_beta_partials(sc_r, target_r, axes):
     return jnp.concatenate([-g, _zeros3()]), g, misalignment_partials(g, r_rho, axes)
 
 
-def sensor_theta(sc_r, target_r, axes):
+def sensor_theta(sc_r: ArrayLike, target_r: ArrayLike, axes: ArrayLike) -> Array:
     """UNF c = 3, theta: atan2(y, rho_a) of r_rho = target_r - sc_r on the sensor axes (rad)."""
     return unified_angles(_f64(target_r) - _f64(sc_r), axes)[1]
 
 
-def sensor_theta_partials(sc_r, target_r, axes):
+def sensor_theta_partials(sc_r: ArrayLike, target_r: ArrayLike, axes: ArrayLike) -> tuple[Array, Array, Array]:
     """(d theta/d sc (r, v) (6,), d theta/d target_r (3,), d theta/d phi (3,))."""
     r_rho = _f64(target_r) - _f64(sc_r)
     g = theta_gradient(r_rho, axes)
@@ -164,7 +166,9 @@ def sensor_theta_partials(sc_r, target_r, axes):
 
 
 # --- one-way integrated Doppler count (UNF c = 0.5) ------------------------------------
-def doppler_count_1way(sc_r, earth_r, st_r, sc_r0, earth_r0, st_r0):
+def doppler_count_1way(
+    sc_r: ArrayLike, earth_r: ArrayLike, st_r: ArrayLike, sc_r0: ArrayLike, earth_r0: ArrayLike, st_r0: ArrayLike
+) -> Array:
     """UNF c = 0.5: range change rho(t_M) - rho(t0) over the count interval (km); the count is
     N = f (this) + bias, f = m_D f_D / c cycles per km.  ``*_r``: at t_M, ``*_r0``: at
     t0 = t_M - dt_c (spacecraft and Earth relative to one origin, station geocentric)."""
@@ -173,7 +177,9 @@ def doppler_count_1way(sc_r, earth_r, st_r, sc_r0, earth_r0, st_r0):
     return jnp.linalg.norm(p1) - jnp.linalg.norm(p0)
 
 
-def doppler_count_1way_partials(sc_r, earth_r, st_r, sc_r0, earth_r0, st_r0):
+def doppler_count_1way_partials(
+    sc_r: ArrayLike, earth_r: ArrayLike, st_r: ArrayLike, sc_r0: ArrayLike, earth_r0: ArrayLike, st_r0: ArrayLike
+) -> tuple[Array, Array, Array, Array]:
     """(d q/d sc(t_M) (6,), d q/d st_r(t_M) (3,), d q/d sc(t0) (6,), d q/d st_r(t0) (3,)):
     (i_rho(t_M), 0), -i_rho(t_M), (-i_rho(t0), 0), +i_rho(t0) (i_rho station -> spacecraft).
     The Earth's rows are minus the spacecraft's.  The H row at t_M is the exact STM form
@@ -186,7 +192,9 @@ def doppler_count_1way_partials(sc_r, earth_r, st_r, sc_r0, earth_r0, st_r0):
 
 
 # --- horizon sensor (UNF c = 3, orbit navigation; digest A.7.2) -------------------------
-def horizon_geometry(r, axes, pole, a_f, b_f, gamma_h):
+def horizon_geometry(
+    r: ArrayLike, axes: ArrayLike, pole: ArrayLike, a_f: float | Array, b_f: float | Array, gamma_h: float | Array
+) -> dict[str, float | Array]:
     """The horizon routine (UNF, digest A.7.2): tangent point of the line of sight in the
     scan plane (normal i_2 = axes[2], through the body centre) on the limb ellipse.
 
@@ -231,14 +239,30 @@ def horizon_geometry(r, axes, pole, a_f, b_f, gamma_h):
     }
 
 
-def horizon_angle(sc_r, body_r, axes, pole, a_f, b_f, gamma_h):
+def horizon_angle(
+    sc_r: ArrayLike,
+    body_r: ArrayLike,
+    axes: ArrayLike,
+    pole: ArrayLike,
+    a_f: float | Array,
+    b_f: float | Array,
+    gamma_h: float | Array,
+) -> Array:
     """UNF horizon measurement psi (c = 3): theta of the spacecraft -> horizon line of sight on
     the horizon-sensor axes (rad; positive above the boresight i_xm toward i_ym)."""
     geo = horizon_geometry(_f64(sc_r) - _f64(body_r), axes, pole, a_f, b_f, gamma_h)
     return unified_angles(geo["rho_h"], axes)[1]
 
 
-def horizon_angle_partials(sc_r, body_r, axes, pole, a_f, b_f, gamma_h):
+def horizon_angle_partials(
+    sc_r: ArrayLike,
+    body_r: ArrayLike,
+    axes: ArrayLike,
+    pole: ArrayLike,
+    a_f: float | Array,
+    b_f: float | Array,
+    gamma_h: float | Array,
+) -> tuple[Array, Array, Array]:
     """(d psi/d sc (r, v) (6,), d psi/d gamma_H (1/km), rho_H (km)).
 
     d psi/d r = -g, g = d theta/d r_rho at r_rho = rho_H (= n/rho_H in the scan plane, n the
@@ -260,7 +284,7 @@ def horizon_angle_partials(sc_r, body_r, axes, pole, a_f, b_f, gamma_h):
 
 
 # --- altitude (UNF c = 4) --------------------------------------------------------------
-def _geodetic(r, pole, a_f, b_f):
+def _geodetic(r: Array, pole: Array, a_f: float | Array, b_f: float | Array) -> tuple[Array, Array]:
     """(height h km, unit ellipsoid normal n (3,)) of r (relative to the body centre)."""
     z = jnp.dot(r, pole)
     w = r - z * pole
@@ -276,7 +300,15 @@ def _geodetic(r, pole, a_f, b_f):
     return h, cp * (w / rho) + sp * pole
 
 
-def altitude(sc_r, body_r, pole, a_f, b_f, r_ref, geodetic):
+def altitude(
+    sc_r: ArrayLike,
+    body_r: ArrayLike,
+    pole: ArrayLike,
+    a_f: float | Array,
+    b_f: float | Array,
+    r_ref: float | Array,
+    geodetic: float | Array,
+) -> Array:
     """UNF c = 4: altitude (km).  ``geodetic`` false (0.0): spherical h = |r| - r_ref (UNF
     r_ET); true (1.0): geodetic height above the ellipsoid (a_f, b_f, pole; r_ref unused)."""
     r = _f64(sc_r) - _f64(body_r)
@@ -284,7 +316,15 @@ def altitude(sc_r, body_r, pole, a_f, b_f, r_ref, geodetic):
     return jnp.where(geodetic > 0.5, h_geo, jnp.linalg.norm(r) - r_ref)
 
 
-def altitude_partials(sc_r, body_r, pole, a_f, b_f, r_ref, geodetic):
+def altitude_partials(
+    sc_r: ArrayLike,
+    body_r: ArrayLike,
+    pole: ArrayLike,
+    a_f: float | Array,
+    b_f: float | Array,
+    r_ref: float | Array,
+    geodetic: float | Array,
+) -> Array:
     """(d h/d sc (r, v) (6,)): (i_r, 0) spherical, (n, 0) geodetic (the foot point's normal)."""
     r = _f64(sc_r) - _f64(body_r)
     _, n = _geodetic(r, _f64(pole), a_f, b_f)

@@ -34,6 +34,8 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
 
 from fracas import _jax  # noqa: F401  (float64 before any array exists)
 
@@ -55,30 +57,30 @@ RELATIVE_UNITS = {k: u for k, (_, u) in RELATIVE_KINDS.items()}
 _INDEX = {k: i for i, k in enumerate(RELATIVE_KINDS)}
 
 
-def _f64(x):
+def _f64(x: ArrayLike) -> Array:
     return jnp.asarray(x, dtype=jnp.float64)
 
 
-def relative_state(x_chaser, x_target):
+def relative_state(x_chaser: ArrayLike, x_target: ArrayLike) -> tuple[Array, Array]:
     """(r_rho km, v_rho km/s) = target - chaser, from two (6,) or (>=6,) states."""
     xa, xt = _f64(x_chaser), _f64(x_target)
     return xt[:3] - xa[:3], xt[3:6] - xa[3:6]
 
 
-def _range(r, v, M):
+def _range(r: Array, v: Array, M: Array) -> Array:
     return jnp.linalg.norm(r)
 
 
-def _range_rate(r, v, M):
+def _range_rate(r: Array, v: Array, M: Array) -> Array:
     return jnp.dot(r, v) / jnp.linalg.norm(r)
 
 
-def _beta(r, v, M):
+def _beta(r: Array, v: Array, M: Array) -> Array:
     s = M @ r
     return jnp.arctan2(s[2], s[0])
 
 
-def _theta(r, v, M):
+def _theta(r: Array, v: Array, M: Array) -> Array:
     s = M @ r
     return jnp.arctan2(s[1], jnp.sqrt(s[0] ** 2 + s[2] ** 2))
 
@@ -86,32 +88,32 @@ def _theta(r, v, M):
 _MODELS = (_range, _range_rate, _beta, _theta)
 
 
-def relative_value(kind: str, r_rho, v_rho, axes=None):
+def relative_value(kind: str, r_rho: ArrayLike, v_rho: ArrayLike, axes: ArrayLike | None = None) -> Array:
     """The model value of ``kind`` (km, km/s or rad) at the relative state; ``axes`` (3, 3):
     rows i_xm, i_ym, i_zm of the sensor frame in inertial axes (identity when None)."""
     M = jnp.eye(3, dtype=jnp.float64) if axes is None else _f64(axes)
     return _MODELS[_INDEX[kind]](_f64(r_rho), _f64(v_rho), M)
 
 
-def _g_range(r, v, M):
+def _g_range(r: Array, v: Array, M: Array) -> Array:
     u = r / jnp.linalg.norm(r)
     return jnp.concatenate([u, jnp.zeros(3, dtype=jnp.float64)])
 
 
-def _g_range_rate(r, v, M):
+def _g_range_rate(r: Array, v: Array, M: Array) -> Array:
     rho = jnp.linalg.norm(r)
     u = r / rho
     rdot = jnp.dot(u, v)
     return jnp.concatenate([(v - rdot * u) / rho, u])
 
 
-def _g_beta(r, v, M):
+def _g_beta(r: Array, v: Array, M: Array) -> Array:
     x, _, z = M @ r
     d = (x * M[2] - z * M[0]) / (x**2 + z**2)
     return jnp.concatenate([d, jnp.zeros(3, dtype=jnp.float64)])
 
 
-def _g_theta(r, v, M):
+def _g_theta(r: Array, v: Array, M: Array) -> Array:
     x, y, z = M @ r
     rho_a = jnp.sqrt(x**2 + z**2)
     i_rho_a = (x * M[0] + z * M[2]) / rho_a
@@ -122,7 +124,7 @@ def _g_theta(r, v, M):
 _PARTIALS = (_g_range, _g_range_rate, _g_beta, _g_theta)
 
 
-def relative_partials(kind: str, r_rho, v_rho, axes=None):
+def relative_partials(kind: str, r_rho: ArrayLike, v_rho: ArrayLike, axes: ArrayLike | None = None) -> Array:
     """g = dq/d(r_rho, v_rho) (6,), in kind units per km and per km/s (UNF b-vector w.r.t. the
     relative state; digest §A.3.2-A.3.5):
 
@@ -135,7 +137,7 @@ def relative_partials(kind: str, r_rho, v_rho, axes=None):
     return _PARTIALS[_INDEX[kind]](_f64(r_rho), _f64(v_rho), M)
 
 
-def misalignment_partials(kind: str, r_rho, v_rho, axes=None):
+def misalignment_partials(kind: str, r_rho: ArrayLike, v_rho: ArrayLike, axes: ArrayLike | None = None) -> Array:
     """dq/dphi (3,) rad per rad, for a small rotation phi of the sensor axes (i' = i + phi x i):
     g_r x r_rho (digest §A.3.5).  Zero for range and range rate, which do not depend on the axes."""
     if kind in ("range", "range_rate"):
@@ -144,12 +146,12 @@ def misalignment_partials(kind: str, r_rho, v_rho, axes=None):
     return jnp.cross(g[:3], _f64(r_rho))
 
 
-def vehicle_rows(g):
+def vehicle_rows(g: Array) -> tuple[Array, Array]:
     """(b_A, b_T): the chaser's and the target's H rows (6,) each, b_T = -b_A = g (R-649 §II.B)."""
     return -g, g
 
 
-def noise_sigma(q, sigma, fraction, floor):
+def noise_sigma(q: ArrayLike, sigma: ArrayLike, fraction: ArrayLike, floor: ArrayLike) -> Array:
     """White-noise sigma of a measurement of value ``q``: ``sigma`` when ``fraction`` is 0,
     else max(fraction |q|, floor) (R-649 Fig. II-4's proportional model with a floor).  Same
     unit as q."""
@@ -158,7 +160,7 @@ def noise_sigma(q, sigma, fraction, floor):
 
 
 @jax.jit
-def _all(x_chaser, x_target, axes):
+def _all(x_chaser: Array, x_target: Array, axes: Array) -> tuple[Array, Array, Array]:
     r, v = relative_state(x_chaser, x_target)
     vals = jnp.stack([f(r, v, axes) for f in _MODELS])
     gs = jnp.stack([f(r, v, axes) for f in _PARTIALS])
@@ -167,7 +169,9 @@ def _all(x_chaser, x_target, axes):
     return vals, gs, mis
 
 
-def relative_measurement(x_chaser, x_target, axes=None):
+def relative_measurement(
+    x_chaser: ArrayLike, x_target: ArrayLike, axes: ArrayLike | None = None
+) -> tuple[Array, Array, Array]:
     """Every relative kind at once (one compiled kernel): values (4,) in RELATIVE_KINDS order,
     partials g (4, 6) w.r.t. the relative state, misalignment partials (4, 3)."""
     M = jnp.eye(3, dtype=jnp.float64) if axes is None else _f64(axes)

@@ -35,6 +35,8 @@ from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
 
 from fracas import _jax  # noqa: F401  (x64 first)
 from fracas.constants import DAY_S
@@ -93,7 +95,7 @@ DSN_STATIONS: dict[str, Station] = {
 }
 
 
-def earth_rotation_angle(et_s):
+def earth_rotation_angle(et_s: ArrayLike) -> Array:
     """IAU 2000 Earth rotation angle theta (rad, in [0, 2 pi)) at TDB seconds past J2000.
 
     theta = 2 pi frac(0.7790572732640 + 0.00273781191135448 Tu + frac(Tu)),
@@ -112,13 +114,15 @@ def earth_rotation_angle(et_s):
     return 2.0 * jnp.pi * jnp.mod(rev, 1.0)
 
 
-def _trig(latitude_rad, longitude_rad, et_s):
+def _trig(latitude_rad: ArrayLike, longitude_rad: ArrayLike, et_s: ArrayLike) -> tuple[Array, Array, Array, Array]:
     phi = jnp.asarray(latitude_rad, dtype=jnp.float64)
     psi = jnp.asarray(longitude_rad, dtype=jnp.float64) + earth_rotation_angle(et_s)
     return jnp.cos(phi), jnp.sin(phi), jnp.cos(psi), jnp.sin(psi)
 
 
-def station_state(radius_km, latitude_rad, longitude_rad, et_s):
+def station_state(
+    radius_km: ArrayLike, latitude_rad: ArrayLike, longitude_rad: ArrayLike, et_s: ArrayLike
+) -> tuple[Array, Array]:
     """Geocentric ICRF position (km) and velocity (km/s) of a station at TDB ``et_s`` (s).
 
     r = R (cos phi cos psi, cos phi sin psi, sin phi), v = omega z x r,
@@ -132,7 +136,7 @@ def station_state(radius_km, latitude_rad, longitude_rad, et_s):
     return r, v
 
 
-def station_partials(radius_km, latitude_rad, longitude_rad, et_s):
+def station_partials(radius_km: ArrayLike, latitude_rad: ArrayLike, longitude_rad: ArrayLike, et_s: ArrayLike) -> Array:
     """Analytic d(r, v)/d(R, phi, lambda) of :func:`station_state`, shape (6, 3).
 
     Rows: r_x, r_y, r_z (km), v_x, v_y, v_z (km/s); columns: R (per km), phi, lambda (per

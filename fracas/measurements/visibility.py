@@ -15,7 +15,12 @@ and counted, like one below ``min_elevation_deg``.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
 
 __all__ = ["UNF_MAX_RANGE_KM", "beacon_visible", "visibility_passes", "beacon_passes"]
 
@@ -23,7 +28,9 @@ __all__ = ["UNF_MAX_RANGE_KM", "beacon_visible", "visibility_passes", "beacon_pa
 UNF_MAX_RANGE_KM = 1500.0 * 1.852
 
 
-def beacon_visible(r_p, r_b, min_elevation_rad: float, max_range_km: float = np.inf) -> np.ndarray:
+def beacon_visible(
+    r_p: npt.ArrayLike, r_b: npt.ArrayLike, min_elevation_rad: float, max_range_km: float = np.inf
+) -> np.ndarray:
     """Whether the vehicle(s) ``r_p`` (..., 3) km are in the visibility cone of the beacon(s)
     ``r_b`` (..., 3) km (both geocentric, broadcast): elevation above ``min_elevation_rad``
     and range at most ``max_range_km``.  Returns a bool array of the broadcast shape."""
@@ -35,7 +42,7 @@ def beacon_visible(r_p, r_b, min_elevation_rad: float, max_range_km: float = np.
     return (np.sum(up * d, axis=-1) >= np.sin(min_elevation_rad) * rng) & (rng <= max_range_km)
 
 
-def visibility_passes(times_s, visible) -> list[tuple[float, float]]:
+def visibility_passes(times_s: npt.ArrayLike, visible: npt.ArrayLike) -> list[tuple[float, float]]:
     """The passes of a visibility mask sampled at ``times_s``: [(first, last visible time)]
     for each run of consecutive True samples (s)."""
     t = np.asarray(times_s, dtype=np.float64)
@@ -49,7 +56,11 @@ def visibility_passes(times_s, visible) -> list[tuple[float, float]]:
 
 
 def beacon_passes(
-    times_s, r_p, r_b, min_elevation_rad: float, max_range_km: float = UNF_MAX_RANGE_KM
+    times_s: npt.ArrayLike,
+    r_p: npt.ArrayLike,
+    r_b: npt.ArrayLike,
+    min_elevation_rad: float,
+    max_range_km: float = UNF_MAX_RANGE_KM,
 ) -> list[tuple[float, float]]:
     """The passes [(first, last visible time)] of a beacon over a sampled reference: vehicle
     ``r_p`` (K, 3) and beacon ``r_b`` (K, 3) or (3,) geocentric km at ``times_s`` (K,) (the

@@ -3,9 +3,9 @@
 (a) 100 Mercury-size studies over one STM file (namelists/mercury_approach_team.toml; 5 range
     sigmas x 5 thrust-noise correlation times x 4 QVLBI range sigmas): one group of studies
     that differ only in numbers, batched (fracas.team.batch) on a LocalCluster of two worker
-    processes, against pipeline.run_team one study after another in this process (the
+    processes, against team_mode.run_team one study after another in this process (the
     baseline, measured in the same run on the first --baseline studies, each deck as the sweep
-    makes it: fracas.sweep.study_deck, no error budget).  Goal >= 20 studies/s.
+    makes it: fracas.modes.sweep.run.study_deck, no error budget).  Goal >= 20 studies/s.
 (b) 20 studies that change the tracking schedule (Doppler interval_hours 1 ... 20 h): one task
     per study, 2 workers vs 1 worker.  Goal >= 1.6x faster.
 
@@ -33,10 +33,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
-from fracas import pipeline  # noqa: E402
 from fracas.config.sweep import parse_sweep_deck  # noqa: E402
 from fracas.config.team import load_team_deck  # noqa: E402
-from fracas.sweep import outputs_of, run_sweep, study_deck  # noqa: E402
+from fracas.modes import stm as stm_mode  # noqa: E402
+from fracas.modes import team as team_mode  # noqa: E402
+from fracas.modes.sweep.run import outputs_of, run_sweep, study_deck  # noqa: E402
 
 DECK = ROOT / "namelists" / "mercury_approach_team.toml"
 OUTPUTS = ["position_rss_km", "velocity_rss_km_s", "sigma[thrust_scale]", "true_position_rss_km"]
@@ -112,7 +113,7 @@ def main() -> None:
         folder = Path(tmp)
         stm = folder / "mercury.h5"
         t0 = time.perf_counter()
-        pipeline.build_stm(load_team_deck(DECK), stm)
+        stm_mode.build_stm(load_team_deck(DECK), stm)
         say(f"STM file built once: {time.perf_counter() - t0:.1f} s (not counted below)")
 
         # (a) baseline: run_team one by one, in process
@@ -124,7 +125,7 @@ def main() -> None:
         first = None
         one = []
         for k, v in enumerate(studies[:nb]):
-            product, _, _ = pipeline.run_team(study_deck(base, cfg_a.fields, v), stm=str(stm), write_results=False)
+            product, _, _ = team_mode.run_team(study_deck(base, cfg_a.fields, v), stm=str(stm), write_results=False)
             one.append(outputs_of(product, OUTPUTS)[0])
             if k == 0:
                 first = time.perf_counter() - t0

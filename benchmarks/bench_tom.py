@@ -4,7 +4,7 @@
     .venv/bin/python benchmarks/bench_tom.py --quick    # Lambert and Hohmann only
 
 Sections:
-  1. AD against FEGS per example deck: ``fracas.pipeline.run_tom`` with ``sensitivities = "ad"``
+  1. AD against FEGS per example deck: ``fracas.modes.tom.run_tom`` with ``sensitivities = "ad"``
      and ``"fegs"``; each cold run in a fresh process with its own empty FRACAS_CACHE_DIR (so
      both pay their own compile), then a warm second run in the same process; the issue's goal
      is AD >= 5x faster than FEGS (cold wall time, compile included);
@@ -85,7 +85,7 @@ def one(name, method):
     build_tom is wrapped (here only) to read the problem's own counters afterwards: every
     plain-core propagation (FEGS's included) and every AD sensitivity run."""
     import fracas.build.tom as build_mod
-    from fracas.pipeline import run_tom
+    from fracas.modes.tom import run_tom
 
     built = []
     orig = build_mod.build_tom

@@ -123,7 +123,7 @@ def main():
     from fracas.build.tsim import build_plan
     from fracas.config.tsim import load_tsim_deck
     from fracas.integrate.propagate import propagate
-    from fracas.montecarlo import _team_for, run_tsim
+    from fracas.modes.tsim.run import _team_for, run_tsim
     from fracas.tsim import engine
 
     cfg = load_tsim_deck(DECK)

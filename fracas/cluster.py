@@ -1,5 +1,5 @@
-"""Dask for fracas's parallel runners: sweeps (:mod:`fracas.sweep`) and TSIM Monte Carlo
-batches (:mod:`fracas.montecarlo`).  Every call to ``distributed`` is in this module.
+"""Dask for fracas's parallel runners: sweeps (:mod:`fracas.modes.sweep.run`) and TSIM Monte Carlo
+batches (:mod:`fracas.modes.tsim.run`).  Every call to ``distributed`` is in this module.
 
 * :func:`start` starts a Dask LocalCluster of single-threaded worker processes, or connects
   to a running scheduler at an address, registers the worker plugin (:func:`worker_plugin`:

@@ -11,7 +11,7 @@ pydantic), so every layer may import it.
 * :class:`TeamProduct` -- the covariance history of one TEAM run (``fracas.team.result``).
 * :class:`TomProduct` -- one TOM run: controls, targets, final mass, iteration history.
 * :class:`TrajectoryData` -- one propagation with its optional :class:`SensitivityData`
-  (``fracas.pipeline.trajectory_data``; the trajectory file's contents).
+  (``fracas.build.trajectory_product.trajectory_data``; the trajectory file's contents).
 """
 
 from __future__ import annotations

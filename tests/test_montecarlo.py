@@ -1,4 +1,4 @@
-"""The TSIM driver (fracas.montecarlo): bit-identical statistics whatever the batch size, the
+"""The TSIM driver (fracas.modes.tsim.run): bit-identical statistics whatever the batch size, the
 worker count or a kill and resume; a-priori merging of two half runs against one whole run;
 the command line and its errors.
 
@@ -21,7 +21,7 @@ from fracas.cli import main
 from fracas.config.tsim import parse_tsim_deck
 from fracas.errors import DeckError
 from fracas.io.tsim_results import read_tsim_results
-from fracas.montecarlo import checkpoint_path, run_tsim
+from fracas.modes.tsim.run import checkpoint_path, run_tsim
 
 DATA = Path(__file__).resolve().parent / "data"
 # the TEAM study of tests/tsim/test_engine.py (one TEAM run per test process serves both)

@@ -1,4 +1,4 @@
-"""Sweeps (fracas.sweep): the deck schema, vary(), in-process and Dask runs, resume, failures."""
+"""Sweeps (fracas.modes.sweep): the deck schema, vary(), in-process and Dask runs, resume, failures."""
 
 from __future__ import annotations
 
@@ -9,13 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fracas import pipeline
-from fracas.config.modes import parse_any
 from fracas.config.sweep import SweepDeck, parse_sweep_deck
 from fracas.config.team import load_team_deck
 from fracas.errors import DeckError
 from fracas.io.sweep_table import csv_path, read_sweep_table, write_sweep_table
-from fracas.sweep import base_hash, parse_vary, run_sweep, sweep_main, vary
+from fracas.modes import parse_any
+from fracas.modes import stm as stm_mode
+from fracas.modes import team as team_mode
+from fracas.modes.sweep.run import base_hash, parse_vary, run_sweep, sweep_main, vary
 
 DATA = Path(__file__).parent / "data"
 FIELD = "thrust_noise.proportionality.sigma"
@@ -53,11 +54,11 @@ def test_the_studies_run_the_exact_model():
     from fracas.team.batch import structure_mismatch
 
     base = load_team_deck(DATA / "team_small.toml")
-    a = pipeline.load_team(base).study
+    a = stm_mode.load_team(base).study
     assert a.noise_model == "exact" and a.has_noise
-    b = pipeline.load_team(vary(base, "thrust_noise.in_plane_deg.tau_days", 3.0)).study
+    b = stm_mode.load_team(vary(base, "thrust_noise.in_plane_deg.tau_days", 3.0)).study
     assert structure_mismatch(a, b) == "noise correlation times"
-    c = pipeline.load_team(vary(base, FIELD, 0.03)).study
+    c = stm_mode.load_team(vary(base, FIELD, 0.03)).study
     assert structure_mismatch(a, c) is None
 
 
@@ -154,15 +155,15 @@ def test_vary_equals_the_deck_edited_by_hand(study_dir, tmp_path):
     shutil.copy(study_dir / "team_small_traj.toml", tmp_path / "team_small_traj.toml")
     hand = load_team_deck(edited)
     assert hand.model_dump() == v.model_dump()
-    pa, _, _ = pipeline.run_team(v, output=tmp_path / "a.h5")
-    pb, _, _ = pipeline.run_team(hand, output=tmp_path / "b.h5")
+    pa, _, _ = team_mode.run_team(v, output=tmp_path / "a.h5")
+    pb, _, _ = team_mode.run_team(hand, output=tmp_path / "b.h5")
     for name in ("P_plus", "P_minus", "sigma"):
         assert np.array_equal(getattr(pa.assumed, name), getattr(pb.assumed, name))
         assert np.array_equal(getattr(pa.true, name), getattr(pb.true, name))
 
 
 # ----------------------------------------------------------------------------- running
-RTOL = 1e-12  # batched (vmapped scan) vs pipeline.run_team one by one: measured <= 2e-15 on these outputs
+RTOL = 1e-12  # batched (vmapped scan) vs team_mode.run_team one by one: measured <= 2e-15 on these outputs
 
 
 def _numbers(rows):
@@ -177,7 +178,7 @@ def one_by_one(study_dir):
 
 
 def _expected(base, value, tmp_path):
-    product, _, _ = pipeline.run_team(vary(base, FIELD, value), output=tmp_path / "one.h5")
+    product, _, _ = team_mode.run_team(vary(base, FIELD, value), output=tmp_path / "one.h5")
     s, st = product.assumed.sigma[-1], product.true.sigma[-1]
     return {
         "position_rss_km": float(np.sqrt(np.sum(s[:3] ** 2))),
@@ -265,7 +266,7 @@ def test_mixed_sweep_batches_each_schedule(study_dir, tmp_path, monkeypatch):
     base = load_team_deck(study_dir / "team_small.toml")
     for r in res.rows:
         deck = vary(vary(base, FIELD, r[FIELD]), "filter.stop_days", r["filter.stop_days"])
-        product, _, _ = pipeline.run_team(deck, output=tmp_path / "m.h5")
+        product, _, _ = team_mode.run_team(deck, output=tmp_path / "m.h5")
         s = product.assumed.sigma[-1]
         assert r["position_rss_km"] == pytest.approx(float(np.sqrt(np.sum(s[:3] ** 2))), rel=RTOL, abs=0.0)
 
@@ -283,7 +284,7 @@ def lean(study_dir):
     text = (study_dir / "team_small.toml").read_text()
     assert text.count(PREDICTION) == 1
     (study_dir / "team_lean.toml").write_text(text.replace(PREDICTION, ""))
-    pipeline.build_stm(load_team_deck(study_dir / "team_lean.toml"), study_dir / "lean_stm.h5")
+    stm_mode.build_stm(load_team_deck(study_dir / "team_lean.toml"), study_dir / "lean_stm.h5")
     cfg = make_deck(study_dir, VALUES, "lean_one_by_one.h5", "lean_one_by_one.toml", LEAN, "team_lean.toml")
     return run_sweep(cfg, workers=0, max_batch=1)
 
@@ -301,7 +302,7 @@ def test_local_cluster_gives_the_same_numbers(lean, study_dir):
     assert _numbers(res.rows) == _numbers(lean.rows)
     print(f"\n2 workers: {len(res.rows)} studies in {wall:.1f} s (cluster start included)")
     deck = vary(load_team_deck(study_dir / "team_lean.toml"), FIELD, VALUES[0])
-    product, _, _ = pipeline.run_team(deck, stm=str(study_dir / "lean_stm.h5"), write_results=False)
+    product, _, _ = team_mode.run_team(deck, stm=str(study_dir / "lean_stm.h5"), write_results=False)
     s = product.assumed.sigma[-1]
     assert res.rows[0]["position_rss_km"] == pytest.approx(float(np.sqrt(np.sum(s[:3] ** 2))), rel=RTOL, abs=0.0)
 
@@ -309,7 +310,7 @@ def test_local_cluster_gives_the_same_numbers(lean, study_dir):
 _KILLED = """
 import os, sys
 from fracas.config.sweep import load_sweep_deck
-from fracas.sweep import run_sweep
+from fracas.modes.sweep.run import run_sweep
 def die(done, total):
     if done == 2:
         os._exit(3)   # killed mid-run, after two studies are in the table
@@ -350,8 +351,8 @@ def test_resume_runs_only_the_missing_studies(serial, study_dir, monkeypatch):
     bh = base_hash(load_team_deck(study_dir / "team_small.toml"))  # the table is this study's
     write_sweep_table(table, rows, [FIELD], OUTPUTS, units, {"title": "partial", "base_hash": bh})
     calls = []
-    real = pipeline.run_team
-    monkeypatch.setattr(pipeline, "run_team", lambda cfg, **kw: calls.append(1) or real(cfg, **kw))
+    real = team_mode.run_team
+    monkeypatch.setattr(team_mode, "run_team", lambda cfg, **kw: calls.append(1) or real(cfg, **kw))
     res = run_sweep(half, workers=0, batch=False)
     assert len(calls) == 2 and res.ran == [0, 2] and res.skipped == [1, 3]
     got = read_sweep_table(table).rows()
@@ -367,14 +368,14 @@ def test_a_failed_study_is_recorded_and_the_others_complete(study_dir, monkeypat
     outputs; the others complete."""
     from fracas.errors import NumericalError
 
-    real = pipeline.run_team
+    real = team_mode.run_team
 
     def flaky(cfg, **kw):
         if cfg.thrust_noise.proportionality.sigma == 0.03:
             raise NumericalError("team: the covariance lost positive-definiteness at t = 1.5 d")
         return real(cfg, **kw)
 
-    monkeypatch.setattr(pipeline, "run_team", flaky)
+    monkeypatch.setattr(team_mode, "run_team", flaky)
     cfg = make_deck(study_dir, [0.01, 0.03, 0.02], table="fail.h5", name="fail.toml")
     res = run_sweep(cfg, workers=0, batch=False)
     assert [r["status"] for r in res.rows] == ["ok", "failed", "ok"]
@@ -483,16 +484,16 @@ def test_derived_study_equals_build_case(study_dir):
     """A study derived from its group's first (fracas.build.vary.derive_study) equals the one
     build_case builds from its own deck, every field, arrays bit for bit."""
     from fracas.build.vary import derivable, derive_study
-    from fracas.sweep import study_deck
+    from fracas.modes.sweep.run import study_deck
 
     base = load_team_deck(study_dir / "team_small.toml")
     fields = tuple(DERIVED)
-    first = pipeline.load_team(study_deck(base, fields, tuple(a for a, _ in DERIVED.values()))).study
+    first = stm_mode.load_team(study_deck(base, fields, tuple(a for a, _ in DERIVED.values()))).study
     for k in range(len(fields) + 1):  # one field changed at a time, then all of them
         vals = tuple(b if (j == k or k == len(fields)) else a for j, (a, b) in enumerate(DERIVED.values()))
         deck = study_deck(base, fields, vals)
         assert derivable(first, deck)
-        _same(derive_study(first, deck), pipeline.load_team(deck).study)
+        _same(derive_study(first, deck), stm_mode.load_team(deck).study)
     with pytest.raises(DeckError, match="must be <= 1"):
         study_deck(base, (FIELD,), (2.0,))  # the deck's own validation, as in a single run
 
@@ -523,7 +524,7 @@ def test_guidance_sweep_equals_run_team_one_by_one(study_dir, tmp_path):
     assert res.units["tcm1.dv_99_m_s"] == "m/s" and res.units["tcm1.x_sigma_after"] == "km"
     base = load_team_deck(study_dir / "team_guid.toml")
     for r in res.rows:
-        product, _, _ = pipeline.run_team(vary(base, FIELD, r[FIELD]), write_results=False)
+        product, _, _ = team_mode.run_team(vary(base, FIELD, r[FIELD]), write_results=False)
         (e,) = product.guidance
         assert r["tcm1.dv_mean_m_s"] == e.dv_mean_km_s * 1000.0 and r["tcm1.dv_99_m_s"] == e.dv_99_km_s * 1000.0
         assert r["tcm1.dv_rms_m_s"] == e.dv_rms_km_s * 1000.0 > 0
@@ -580,13 +581,14 @@ def no_work(monkeypatch):
     """Every way a sweep starts work (an STM build, a study run, a batched group, a
     reference, a Dask cluster) fails the test if it is called."""
     import fracas.cluster as cluster_mod
-    import fracas.sweep as sweep_mod
+    import fracas.modes.sweep.run as sweep_mod
 
     def forbidden(*_a, **_k):
         raise AssertionError("a study was started before every study was validated")
 
-    for name in ("run_team", "build_stm", "load_team", "reference_from_stm"):
-        monkeypatch.setattr(pipeline, name, forbidden)
+    monkeypatch.setattr(team_mode, "run_team", forbidden)
+    for name in ("build_stm", "load_team", "reference_from_stm"):
+        monkeypatch.setattr(stm_mode, name, forbidden)
     for name in ("run_one", "run_group", "_run_tasks"):
         monkeypatch.setattr(sweep_mod, name, forbidden)
     for name in ("start", "start_cluster"):
@@ -601,7 +603,7 @@ def test_every_study_is_validated_before_any_work(case, study_dir, no_work):
     per refused study naming the sweep deck, the study's index and swept values, and the
     field; the table is not written."""
     from fracas.config.sweep import load_sweep_deck
-    from fracas.validate import validate_path
+    from fracas.modes import validate_path
 
     path = _bad_sweep(study_dir, case)
     varies, _, bad = BAD_SWEEPS[case]
@@ -665,7 +667,7 @@ def test_failed_studies_exit_non_zero_in_80_columns(study_dir, monkeypatch):
     and exits with SWEEP_FAILED_EXIT (3), not 0."""
     from click.testing import CliRunner
 
-    import fracas.sweep as sweep_mod
+    import fracas.modes.sweep.run as sweep_mod
     from fracas.cli import SWEEP_FAILED_EXIT, main
 
     long_error = f"{study_dir / 'team_small.toml'}: " + "the reference stopped early at t = 1.25 d " * 8
@@ -712,7 +714,7 @@ def _fake_group(base, items, fields, outputs, gkey, stm=None, pad_to=1, max_batc
 @pytest.fixture
 def resumable(study_dir, monkeypatch):
     """A sweep deck and its complete table (written by a stand-in runner), and the rows."""
-    import fracas.sweep as sweep_mod
+    import fracas.modes.sweep.run as sweep_mod
 
     monkeypatch.setattr(sweep_mod, "run_one", _fake_one)
     monkeypatch.setattr(sweep_mod, "run_group", _fake_group)
@@ -817,7 +819,7 @@ def test_resume_from_blocks_zeroed_or_bits_flipped(resumable, no_work, tmp_path)
     import shutil
 
     from fracas.errors import ResultsFileError
-    from fracas.sweep import resume_table
+    from fracas.modes.sweep.run import resume_table
 
     cfg, table, rows = resumable
     bh = base_hash(load_team_deck(cfg.resolve(cfg.sweep.study)))

@@ -36,7 +36,7 @@ the run passes, whatever dispatch lies in between:
 * ``thrust_propagate``: namelists/near_earth_spiral.toml (thrust, DOP853); ``propagate`` ->
   ``_propagate``;
 * ``team_reference``: namelists/earth_mars_guidance.toml; the reference and its STMs as
-  STMGEN integrates them (``fracas stm build``, ``fracas.pipeline.stm_product``):
+  STMGEN integrates them (``fracas stm build``, ``fracas.modes.stm.stm_product``):
   ``fracas.team.reference.run_reference(problem, stm_file_times(case), stm_file_labels(case))``
   -> ``propagate_with_sensitivities`` ("auto") -> ``_propagate_sens`` at the time of writing
   (the table names the function reached);

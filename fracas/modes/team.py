@@ -129,6 +129,7 @@ def run_team(
     plot: str | Path | None = None,
     write_results: bool = True,
     output_dir: str | Path | None = None,
+    case: Any = None,
 ) -> tuple[Any, Path | None, str]:
     """``fracas run`` on a TEAM deck (path or TeamDeck): case -> reference (STM file or in
     line) -> filter -> TeamProduct -> results file (and punch file).  Every output (results,
@@ -139,6 +140,9 @@ def run_team(
     ``write_results=False`` (sweeps, in-memory callers) returns the product without writing the
     results file (the path returned is then None); punch files are still written.
 
+    ``case``: the deck's case when the caller has built it already (:func:`load_team`; TSIM
+    keeps it for its plan, so a TEAM case is built once).
+
     Returns (TeamProduct or None when ``errcon.analysis = false``, results path, reference source).
     """
     from fracas.io.team_results import write_punch, write_team_results
@@ -147,7 +151,7 @@ def run_team(
     say = say_to(on_stage)
     t0 = time.perf_counter()
     say("reading the deck")
-    case = load_team(deck)
+    case = case if case is not None else load_team(deck)
     cfg, study = case.deck, case.study
     out: Path | None = results_path(cfg, output)
     where = Path(output) if output is not None else (Path(output_dir) / "-" if output_dir is not None else None)

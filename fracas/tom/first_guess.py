@@ -17,7 +17,7 @@ passes, each an ordinary TOM problem:
    time.  The second pass optimizes the burns' switch times and pointing laws.
 
 Arrays in, arrays out (no deck objects): :mod:`fracas.build.tom` builds the two problems and
-:func:`fracas.pipeline.run_tom` runs them.
+:func:`fracas.modes.tom.run_tom` runs them.
 """
 
 from __future__ import annotations

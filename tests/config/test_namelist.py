@@ -125,7 +125,7 @@ def test_round_trip_validates_with_fracas_validate(tmp_path):
 def test_round_trip_gives_the_same_propagation_as_the_toml_deck(tmp_path):
     """leo_j2 propagated from the TOML deck and from its namelist import: the same final state
     to 1e-12 relative (the same deck values; in practice bit for bit)."""
-    from fracas.pipeline import propagate_deck
+    from fracas.modes.propagate import propagate_deck
 
     deck = NAMELISTS / "leo_j2.toml"
     out = write_import(import_namelist(namelist_from_deck(load_any(deck)), "leo.nml"), tmp_path / "leo.toml")

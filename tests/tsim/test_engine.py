@@ -29,7 +29,7 @@ import pytest
 
 from fracas.build.tsim import build_plan
 from fracas.config.tsim import parse_tsim_deck
-from fracas.montecarlo import _team_for, assemble
+from fracas.modes.tsim.run import _team_for, assemble
 from fracas.tsim import engine, summary
 from fracas.tsim.plan import STATUS_HOPELESS, STATUS_NEAR, STATUS_OK
 

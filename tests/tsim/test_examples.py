@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from fracas.config.tsim import load_tsim_deck, parse_tsim_deck
-from fracas.montecarlo import run_tsim
+from fracas.modes.tsim.run import run_tsim
 
 NAMELISTS = Path(__file__).resolve().parents[2] / "namelists"
 

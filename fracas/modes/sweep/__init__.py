@@ -2,7 +2,7 @@
 
 A sweep deck (or a TEAM deck with ``--vary``) -> every study validated -> groups of studies
 sharing a reference, on Dask through :mod:`fracas.cluster` -> the sweep table (HDF5 + CSV),
-resumable -> the summary.  The orchestrator is :func:`fracas.sweep.sweep_main`."""
+resumable -> the summary.  The orchestrator is :func:`fracas.modes.sweep.run.sweep_main`."""
 
 from __future__ import annotations
 
@@ -21,8 +21,8 @@ SWEEP_FAILED_EXIT = 3
 
 
 def run_sweep(*args: Any, **kw: Any) -> Any:
-    """The sweep orchestrator (:func:`fracas.sweep.sweep_main`)."""
-    from fracas.sweep import sweep_main
+    """The sweep orchestrator (:func:`fracas.modes.sweep.run.sweep_main`)."""
+    from fracas.modes.sweep.run import sweep_main
 
     return sweep_main(*args, **kw)
 

@@ -1,4 +1,4 @@
-"""A sweep's plan (:mod:`fracas.sweep`; docs/sweep.md): the sweep deck the command line
+"""A sweep's plan (:mod:`fracas.modes.sweep.run`; docs/sweep.md): the sweep deck the command line
 gives (``--vary FIELD=VALUES``), each study's deck and key, the table's path and units, the
 STM file and results folder, the groups of studies that run as batched computations and the
 tasks the studies to run are cut into.
@@ -16,8 +16,6 @@ from typing import Any
 import numpy as np
 import tomllib
 
-from fracas import pipeline
-from fracas.config.modes import deck_mode
 from fracas.config.sweep import (
     SweepDeck,
     is_numeric_field,
@@ -29,6 +27,8 @@ from fracas.config.sweep import (
 from fracas.config.team import TeamDeck
 from fracas.config.trajectory import read_deck_text
 from fracas.errors import DeckError
+from fracas.modes import stm
+from fracas.modes.base import default_output
 
 __all__ = [
     "vary",
@@ -151,7 +151,7 @@ def table_path(cfg: SweepDeck) -> Path:
     """The deck's ``[output] table``, else ``out/<deck stem>.h5``."""
     if cfg.output.table:
         return cfg.resolve(cfg.output.table)
-    return pipeline.default_output(cfg.source_path)
+    return default_output(cfg.source_path)
 
 
 def stm_file(cfg: SweepDeck, base: TeamDeck, todo: list[int]) -> str | None:
@@ -162,7 +162,7 @@ def stm_file(cfg: SweepDeck, base: TeamDeck, todo: list[int]) -> str | None:
         return None
     stm_path = cfg.resolve(sw.stm_file)
     if not stm_path.exists() and todo:
-        pipeline.build_stm(base, stm_path)
+        stm.build_stm(base, stm_path)
     return str(stm_path)
 
 
@@ -292,12 +292,14 @@ def with_vary(cfg: SweepDeck, specs: list[str]) -> SweepDeck:
 def sweep_deck_for(deck_path: str | Path, specs: list[str]) -> SweepDeck:
     """The sweep deck of ``deck_path``: a sweep deck (``--vary`` adds or replaces fields) or a
     TEAM deck swept over the ``--vary`` fields (at least one)."""
+    from fracas.modes import mode_of_deck
+
     path = Path(deck_path)
-    mode = deck_mode(read_deck_text(path), str(path))
-    if mode == "sweep":
+    mode = mode_of_deck(path)
+    if mode.name == "sweep":
         return with_vary(load_sweep_deck(path), specs)
-    if mode != "team":
-        raise DeckError(f'{path}: a sweep runs a TEAM deck or a sweep deck (mode = "sweep"), not mode = "{mode}"')
+    if not mode.sweep_study:
+        raise DeckError(f'{path}: a sweep runs a TEAM deck or a sweep deck (mode = "sweep"), not mode = "{mode.name}"')
     if not specs:
         raise DeckError(f"{path}: a TEAM deck: give the fields to vary with --vary FIELD=VALUES")
     from pydantic import ValidationError

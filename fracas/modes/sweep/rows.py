@@ -1,4 +1,4 @@
-"""The rows of a sweep table (:mod:`fracas.sweep`; docs/sweep.md): a study's outputs from
+"""The rows of a sweep table (:mod:`fracas.modes.sweep.run`; docs/sweep.md): a study's outputs from
 its TEAM product or its final 1σ vectors (:func:`outputs_of`, :func:`outputs_from`,
 :func:`guidance_outputs`), the row a study starts as (:func:`study_row`) and the rows a
 table already holds, read back to resume a sweep (:func:`resume_table`, :func:`resumed_rows`).
@@ -17,7 +17,7 @@ from fracas.config.sweep import SweepDeck, guidance_output, output_problems
 from fracas.config.team import TeamDeck
 from fracas.config.trajectory import cut, deck_error
 from fracas.errors import FracasError
-from fracas.sweep_plan import plain
+from fracas.modes.sweep.plan import plain
 
 __all__ = [
     "outputs_of",

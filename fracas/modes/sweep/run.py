@@ -6,8 +6,8 @@ existing Dask scheduler: :mod:`fracas.cluster`), appends each finished row to th
 (HDF5 + CSV, written whole and atomically each time) and skips, on a restart, the studies
 already in it; ``sweep_main`` is the command line's ``fracas sweep``.  The sweep's plan
 (each study's deck and key, units, groups, tasks, the deck from ``--vary``) is in
-:mod:`fracas.sweep_plan`, the table's rows (a study's outputs, resuming from a table) in
-:mod:`fracas.sweep_rows`.
+:mod:`fracas.modes.sweep.plan`, the table's rows (a study's outputs, resuming from a table) in
+:mod:`fracas.modes.sweep.rows`.
 """
 
 from __future__ import annotations
@@ -20,13 +20,14 @@ from typing import Any
 
 import numpy as np
 
-from fracas import cluster, pipeline
+from fracas import cluster
 from fracas.config.sweep import SweepDeck, study_label, sweep_problems
 from fracas.config.team import TeamDeck, load_team_deck
 from fracas.config.trajectory import deck_error
 from fracas.errors import FracasError
 from fracas.io.atomic import check_output_path
-from fracas.sweep_plan import (
+from fracas.modes import stm, team
+from fracas.modes.sweep.plan import (
     base_hash,
     batch_groups,
     parse_vary,
@@ -42,7 +43,7 @@ from fracas.sweep_plan import (
     vary,
     vary_many,
 )
-from fracas.sweep_rows import (
+from fracas.modes.sweep.rows import (
     check_outputs,
     guidance_outputs,
     one_line,
@@ -94,7 +95,7 @@ def run_one(
     try:
         cfg = study_deck(base, fields, values)
         out = None if results is None else Path(results)
-        product, _, _ = pipeline.run_team(cfg, stm=stm, output=out, write_results=out is not None)
+        product, _, _ = team.run_team(cfg, stm=stm, output=out, write_results=out is not None)
         vals, units = outputs_of(product, outputs)
         row.update(vals)
         row.update(status="ok", error="", units=units)
@@ -116,7 +117,7 @@ def _setup_for(gkey: str, study: Any, stm: str | None) -> tuple[Any, Any]:
     if hit is not None:
         return hit
     if stm is not None:
-        ref = pipeline.reference_from_stm(study, stm)
+        ref = stm.reference_from_stm(study, stm)
     else:
         from fracas.team.reference import integrate_reference
 
@@ -203,7 +204,7 @@ def _build_studies(
             if ref is not None and numbers_only and derivable(ref, deck):
                 st = derive_study(ref, deck)
             else:
-                st = pipeline.load_team(deck).study
+                st = stm.load_team(deck).study
                 ref = st if ref is None else ref
             built.append((i, v, k, st))
         except Exception:  # noqa: BLE001 - run_one records the failure with its message
@@ -279,7 +280,7 @@ class _Context:
     max_batch: int
 
     def call(self, task: tuple) -> cluster.Call:
-        """(function, args) of a task (:func:`fracas.sweep_plan.plan_tasks`)."""
+        """(function, args) of a task (:func:`fracas.modes.sweep.plan.plan_tasks`)."""
         if task[0] == "one":
             i = task[1]
             args = (self.base, i, self.fields, self.studies[i], self.outputs, self.keys[i], self.stm)

@@ -1,7 +1,7 @@
 """Mode ``tsim``: the Monte Carlo (FRACAS TSIM): the TEAM study it stands on, blocks of
 sampled missions with designed and executed guidance, statistics, consistency with the
 linear analysis -> results file -> the report.  The orchestrator is
-:func:`fracas.montecarlo.run_tsim`; Dask through :mod:`fracas.cluster`."""
+:func:`fracas.modes.tsim.run.run_tsim`; Dask through :mod:`fracas.cluster`."""
 
 from __future__ import annotations
 
@@ -16,14 +16,14 @@ __all__ = ["MODE", "run_tsim"]
 
 
 def run_tsim(*args: Any, **kw: Any) -> Any:
-    """The TSIM orchestrator (:func:`fracas.montecarlo.run_tsim`)."""
-    from fracas.montecarlo import run_tsim as run
+    """The TSIM orchestrator (:func:`fracas.modes.tsim.run.run_tsim`)."""
+    from fracas.modes.tsim.run import run_tsim as run
 
     return run(*args, **kw)
 
 
 def _json_summary(product: Any, path: Path, written: list[Path]) -> str:
-    from fracas.montecarlo import missions_per_second
+    from fracas.modes.tsim.run import missions_per_second
 
     return json.dumps(
         {
@@ -40,7 +40,7 @@ def command(deck: Path, opts: RunOptions, console: Console) -> None:
     """``fracas run`` on a TSIM deck: stages, a progress bar over the missions, the summary."""
     from fracas.config.tsim import load_tsim_deck
     from fracas.io.atomic import check_output_path
-    from fracas.montecarlo import missions_per_second
+    from fracas.modes.tsim.run import missions_per_second
     from fracas.report.tsim import plot_tsim, summary_text
 
     cfg = load_tsim_deck(deck)

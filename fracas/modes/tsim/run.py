@@ -28,11 +28,13 @@ from typing import Any
 
 import numpy as np
 
-from fracas import cluster, pipeline
+from fracas import cluster
 from fracas.config.trajectory import deck_error
 from fracas.config.tsim import TsimDeck, load_tsim_deck, tsim_problems, tsim_team_deck
 from fracas.errors import DeckError
 from fracas.io.atomic import check_output_path
+from fracas.modes import team
+from fracas.modes.base import default_output
 
 __all__ = ["run_tsim", "checkpoint_path", "plan_key", "fly_blocks", "assemble"]
 
@@ -124,8 +126,8 @@ def _team_for(cfg: TsimDeck, say, output_dir: Path | None = None):
     """The TEAM run TSIM stands on (guidance model ``tsim``), once per process for the same
     TEAM deck, trajectory deck and STM file (a second TSIM run on them, e.g. the other half
     of a split run, reuses it)."""
-    from fracas.build.team import build_case
-    from fracas.sweep_plan import vary_many
+    from fracas.modes.stm import load_team
+    from fracas.modes.sweep.plan import vary_many
 
     team_deck = tsim_team_deck(cfg)
     changes = {**cfg.insim.team_changes, "errcon.guidance_model": "tsim"}
@@ -137,10 +139,11 @@ def _team_for(cfg: TsimDeck, say, output_dir: Path | None = None):
     if key in _TEAM_RUNS:
         return _TEAM_RUNS[key]
     say("running TEAM (guidance model tsim) for the knowledge and guidance matrices")
-    prod, _, _ = pipeline.run_team(team_deck, write_results=False, on_stage=say, output_dir=output_dir)
+    case = load_team(team_deck)  # built once: the TEAM run and TSIM's plan share it
+    prod, _, _ = team.run_team(team_deck, write_results=False, on_stage=say, output_dir=output_dir, case=case)
     if prod is None or not prod.guidance:
         raise DeckError(f"{cfg.source_path}: insim.team_deck: the TEAM run made no guidance events")
-    _TEAM_RUNS[key] = (team_deck, build_case(team_deck), prod)
+    _TEAM_RUNS[key] = (team_deck, case, prod)
     return _TEAM_RUNS[key]
 
 
@@ -251,7 +254,7 @@ def run_tsim(
 def _results_path(cfg: TsimDeck, output: str | Path | None) -> Path:
     """``output``, else the deck's ``[output] results``, else ``out/<deck stem>_tsim.h5``."""
     out = Path(output) if output is not None else (
-        cfg.resolve(cfg.output.results) if cfg.output.results else pipeline.default_output(cfg.source_path)
+        cfg.resolve(cfg.output.results) if cfg.output.results else default_output(cfg.source_path)
     )  # fmt: skip
     if output is None and not cfg.output.results:
         out = out.with_name(out.stem + "_tsim.h5")

@@ -9,7 +9,9 @@ ICRF / EME2000 (the frame of DE421); ecliptic quantities use the IAU 2006 obliqu
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 # --- units and universal constants -------------------------------------------------
 AU_KM = 149_597_870.7  # km, IAU 2012 astronomical unit
@@ -90,3 +92,15 @@ def pole_unit_vector(name: str) -> tuple[float, float, float]:
     body = BODIES[name]
     ra, dec = math.radians(body.pole_ra_deg), math.radians(body.pole_dec_deg)
     return (math.cos(ra) * math.cos(dec), math.sin(ra) * math.cos(dec), math.sin(dec))
+
+
+def body_name_at(bodies: Sequence[str], index: Any) -> str:
+    """The name of body ``index`` in a force model's body list ``bodies`` (a trajectory's
+    primary index: ``bodies[i]``), or "" for an index outside it (no primary)."""
+    i = int(index)
+    return bodies[i] if 0 <= i < len(bodies) else ""
+
+
+def body_names_at(bodies: Sequence[str], indices: Iterable[Any]) -> list[str]:
+    """:func:`body_name_at` of each index: a trajectory's primary indices -> body names."""
+    return [body_name_at(bodies, i) for i in indices]

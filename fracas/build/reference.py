@@ -7,8 +7,11 @@ which :func:`fracas.io.stm_file.write_stm_file` stores.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
+from fracas.constants import body_names_at
 from fracas.dynamics.parameters import get_values
 from fracas.errors import StmFileError
 from fracas.io.hdf5 import provenance
@@ -19,7 +22,15 @@ from fracas.status import status_text
 __all__ = ["stm_data_from_run", "reference_product"]
 
 
-def stm_data_from_run(problem, traj, sens, event_types, deck_text, deck_hash, deck_path=None) -> ReferenceTrajectory:
+def stm_data_from_run(
+    problem: Any,
+    traj: Any,
+    sens: Any,
+    event_types: Any,
+    deck_text: str | None,
+    deck_hash: str,
+    deck_path: str | None = None,
+) -> ReferenceTrajectory:
     """Assemble the :class:`~fracas.products.ReferenceTrajectory` from a propagation with sensitivities (FRACAS STMGEN).
 
     ``problem``: :class:`fracas.build.Problem` whose ``t_out`` are the schedule times (s,
@@ -63,7 +74,7 @@ def stm_data_from_run(problem, traj, sens, event_types, deck_text, deck_hash, de
         epoch_et_s=float(problem.epoch_et_s),
         event_types=event_types,
         states=np.asarray(traj.x, np.float64),
-        primary=[model.bodies[int(i)] for i in np.asarray(traj.primary)],
+        primary=body_names_at(model.bodies, np.asarray(traj.primary)),
         stm_step=stm_step,
         par_step=par_step,
         param_labels=labels,

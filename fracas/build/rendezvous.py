@@ -14,11 +14,15 @@ deck's length unit, minutes and mrad become km, km/s, s and rad).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 
-from fracas.build.trajectory import build_propagation
+from fracas.build.trajectory import Problem, build_propagation
 from fracas.config.rendezvous import RELATIVE_KIND_NAMES, RendezvousDeck, rendezvous_problems, vehicle_deck
-from fracas.config.trajectory import trajectory_hash
+from fracas.config.trajectory import TrajectoryDeck, trajectory_hash
+from fracas.constants import body_names_at
 from fracas.errors import ConfigError, DeckError
 from fracas.guidance.intercept import intercept, intercept_sensitivity
 from fracas.status import RunStatus
@@ -62,13 +66,15 @@ def _index(times: np.ndarray, t: float) -> int:
     return int(np.argmin(np.abs(times - t)))
 
 
-def _covariance(v, km: float) -> np.ndarray:
+def _covariance(v: Any, km: float) -> np.ndarray:
     if v.covariance is not None:
         return np.asarray(v.covariance, dtype=np.float64) * km**2
     return np.diag(np.r_[np.asarray(v.position_sigma), np.asarray(v.velocity_sigma)] * km) ** 2
 
 
-def _reference(deck: RendezvousDeck, which: str, tdeck, t_out: np.ndarray, marks: np.ndarray):
+def _reference(
+    deck: RendezvousDeck, which: str, tdeck: TrajectoryDeck, t_out: np.ndarray, marks: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float, Problem, str]:
     """(states (K, 6), step STMs (K, 6, 6), mu km^3/s^2, problem, source) of one vehicle at
     t_out (s from its own epoch): from its STM file when the deck names one that exists
     (checked against the trajectory deck's hash), else integrated in line, and then written
@@ -105,7 +111,7 @@ def _reference(deck: RendezvousDeck, which: str, tdeck, t_out: np.ndarray, marks
         sl = slice(1, None) if lead else slice(None)
         states = np.array(traj.x)[sl, :6]
         phi = np.array(sens.stm_step)[sl, :6, :6]
-        prim = [bodies[int(i)] for i in np.asarray(traj.primary)[sl]]
+        prim = body_names_at(bodies, np.asarray(traj.primary)[sl])
         source = "integrated"
         if stm_path is not None:
             from dataclasses import replace
@@ -156,20 +162,30 @@ def _check_marks(deck: RendezvousDeck, times: np.ndarray, marks: np.ndarray, xa:
         )
 
 
-def _is_two_body(problem) -> bool:
+def _is_two_body(problem: Problem) -> bool:
     """Point-mass, ballistic, one centre: the conic is the exact reference."""
     m = problem.model
     return not (m.third_bodies or m.j2 or m.srp or m.thrust or m.n_impulses or m.change_primary_at_soi)
 
 
-def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
-    """The study of a validated rendezvous deck (module docstring); DeckError / ConfigError
-    (one line, naming the field) for what the schema cannot see."""
-    probs = rendezvous_problems(deck)
-    if probs:
-        raise DeckError(probs[0] + (f" (and {len(probs) - 1} more errors)" if len(probs) > 1 else ""), problems=probs)
-    km = deck.km_per_unit
-    times, marks = event_times(deck)
+@dataclass(frozen=True)
+class _References:
+    """Both vehicles' references at the study's times: states (K, 6), step STMs (K, 6, 6)
+    with Φ(t_0, t_0) = I, the centre and its mu, the chaser's problem, the sources, two-body or not."""
+
+    xa: np.ndarray
+    phia: np.ndarray
+    xt: np.ndarray
+    phit: np.ndarray
+    mu: float
+    centre: str
+    prob_a: Problem
+    sources: tuple[str, str]
+    two_body: bool
+
+
+def _references(deck: RendezvousDeck, times: np.ndarray, marks: np.ndarray) -> _References:
+    """The chaser's and the target's references (the target's epoch at or before the chaser's)."""
     da, dt = vehicle_deck(deck, "chaser"), vehicle_deck(deck, "target")
     shift = da.epoch.et - dt.epoch.et
     if shift < -_TOL_S:
@@ -188,7 +204,11 @@ def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
     # the first step: Phi(t_0, t_0) = I (the a priori holds at t_0 = 0)
     phia[0] = np.eye(6)
     phit[0] = np.eye(6)
+    return _References(xa, phia, xt, phit, mu, da.initial_state.centre, prob_a, (src_a, src_t), two_body)
 
+
+def _noise_models(deck: RendezvousDeck, km: float) -> tuple[np.ndarray, np.ndarray]:
+    """(assumed, true) noise (sigma, fraction, floor) of each relative kind, in km and rad."""
     nz = lambda n: np.array([n.sigma, n.fraction, n.floor], dtype=np.float64)  # noqa: E731
     noise_a = np.zeros((4, 3))
     noise_t = np.zeros((4, 3))
@@ -201,8 +221,12 @@ def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
         a = nz(n) * np.array([f, 1.0, f])
         t = np.array(n.true_model(), dtype=np.float64) * np.array([f, 1.0, f])
         noise_a[i], noise_t[i] = a, t
+    return noise_a, noise_t
 
-    biases = tuple(
+
+def _biases(deck: RendezvousDeck, km: float) -> tuple[BiasSpec, ...]:
+    """The [[bias]] entries: kind index, sigma in km or rad, role, τ (s; inf: constant)."""
+    return tuple(
         BiasSpec(
             b.name,
             RELATIVE_KIND_NAMES.index(b.measurement),
@@ -212,6 +236,10 @@ def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
         )
         for b in deck.bias
     )
+
+
+def _a_priori(deck: RendezvousDeck, km: float, biases: tuple[BiasSpec, ...]) -> np.ndarray:
+    """The true a-priori covariance of [chaser, target, biases] (km, km/s)."""
     nb = len(biases)
     P0 = np.zeros((12 + nb, 12 + nb))
     P0[:6, :6] = _covariance(deck.chaser, km)
@@ -222,11 +250,12 @@ def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
         P0[6:12, :6] = P0[:6, :6]
     for j, b in enumerate(biases):
         P0[12 + j, 12 + j] = b.sigma**2
-    _check_marks(deck, times, marks, xa, xt)
-    load = None
-    if deck.chaser.filter_position_sigma is not None:
-        load = np.r_[np.asarray(deck.chaser.filter_position_sigma), np.asarray(deck.chaser.filter_velocity_sigma)] * km
-    resets = tuple(
+    return P0
+
+
+def _resets(deck: RendezvousDeck, times: np.ndarray, km: float) -> tuple[ResetSpec, ...]:
+    """The [[reset]] entries: the time index, the sigmas (km, km/s) and the roles reset."""
+    return tuple(
         ResetSpec(
             _index(times, r.time_min * 60.0),
             np.r_[np.asarray(r.position_sigma), np.asarray(r.velocity_sigma)] * km,
@@ -234,6 +263,11 @@ def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
         )
         for r in deck.reset
     )
+
+
+def _maneuvers(deck: RendezvousDeck, times: np.ndarray, refs: _References) -> tuple[ManeuverSpec, ...]:
+    """Each [[maneuver]]: the conic intercept of the target and its sensitivity."""
+    xa, xt, mu = refs.xa, refs.xt, refs.mu
     mans = []
     for m in deck.maneuver:
         k = _index(times, m.time_min * 60.0)
@@ -248,18 +282,42 @@ def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
             )
         M = np.asarray(intercept_sensitivity(xa[k], xt[k], v1, tof, mu))
         mans.append(ManeuverSpec(m.name, k, float(times[k]), m.arrival_min * 60.0, M, np.asarray(dv), int(status)))
+    return tuple(mans)
+
+
+def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
+    """The study of a validated rendezvous deck (module docstring); DeckError / ConfigError
+    (one line, naming the field) for what the schema cannot see.
+
+    The steps: the deck's cross-vehicle checks, the event times, both references, the noise
+    models, the biases and the a priori, the marks' geometry, the resets and the maneuvers."""
+    probs = rendezvous_problems(deck)
+    if probs:
+        raise DeckError(probs[0] + (f" (and {len(probs) - 1} more errors)" if len(probs) > 1 else ""), problems=probs)
+    km = deck.km_per_unit
+    times, marks = event_times(deck)
+    refs = _references(deck, times, marks)
+    noise_a, noise_t = _noise_models(deck, km)
+    biases = _biases(deck, km)
+    P0 = _a_priori(deck, km, biases)
+    _check_marks(deck, times, marks, refs.xa, refs.xt)
+    load = None
+    if deck.chaser.filter_position_sigma is not None:
+        load = np.r_[np.asarray(deck.chaser.filter_position_sigma), np.asarray(deck.chaser.filter_velocity_sigma)] * km
+    resets = _resets(deck, times, km)
+    mans = _maneuvers(deck, times, refs)
     return RendezvousStudy(
         title=deck.title,
         source=deck.source_path or "<deck>",
         chaser_name=deck.chaser.name,
         target_name=deck.target.name,
-        centre=da.initial_state.centre,
-        mu_km3_s2=mu,
+        centre=refs.centre,
+        mu_km3_s2=refs.mu,
         times_s=times,
-        x_chaser=xa,
-        x_target=xt,
-        phi_chaser=phia,
-        phi_target=phit,
+        x_chaser=refs.xa,
+        x_target=refs.xt,
+        phi_chaser=refs.phia,
+        phi_target=refs.phit,
         marks=marks,
         noise_assumed=noise_a,
         noise_true=noise_t,
@@ -269,12 +327,12 @@ def build_rendezvous(deck: RendezvousDeck) -> RendezvousStudy:
         biases=biases,
         roles=tuple(deck.roles),
         resets=resets,
-        maneuvers=tuple(mans),
+        maneuvers=mans,
         length_unit=deck.units,
         km_per_unit=km,
-        epoch_et_s=float(prob_a.epoch_et_s),
-        two_body=two_body,
-        reference_sources=(src_a, src_t),
+        epoch_et_s=float(refs.prob_a.epoch_et_s),
+        two_body=refs.two_body,
+        reference_sources=refs.sources,
     )
 
 

@@ -20,11 +20,20 @@ Conversions made here (and nowhere else):
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
 from fracas import constants
-from fracas.config.trajectory import TrajectoryDeck, deck_bodies
+from fracas.config.trajectory import (
+    Impulse,
+    Integrator,
+    Propulsion,
+    ThrustArc,
+    TrajectoryDeck,
+    deck_bodies,
+    needs_ephemeris,
+)
 from fracas.dynamics.model import (
     FRAME_INERTIAL,
     FRAME_VELOCITY,
@@ -33,6 +42,7 @@ from fracas.dynamics.model import (
     POWER_SOLAR,
     ForceModel,
     IntegratorSettings,
+    Params,
     StopCondition,
     default_params,
 )
@@ -120,7 +130,7 @@ def _initial_state(deck: TrajectoryDeck, mu_centre: float) -> tuple[np.ndarray, 
     return rot @ r, rot @ v
 
 
-def _conic_elements(deck: TrajectoryDeck, bodies: tuple[str, ...], mu: np.ndarray):
+def _conic_elements(deck: TrajectoryDeck, bodies: tuple[str, ...], mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(nb, 6) ICRF-referenced heliocentric elements (rad) and (nb,) their epochs (TDB s)."""
     from fracas.dynamics import elements as el
 
@@ -141,7 +151,7 @@ def _conic_elements(deck: TrajectoryDeck, bodies: tuple[str, ...], mu: np.ndarra
     return elems, et
 
 
-def integrator_settings(ig, thrust: bool) -> IntegratorSettings:
+def integrator_settings(ig: Integrator, thrust: bool) -> IntegratorSettings:
     """The core's step settings from a deck's ``[integrator]`` (every "auto" resolved).
 
     dt_max_s unset: 4000 s under FRACAS's c_nom rule (Doc. 4), no limit under tolerance
@@ -164,22 +174,14 @@ def integrator_settings(ig, thrust: bool) -> IntegratorSettings:
     )
 
 
-def build_propagation(deck: TrajectoryDeck) -> Problem:
-    """Validated deck -> :class:`Problem` in canonical units (see the module docstring)."""
-    src = _src(deck)
-    st, sc, f, prop = deck.initial_state, deck.spacecraft, deck.forces, deck.propulsion
-    bodies = model_bodies(deck)
+def _force_model(deck: TrajectoryDeck, bodies: tuple[str, ...]) -> ForceModel:
+    """The static force model: bodies, primary, perturbations, thrust layout, steps and stop."""
+    f, prop = deck.forces, deck.propulsion
     idx = bodies.index
-    centre = st.centre
-
-    # --- epoch and final time
-    epoch_et = deck.epoch.et
-    t_final = deck.duration_days * constants.DAY_S
-
-    # --- static model
+    centre = deck.initial_state.centre
     ig = deck.integrator
     stop_body = deck.stop.body or centre
-    model = ForceModel(
+    return ForceModel(
         bodies=bodies,
         primary=idx(centre),
         third_bodies=tuple(idx(b) for b in bodies if b in f.third_bodies),
@@ -201,81 +203,110 @@ def build_propagation(deck: TrajectoryDeck) -> Problem:
         ),
     )
 
-    # --- dynamic parameters
+
+def _body_constants(
+    deck: TrajectoryDeck, bodies: tuple[str, ...], model: ForceModel
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(mu, j2, radius) of the model's bodies: the catalogue's, with ``[forces.overrides]``."""
     base = default_params(model)
     mu, j2, radius = (np.array(a, dtype=np.float64) for a in (base.mu, base.j2, base.radius))
-    for name, ov in f.overrides.items():
+    for name, ov in deck.forces.overrides.items():
         if name not in bodies:
             raise ConfigError(
-                f'{src}: forces.overrides.{name}: body "{name}" is not in the force model '
+                f'{_src(deck)}: forces.overrides.{name}: body "{name}" is not in the force model '
                 f"({', '.join(bodies)}); add it to forces.third_bodies or remove the override"
             )
-        k = idx(name)
+        k = bodies.index(name)
         if ov.mu_km3_s2 is not None:
             mu[k] = ov.mu_km3_s2
         if ov.j2 is not None:
             j2[k] = ov.j2
         if ov.radius_km is not None:
             radius[k] = ov.radius_km
+    return mu, j2, radius
+
+
+def _propulsion_params(prop: Propulsion) -> dict[str, Any]:
+    """The engine's parameters: power, its decay (nuclear), efficiency, c = Isp g0, thrust scale."""
+    c = prop.exhaust_velocity_km_s if prop.exhaust_velocity_km_s is not None else prop.isp_s * constants.G0_KM_S2
+    decay = prop.decay_days * constants.DAY_S if (prop.power_source == POWER_NUCLEAR and prop.decay_days) else math.inf
+    return {
+        "power_kw": prop.power_kw,
+        "power_decay_s": decay,
+        "efficiency": prop.efficiency,
+        "exhaust_velocity_km_s": c,
+        "thrust_scale": prop.thrust_scale,
+    }
+
+
+def _arc_params(arcs: list[ThrustArc]) -> dict[str, Any]:
+    """The thrust arcs' switch times (s), angles (rad), throttles, frames and pointing laws."""
+    over: dict[str, Any] = {
+        "arc_t_on": [a.start_days * constants.DAY_S for a in arcs],
+        "arc_t_off": [a.stop_days * constants.DAY_S for a in arcs],
+        "arc_alpha": [math.radians(a.alpha_deg) for a in arcs],
+        "arc_beta": [math.radians(a.beta_deg) for a in arcs],
+        "arc_throttle": [a.throttle for a in arcs],
+        "arc_frame": [_ARC_FRAMES[a.frame] for a in arcs],
+    }
+    for angle in ("alpha", "beta"):
+        for k in range(3):
+            over[f"arc_{angle}_p{k + 1}"] = [
+                math.radians(c[k]) if k < len(c) else 0.0 for c in (getattr(a, f"{angle}_legendre_deg") for a in arcs)
+            ]
+    return over
+
+
+def _impulse_params(imps: list[Impulse]) -> dict[str, Any]:
+    """The impulses' times (s), ΔV (km/s), frames and the one engine's Isp."""
+    return {
+        "impulse_t": [i.time_days * constants.DAY_S for i in imps],
+        "impulse_dv": np.array([i.dv_km_s for i in imps], dtype=np.float64).reshape(len(imps), 3),
+        "impulse_frame": [FRAME_VELOCITY if i.frame == "velocity" else FRAME_INERTIAL for i in imps],
+        "impulse_isp_s": imps[0].isp_s,
+    }
+
+
+def _params(deck: TrajectoryDeck, bodies: tuple[str, ...], model: ForceModel) -> tuple[Params, np.ndarray]:
+    """The dynamic parameters (canonical units) and the bodies' mu (km^3/s^2)."""
+    sc, prop = deck.spacecraft, deck.propulsion
+    mu, j2, radius = _body_constants(deck, bodies, model)
     over: dict = {"mu": mu, "j2": j2, "radius": radius, "area_m2": sc.area_m2, "cr": sc.cr}
     if prop is not None:
-        c = prop.exhaust_velocity_km_s if prop.exhaust_velocity_km_s is not None else prop.isp_s * constants.G0_KM_S2
-        decay = (
-            prop.decay_days * constants.DAY_S if (prop.power_source == POWER_NUCLEAR and prop.decay_days) else math.inf
-        )
-        over.update(
-            power_kw=prop.power_kw,
-            power_decay_s=decay,
-            efficiency=prop.efficiency,
-            exhaust_velocity_km_s=c,
-            thrust_scale=prop.thrust_scale,
-        )
-    arcs = deck.thrust_arc
-    if arcs:
-        over.update(
-            arc_t_on=[a.start_days * constants.DAY_S for a in arcs],
-            arc_t_off=[a.stop_days * constants.DAY_S for a in arcs],
-            arc_alpha=[math.radians(a.alpha_deg) for a in arcs],
-            arc_beta=[math.radians(a.beta_deg) for a in arcs],
-            arc_throttle=[a.throttle for a in arcs],
-            arc_frame=[_ARC_FRAMES[a.frame] for a in arcs],
-        )
-        for angle in ("alpha", "beta"):
-            for k in range(3):
-                over[f"arc_{angle}_p{k + 1}"] = [
-                    math.radians(c[k]) if k < len(c) else 0.0
-                    for c in (getattr(a, f"{angle}_legendre_deg") for a in arcs)
-                ]
-    imps = deck.impulse
-    if imps:
-        over.update(
-            impulse_t=[i.time_days * constants.DAY_S for i in imps],
-            impulse_dv=np.array([i.dv_km_s for i in imps], dtype=np.float64).reshape(len(imps), 3),
-            impulse_frame=[FRAME_VELOCITY if i.frame == "velocity" else FRAME_INERTIAL for i in imps],
-            impulse_isp_s=imps[0].isp_s,
-        )
-    if f.conic_bodies:
+        over.update(_propulsion_params(prop))
+    if deck.thrust_arc:
+        over.update(_arc_params(deck.thrust_arc))
+    if deck.impulse:
+        over.update(_impulse_params(deck.impulse))
+    if deck.forces.conic_bodies:
         over["body_elements"], over["body_elements_et"] = _conic_elements(deck, bodies, mu)
-    params = default_params(model, **over)
+    return default_params(model, **over), mu
 
-    # --- initial state (relative to the centre, ICRF)
-    r0, v0 = _initial_state(deck, float(mu[idx(centre)]))
-    x0 = np.concatenate([r0, v0, [sc.mass_kg]]).astype(np.float64)
+
+def _initial_vector(deck: TrajectoryDeck, mu_centre: float) -> np.ndarray:
+    """x0 = (r km, v km/s relative to the centre, ICRF; mass kg), checked finite."""
+    r0, v0 = _initial_state(deck, mu_centre)
+    x0 = np.concatenate([r0, v0, [deck.spacecraft.mass_kg]]).astype(np.float64)
     if not np.all(np.isfinite(x0)):
-        raise ConfigError(f"{src}: initial_state: the state converts to non-finite numbers {x0.tolist()}")
+        raise ConfigError(f"{_src(deck)}: initial_state: the state converts to non-finite numbers {x0.tolist()}")
+    return x0
 
-    # --- ephemeris: whenever a body other than the Sun and the conic bodies needs a position
-    need_ephem = len(bodies) > 1 and any(b != "sun" and b not in f.conic_bodies for b in bodies)
-    ephem = None
-    if need_ephem:
-        from fracas.dynamics.ephemeris import build_ephemeris
 
-        try:
-            ephem = build_ephemeris(bodies, epoch_et + min(0.0, t_final), epoch_et + max(0.0, t_final))
-        except ConfigError as exc:
-            raise ConfigError(f"{src}: {exc}") from None
+def _ephemeris(deck: TrajectoryDeck, bodies: tuple[str, ...], epoch_et: float, t_final: float) -> Any:
+    """The DE421 table over the propagation window, or None when no body other than the Sun
+    and the conic bodies needs a position (:func:`fracas.config.trajectory.needs_ephemeris`)."""
+    if not needs_ephemeris(deck):
+        return None
+    from fracas.dynamics.ephemeris import build_ephemeris
 
-    # --- sensitivities
+    try:
+        return build_ephemeris(bodies, epoch_et + min(0.0, t_final), epoch_et + max(0.0, t_final))
+    except ConfigError as exc:
+        raise ConfigError(f"{_src(deck)}: {exc}") from None
+
+
+def _sensitivity_labels(deck: TrajectoryDeck, model: ForceModel) -> tuple[str, ...]:
+    """``[output] sensitivities``, each checked against the force model."""
     labels = tuple(deck.output.sensitivities)
     if labels:
         from fracas.params import parse_label
@@ -284,8 +315,25 @@ def build_propagation(deck: TrajectoryDeck) -> Problem:
             try:
                 parse_label(label, model)
             except Exception as exc:  # noqa: BLE001 - any parse failure is a deck problem
-                raise ConfigError(f'{src}: output.sensitivities[{k}] = "{label}": {exc}') from None
+                raise ConfigError(f'{_src(deck)}: output.sensitivities[{k}] = "{label}": {exc}') from None
+    return labels
 
+
+def build_propagation(deck: TrajectoryDeck) -> Problem:
+    """Validated deck -> :class:`Problem` in canonical units (see the module docstring).
+
+    The steps: the static force model, the dynamic parameters, the initial state, the
+    ephemeris table and the sensitivity labels."""
+    st = deck.initial_state
+    bodies = model_bodies(deck)
+    centre = st.centre
+    epoch_et = deck.epoch.et
+    t_final = deck.duration_days * constants.DAY_S
+    model = _force_model(deck, bodies)
+    params, mu = _params(deck, bodies, model)
+    x0 = _initial_vector(deck, float(mu[bodies.index(centre)]))
+    ephem = _ephemeris(deck, bodies, epoch_et, t_final)
+    labels = _sensitivity_labels(deck, model)
     return Problem(
         model=model,
         params=params,

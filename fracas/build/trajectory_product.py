@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from fracas.build.trajectory import Problem
+from fracas.constants import body_name_at
 from fracas.io.hdf5 import provenance
 from fracas.io.trajectory_file import SensitivityData, TrajectoryData
 
@@ -41,7 +42,6 @@ def trajectory_data(problem: Problem, traj: Any, sens: Any) -> TrajectoryData:
     t = np.asarray(traj.t, dtype=np.float64)
     x = np.asarray(traj.x, dtype=np.float64)
     pidx = np.asarray(traj.primary).astype(int)
-    name = lambda i, ok=True: bodies[i] if ok and 0 <= i < len(bodies) else ""  # noqa: E731
     sdata = _sensitivity_data(problem, sens) if sens is not None else None
     xf = np.asarray(traj.x_final, dtype=np.float64)
     return TrajectoryData(
@@ -50,13 +50,13 @@ def trajectory_data(problem: Problem, traj: Any, sens: Any) -> TrajectoryData:
         r_km=x[:, 0:3],
         v_km_s=x[:, 3:6],
         mass_kg=x[:, 6],
-        primary=tuple(name(int(i), bool(np.isfinite(tk))) for i, tk in zip(pidx, t)),
+        primary=tuple(body_name_at(bodies, i) if np.isfinite(tk) else "" for i, tk in zip(pidx, t)),
         bodies=bodies,
         t_final_s=float(traj.t_final),
         r_final_km=xf[0:3],
         v_final_km_s=xf[3:6],
         mass_final_kg=float(xf[6]),
-        primary_final=name(int(traj.primary_final)),
+        primary_final=body_name_at(bodies, traj.primary_final),
         status=int(traj.status),
         n_steps=int(traj.n_steps),
         n_rect=int(traj.n_rect),

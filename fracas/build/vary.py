@@ -6,7 +6,7 @@ deck only in numeric fields (:data:`fracas.config.sweep.NUMERIC_FIELDS`: a-prior
 parameter sigmas, thrust-noise sigmas and correlation times, tracking and generalized
 measurement sigmas) and returns the deck's study as ``dataclasses.replace`` of the given one:
 its P0 (assumed and true), noise levels, observation and true measurement sigmas and noise
-cell step are computed from the deck by build_case's own :func:`fracas.build.team.study_numbers`
+cell step are computed from the deck by build_case's own :func:`fracas.build.team_numbers.study_numbers`
 (bit-identical arrays); the schedule, layout, labels, trajectory and
 stations are shared.  It skips build_case's trajectory load and schedule build (most of a
 study's build time).  Studies whose numbers do not come from the deck (a punched a-priori)
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from fracas.build.team import study_numbers
+from fracas.build.team_numbers import study_numbers
 from fracas.config.team import TeamDeck
 from fracas.constants import DAY_S
 from fracas.team.study import Study

@@ -36,6 +36,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, Field, model_validator
 
+from fracas.config.fields import A_PRIORI_SECTIONS, THRUST_NOISE_SECTIONS, a_priori_paths, thrust_noise_paths
 from fracas.config.team import TeamDeck
 from fracas.config.trajectory import (
     FieldProblem,
@@ -97,24 +98,10 @@ Scalar = float | int | bool | str
 #: dict key).  Anything not listed is structural (its studies run one by one).
 NUMERIC_FIELDS = frozenset(
     {
-        "a_priori.position_sigma_km",
-        "a_priori.position_rss_km",
-        "a_priori.velocity_sigma_km_s",
-        "a_priori.velocity_rss_km_s",
-        "a_priori.mass_sigma_kg",
+        *(path for table in A_PRIORI_SECTIONS for path in a_priori_paths(table)),  # fracas.config.fields
         "parameter.sigma",
         "tracking.sigma",
-        *(
-            f"{t}thrust_noise.{c}.{f}"
-            for t in ("", "gencov.")
-            for c in ("proportionality", "in_plane_deg", "out_of_plane_deg")
-            for f in ("sigma", "tau_days")
-        ),
-        "gencov.a_priori.position_sigma_km",
-        "gencov.a_priori.position_rss_km",
-        "gencov.a_priori.velocity_sigma_km_s",
-        "gencov.a_priori.velocity_rss_km_s",
-        "gencov.a_priori.mass_sigma_kg",
+        *(path for table in THRUST_NOISE_SECTIONS for path in thrust_noise_paths(table)),
         "gencov.parameter.sigma",
         "gencov.measurement_sigma.*",
     }

@@ -1,0 +1,122 @@
+"""Value types of the decks: epochs, body names, 3-vectors, parameter labels, and the frozen
+section base every deck table derives from (pydantic annotated types; no JAX).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import re
+from typing import Annotated, Any
+
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, PlainValidator
+
+from fracas.config.trajectory.problems import FieldProblem
+from fracas.constants import BODIES
+from fracas.errors import ConfigError
+from fracas.timescales import calendar_to_et
+
+BODY_NAMES = tuple(BODIES)
+
+
+def _iso_value(v: Any) -> str:
+    """A TDB calendar epoch: an ISO string (or a TOML local date/datetime) -> 'YYYY-MM-DDTHH:MM:SS[.ffffff]'."""
+    if isinstance(v, _dt.datetime):
+        if v.tzinfo is not None:
+            raise ValueError("must be a TDB calendar date without a UTC offset")
+        return v.isoformat()
+    if isinstance(v, _dt.date):
+        return _dt.datetime(v.year, v.month, v.day).isoformat()
+    if not isinstance(v, str):
+        raise ValueError('must be an ISO calendar date string such as "2030-01-01T00:00:00" (TDB)')
+    text = v.strip()
+    try:
+        calendar_to_et(text)  # the one calendar conversion (fracas.timescales)
+    except ConfigError:
+        raise ValueError('must be an ISO calendar date such as "2030-01-01T00:00:00" (TDB)') from None
+    return re.sub(r"\s*TDB$", "", text, flags=re.IGNORECASE)
+
+
+def _epoch_value(v: Any) -> str | float:
+    """An epoch written either as an ISO TDB string/date or as a Julian date (TDB) number."""
+    if isinstance(v, bool):
+        raise ValueError("must be an ISO calendar date string (TDB) or a Julian date number")
+    if isinstance(v, (int, float)):
+        if not math.isfinite(v) or not (1_000_000.0 < v < 5_000_000.0):
+            raise ValueError("a Julian date must lie between 1e6 and 5e6")
+        return float(v)
+    if isinstance(v, (str, _dt.date)):
+        return _iso_value(v)
+    raise ValueError("must be an ISO calendar date string (TDB) or a Julian date number")
+
+
+def _body_name(v: Any) -> str:
+    if not isinstance(v, str):
+        raise ValueError(f"must be a body name, one of {', '.join(BODY_NAMES)}")
+    name = v.strip().lower()
+    if name not in BODIES:
+        raise ValueError(f"must be a known body, one of {', '.join(BODY_NAMES)}")
+    return name
+
+
+BodyName = Annotated[str, PlainValidator(_body_name)]
+IsoEpoch = Annotated[str, PlainValidator(_iso_value)]
+EpochValue = Annotated[Any, PlainValidator(_epoch_value)]
+
+
+def _vector3(v: Any) -> list[float]:
+    ok = isinstance(v, list) and len(v) == 3
+    ok = ok and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+    if not ok:
+        raise ValueError("must be a list of 3 numbers")
+    try:
+        out = [float(x) for x in v]
+    except OverflowError:
+        raise ValueError("must be finite numbers") from None
+    if not all(math.isfinite(x) for x in out):
+        raise ValueError("must be finite numbers")
+    return out
+
+
+Vector3 = Annotated[list[float], PlainValidator(_vector3)]
+PositiveFloat = Annotated[float, Field(gt=0)]
+
+_LABEL_RE = re.compile(r"^[a-z][a-z0-9_]*(\[[A-Za-z0-9_]+(,[A-Za-z0-9_]+)*\])?$")
+
+
+def _check_label(v: str) -> str:
+    if not _LABEL_RE.match(v):
+        raise ValueError('must be a parameter label such as "mu[sun]", "thrust_scale" or "arc_thrust_scale[0]"')
+    return v
+
+
+def canonical_name(v: Any) -> Any:
+    """A name as the catalogues spell it (lower case, no surrounding blanks); other types as given."""
+    return v.strip().lower() if isinstance(v, str) else v
+
+
+#: a parameter label, case-insensitive: "Mu[Sun]" is stored as "mu[sun]" (the catalogue's spelling)
+ParamLabel = Annotated[str, BeforeValidator(canonical_name), AfterValidator(_check_label)]
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True, allow_inf_nan=False)
+
+
+def _check_body_keys(v: dict[str, Any]) -> dict[str, Any]:
+    out = {}
+    for key, val in v.items():
+        try:
+            name = _body_name(key)
+        except ValueError as exc:
+            raise FieldProblem((key,), key, str(exc)) from None
+        out[name] = val
+    return out
+
+
+def _no_repeats(v: list[str]) -> list[str]:
+    """A list field's entries must be distinct (names the index of the repeat)."""
+    for k, item in enumerate(v):
+        if item in v[:k]:
+            raise FieldProblem((k,), item, "listed twice")
+    return v

@@ -211,47 +211,49 @@ def team_problems(deck: TeamDeck) -> list[str]:
         return [f"{src}: a file named in the deck is not a usable path ({exc.strerror or type(exc).__name__})"]
 
 
-def _team_checks(deck: TeamDeck) -> list[str]:
-    src = deck.source_path or "<deck>"
-    out: list[str] = []
+def _reference_deck(deck: TeamDeck, src: str) -> tuple[TrajectoryDeck | None, list[str]]:
+    """The study's trajectory deck ([ertraj] deck), or None with why not."""
     path = deck.resolve(deck.ertraj.deck)
-    tdeck = None
     if not path.exists():
-        out.append(_line(src, "ertraj.deck", deck.ertraj.deck, f"no such trajectory deck ({path})"))
-    else:
-        try:
-            tdeck = load_deck(path)
-        except FracasError as exc:
-            out += exc.problems
-    if tdeck is not None and tdeck.backward:
-        out.append(_line(src, "ertraj.deck", deck.ertraj.deck, BACKWARD_TEAM_PROBLEM))
-        tdeck = None
-    if tdeck is not None:
-        out += trajectory_problems(tdeck)
-        out += team_size_problems(deck, tdeck)
-        model = _model(tdeck)
-        stations = set(_BUILTIN_STATIONS) | {s.name for s in deck.station}
-        for k, p in enumerate(deck.parameter):
-            out.append(_label_problem(p.label, model, stations, src, f"parameter[{k}].label"))
-        if deck.gencov is not None:
-            for k, g in enumerate(deck.gencov.parameter):
-                if g.role == "ignore":
-                    out.append(_label_problem(g.label, model, stations, src, f"gencov.parameter[{k}].label"))
-        for k, lab in enumerate(deck.stm.parameters):
-            out.append(_label_problem(lab, model, stations, src, f"stm.parameters[{k}]", dynamic_only=True))
-        dur = tdeck.duration_days
-        out += _guidance_problems(deck, tdeck, src)
-        for k, e in enumerate(deck.event):
-            late = [t for t in e.times() if t > dur * (1 + 1e-12)]
-            if late:
-                out.append(_line(src, f"event[{k}]", None, f"times must be within the trajectory (<= {dur:g} d)"))
-            if e.predict_to_days is not None and e.predict_to_days > dur * (1 + 1e-12):
-                out.append(
-                    _line(
-                        src, f"event[{k}].predict_to_days", e.predict_to_days, f"must be <= {dur:g} d (the trajectory)"
-                    )
-                )
-    thash = trajectory_hash(tdeck) if tdeck is not None else None
+        return None, [_line(src, "ertraj.deck", deck.ertraj.deck, f"no such trajectory deck ({path})")]
+    try:
+        tdeck = load_deck(path)
+    except FracasError as exc:
+        return None, list(exc.problems)
+    if tdeck.backward:
+        return None, [_line(src, "ertraj.deck", deck.ertraj.deck, BACKWARD_TEAM_PROBLEM)]
+    return tdeck, []
+
+
+def _against_trajectory(deck: TeamDeck, tdeck: TrajectoryDeck, src: str) -> list[str | None]:
+    """Labels, sizes, guidance and event times checked against the trajectory deck."""
+    out: list[str | None] = [*trajectory_problems(tdeck), *team_size_problems(deck, tdeck)]
+    model = _model(tdeck)
+    stations = set(_BUILTIN_STATIONS) | {s.name for s in deck.station}
+    for k, p in enumerate(deck.parameter):
+        out.append(_label_problem(p.label, model, stations, src, f"parameter[{k}].label"))
+    if deck.gencov is not None:
+        for k, g in enumerate(deck.gencov.parameter):
+            if g.role == "ignore":
+                out.append(_label_problem(g.label, model, stations, src, f"gencov.parameter[{k}].label"))
+    for k, lab in enumerate(deck.stm.parameters):
+        out.append(_label_problem(lab, model, stations, src, f"stm.parameters[{k}]", dynamic_only=True))
+    dur = tdeck.duration_days
+    out += _guidance_problems(deck, tdeck, src)
+    for k, e in enumerate(deck.event):
+        late = [t for t in e.times() if t > dur * (1 + 1e-12)]
+        if late:
+            out.append(_line(src, f"event[{k}]", None, f"times must be within the trajectory (<= {dur:g} d)"))
+        if e.predict_to_days is not None and e.predict_to_days > dur * (1 + 1e-12):
+            out.append(
+                _line(src, f"event[{k}].predict_to_days", e.predict_to_days, f"must be <= {dur:g} d (the trajectory)")
+            )
+    return out
+
+
+def _files_read(deck: TeamDeck, src: str, thash: str | None) -> list[str | None]:
+    """The STM file (read, or built: then written), the punch file and the user gain."""
+    out: list[str | None] = []
     ec = deck.errcon
     if ec.stm_file:
         spath = deck.resolve(ec.stm_file)
@@ -272,11 +274,22 @@ def _team_checks(deck: TeamDeck) -> list[str]:
         else:
             if not callable(obj):
                 out.append(_line(src, "filter.user_gain", spec, "is not callable"))
+    return out
+
+
+def _team_checks(deck: TeamDeck) -> list[str]:
+    src = deck.source_path or "<deck>"
+    tdeck, out = _reference_deck(deck, src)
+    found: list[str | None] = list(out)
+    if tdeck is not None:
+        found += _against_trajectory(deck, tdeck, src)
+    thash = trajectory_hash(tdeck) if tdeck is not None else None
+    found += _files_read(deck, src, thash)
     for field, rel in (
         ("output.results", deck.output.results),
         ("output.plot", deck.output.plot),
         ("punch.file", deck.punch.file if deck.punch is not None else None),
     ):
         if rel:
-            out.append(_output_problem(deck.resolve(rel), src, field, rel))
-    return [p for p in out if p]
+            found.append(_output_problem(deck.resolve(rel), src, field, rel))
+    return [p for p in found if p]

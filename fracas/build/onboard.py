@@ -23,7 +23,8 @@ EARTH_FLATTENING = 1.0 / 298.257223563
 _ONBOARD = ("doppler_count_1way", "sensor_beta", "sensor_theta", "horizon_angle", "altitude")
 
 
-def onboard_config(t) -> tuple[OnboardSensor | None, tuple[float, float] | None]:
+# C901 on purpose: one default per onboard field, each a separate branch on what the deck gave
+def onboard_config(t) -> tuple[OnboardSensor | None, tuple[float, float] | None]:  # noqa: C901
     """(sensor, visibility) of a validated [[tracking]] entry (None, None for a plain one).
 
     Defaults: radii from the body (equatorial = its radius; polar: WGS-84 flattening for the

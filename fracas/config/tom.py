@@ -240,8 +240,9 @@ class TomDeck(SourcedDeck):
     grid: GridSpec | None = None
     _inline: TrajectoryDeck | None = PrivateAttr(None)
 
+    # C901 on purpose: a flat list of independent deck checks, each raising the one problem it finds
     @model_validator(mode="after")
-    def _cross_checks(self) -> TomDeck:
+    def _cross_checks(self) -> TomDeck:  # noqa: C901
         if not self.control and self.tom.first_guess is None:
             raise FieldProblem("control", [], "at least one [[control]] (or a [tom.first_guess] table)")
         if self.tom.first_guess is not None:
@@ -346,7 +347,8 @@ def tom_trajectory_deck(deck: TomDeck) -> TrajectoryDeck:
     return load_deck(path)
 
 
-def tom_problems(deck: TomDeck) -> list[str]:
+# C901 on purpose: a flat list of independent checks against the trajectory deck, one problem line each
+def tom_problems(deck: TomDeck) -> list[str]:  # noqa: C901
     """Every problem of a parsed TOM deck the schema alone cannot see, one line each, without
     JAX: the trajectory deck exists and validates; every control names an arc or impulse the
     trajectory has and a final_time control comes with stop.condition = "time"; every

@@ -208,7 +208,8 @@ def _probe(p: Path, timeout: float) -> str | None:
     return f"unreadable HDF5 file (damaged or truncated?): {why or f'exit status {r.returncode}'}"
 
 
-def _check(p: Path, what: str, checksum: bool = True) -> tuple[str | None, str]:
+# C901 on purpose: the integrity checks in the order a damaged file must be refused (stat, header, size, checksum)
+def _check(p: Path, what: str, checksum: bool = True) -> tuple[str | None, str]:  # noqa: C901
     """(why ``p`` is refused or None, kind tag from its integrity header or "")."""
     try:
         st = os.stat(p)

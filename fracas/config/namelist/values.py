@@ -44,7 +44,8 @@ def _case(name: str, v: str) -> str:
     return v.lower()
 
 
-def _scalar(f: NmlField, v: Any, where: str) -> Any:
+# C901 on purpose: one branch per namelist value kind (real, integer, logical, text, code lists)
+def _scalar(f: NmlField, v: Any, where: str) -> Any:  # noqa: C901
     """One namelist value -> its TOML value (type checked, converted); DeckError naming the field."""
     kind = f.kind
     if kind in ("reals",):

@@ -65,8 +65,9 @@ class TeamDeck(SourcedDeck):
     output: OutputSection = OutputSection()
     limits: Limits = Limits()
 
+    # C901 on purpose: a flat list of independent deck checks, each raising the one problem it finds
     @model_validator(mode="after")
-    def _cross_checks(self) -> TeamDeck:
+    def _cross_checks(self) -> TeamDeck:  # noqa: C901
         if self.errcon.analysis and self.a_priori is None:
             raise FieldProblem("a_priori", None, "required when errcon.analysis = true")
         seen: dict[str, int] = {}

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -164,14 +165,50 @@ def _print_options(f):
     return f
 
 
+def _run_only_options(f: Any) -> Any:
+    """The options only ``fracas run`` has: where the reference comes from, TOM's and TEAM's
+    reference decks, and where TSIM's and a sweep's work runs."""
+    for decorator in reversed(
+        (
+            click.option(
+                "--stm",
+                "stm_file",
+                type=click.Path(dir_okay=False, path_type=Path),
+                help="Read the reference and transition matrices from this STM file instead of integrating.",
+            ),
+            click.option(
+                "--reference-deck",
+                type=click.Path(dir_okay=False, path_type=Path),
+                help="TOM: the optimized trajectory deck to write (default: beside -o, else the deck's [tom] "
+                "reference_deck).",
+            ),
+            click.option(
+                "--trajectory-deck",
+                type=click.Path(dir_okay=False, path_type=Path),
+                help="TEAM: the reference trajectory deck to use instead of the one [ertraj] deck names.",
+            ),
+            click.option(
+                "--workers",
+                type=click.IntRange(0, 256),
+                default=None,
+                help="TSIM and sweep decks: Dask LocalCluster worker processes (TSIM default, 0 or 1: in this "
+                "process; a sweep's default is one worker per core, 0 in this process).",
+            ),
+            click.option(
+                "--scheduler",
+                metavar="ADDRESS",
+                default=None,
+                help="TSIM and sweep decks: run on an existing Dask cluster (tcp://...).",
+            ),
+        )
+    ):
+        f = decorator(f)
+    return f
+
+
 @main.command()
 @click.argument("deck", type=click.Path(dir_okay=True, path_type=Path))
-@click.option(
-    "--stm",
-    "stm_file",
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Read the reference and transition matrices from this STM file instead of integrating.",
-)
+@_run_only_options
 @click.option(
     "-o",
     "--output",
@@ -179,51 +216,12 @@ def _print_options(f):
     help="Results file to write (default: the deck's [output] results, else out/<deck stem>.h5).",
 )
 @click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), help="Also write a PNG plot.")
-@click.option(
-    "--reference-deck",
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="TOM: the optimized trajectory deck to write (default: beside -o, else the deck's [tom] reference_deck).",
-)
-@click.option(
-    "--trajectory-deck",
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="TEAM: the reference trajectory deck to use instead of the one [ertraj] deck names.",
-)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON summary instead of the tables.")
 @click.option("--quiet", is_flag=True, help="Print only the one-line summary.")
 @_print_options
-@click.option(
-    "--workers",
-    type=click.IntRange(0, 256),
-    default=None,
-    help="TSIM and sweep decks: Dask LocalCluster worker processes (TSIM default, 0 or 1: in this "
-    "process; a sweep's default is one worker per core, 0 in this process).",
-)
-@click.option(
-    "--scheduler",
-    metavar="ADDRESS",
-    default=None,
-    help="TSIM and sweep decks: run on an existing Dask cluster (tcp://...).",
-)
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
 @click.pass_context
-def run(
-    ctx: click.Context,
-    deck: Path,
-    stm_file: Path | None,
-    output: Path | None,
-    plot: Path | None,
-    reference_deck: Path | None,
-    trajectory_deck: Path | None,
-    as_json: bool,
-    quiet: bool,
-    verbose: bool,
-    velocity_unit: str,
-    width: int | None,
-    workers: int | None,
-    scheduler: str | None,
-    debug: bool,
-) -> None:
+def run(ctx: click.Context, deck: Path, debug: bool, **options: Any) -> None:
     """Run a DECK in the mode it names (mode = "team": a TEAM study; mode = "tom": targeting and
     optimization; mode = "tsim": a Monte Carlo with guidance; mode = "rendezvous": two-vehicle
     navigation; mode = "sweep": a parametric sweep; a trajectory deck: a propagation).  Every
@@ -233,22 +231,7 @@ def run(
     with _errors(debug):
         from fracas.modes.base import RunOptions
 
-        opts = RunOptions(
-            output=output,
-            plot=plot,
-            stm_file=stm_file,
-            reference_deck=reference_deck,
-            trajectory_deck=trajectory_deck,
-            as_json=as_json,
-            quiet=quiet,
-            verbose=verbose,
-            velocity_unit=velocity_unit,
-            width=width,
-            workers=workers,
-            scheduler=scheduler,
-            debug=debug,
-        )
-        _run_mode(deck, opts, debug)
+        _run_mode(deck, RunOptions(debug=debug, **options), debug)
 
 
 @main.command()

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -65,30 +66,10 @@ def export(
     covariances of chosen TEAM events."""
     debug = debug or bool((ctx.obj or {}).get("debug"))
     with _errors(debug):
-        from fracas.errors import FracasError
         from fracas.io import ccsds
-        from fracas.io.atomic import check_output_path
 
-        if oem_out is None and opm_out is None and csv_out is None:
-            raise FracasError(f"{file}: nothing to export: give --oem, --opm or --csv")
-        if (opm_out is not None or csv_out is not None) and not events:
-            raise FracasError(f"{file}: --opm and --csv need --covariance-at EVENT_OR_TIME (e.g. final, all)")
-        if events and opm_out is None and csv_out is None:
-            raise FracasError(f"{file}: --covariance-at is for --opm or --csv")
-        for out, what in ((oem_out, "OEM"), (opm_out, "OPM"), (csv_out, "CSV")):
-            if out is not None:
-                check_output_path(out, what)
-        entries, team = [], None
-        if events:  # everything checked and selected before any file is written
-            if ccsds.file_kind(file) != "team":
-                raise FracasError(f"{file}: --covariance-at needs a TEAM results file")
-            if covariance == "none":
-                raise FracasError(f"{file}: --covariance none: --opm and --csv write covariances")
-            from fracas.io.team_results import read_team_results
-
-            team = read_team_results(file)
-            picked = ccsds.select_events(team, list(events))
-            entries = [ccsds.covariance_at(team, k, covariance, before_update) for k in picked]
+        _check_export(file, oem_out, opm_out, csv_out, events)
+        entries, team = _covariance_entries(file, events, covariance, before_update)
         if oem_out is not None:
             ccsds.write_oem(
                 oem_out,
@@ -103,19 +84,74 @@ def export(
             )
             _say(f"written: {oem_out}")
         if entries:
-            if opm_out is not None:
-                name = object_name or str(team["attrs"].get("title", "")) or "SPACECRAFT"
-                for c in entries:
-                    out = opm_out
-                    if len(entries) > 1:
-                        out = opm_out.with_name(f"{opm_out.stem}_{c['index']:04d}{opm_out.suffix}")
-                    ccsds.write_opm(
-                        out, c, xml=xml, object_name=name, object_id=object_id, originator=originator, source=file.name
-                    )
-                    _say(f"written: {out} (event #{c['index']} {c['event']})")
-            if csv_out is not None:
-                ccsds.write_covariance_csv(csv_out, entries)
-                _say(f"written: {csv_out} ({len(entries)} events x {len(entries[0]['labels'])} labels)")
+            name = object_name or str(team["attrs"].get("title", "")) or "SPACECRAFT"
+            _write_covariances(file, entries, opm_out, csv_out, xml, name, object_id, originator)
+
+
+def _check_export(
+    file: Path, oem_out: Path | None, opm_out: Path | None, csv_out: Path | None, events: tuple[str, ...]
+) -> None:
+    """What ``fracas export`` was asked is coherent, and every output can be written."""
+    from fracas.errors import FracasError
+    from fracas.io.atomic import check_output_path
+
+    if oem_out is None and opm_out is None and csv_out is None:
+        raise FracasError(f"{file}: nothing to export: give --oem, --opm or --csv")
+    if (opm_out is not None or csv_out is not None) and not events:
+        raise FracasError(f"{file}: --opm and --csv need --covariance-at EVENT_OR_TIME (e.g. final, all)")
+    if events and opm_out is None and csv_out is None:
+        raise FracasError(f"{file}: --covariance-at is for --opm or --csv")
+    for out, what in ((oem_out, "OEM"), (opm_out, "OPM"), (csv_out, "CSV")):
+        if out is not None:
+            check_output_path(out, what)
+
+
+def _covariance_entries(
+    file: Path, events: tuple[str, ...], covariance: str | None, before_update: bool
+) -> tuple[list[dict[str, Any]], Any]:
+    """(the covariances at the chosen TEAM events, the TEAM results) -- everything checked and
+    selected before any file is written; ([], None) without --covariance-at."""
+    from fracas.errors import FracasError
+    from fracas.io import ccsds
+
+    if not events:
+        return [], None
+    if ccsds.file_kind(file) != "team":
+        raise FracasError(f"{file}: --covariance-at needs a TEAM results file")
+    if covariance == "none":
+        raise FracasError(f"{file}: --covariance none: --opm and --csv write covariances")
+    from fracas.io.team_results import read_team_results
+
+    team = read_team_results(file)
+    picked = ccsds.select_events(team, list(events))
+    return [ccsds.covariance_at(team, k, covariance, before_update) for k in picked], team
+
+
+def _write_covariances(
+    file: Path,
+    entries: list[dict[str, Any]],
+    opm_out: Path | None,
+    csv_out: Path | None,
+    xml: bool,
+    name: str,
+    object_id: str,
+    originator: str,
+) -> None:
+    """An OPM per event (numbered when several) and/or one covariance CSV."""
+    from fracas.io import ccsds
+
+    if opm_out is not None:
+        for c in entries:
+            out = opm_out
+            if len(entries) > 1:
+                out = opm_out.with_name(f"{opm_out.stem}_{c['index']:04d}{opm_out.suffix}")
+            ccsds.write_opm(
+                out, c, xml=xml, object_name=name, object_id=object_id, originator=originator, source=file.name
+            )
+            _say(f"written: {out} (event #{c['index']} {c['event']})")
+    if csv_out is not None:
+        ccsds.write_covariance_csv(csv_out, entries)
+        _say(f"written: {csv_out} ({len(entries)} events x {len(entries[0]['labels'])} labels)")
 
 
 @click.command("compare-oem")

@@ -14,7 +14,7 @@ that turns a failed single run into the one-line error users see.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -62,36 +62,30 @@ class Console(Protocol):
 
 
 @dataclass(frozen=True)
-class RunOptions:
-    """What ``fracas run`` (and ``fracas sweep``) was asked, beyond the deck."""
+class ReportOptions:
+    """What ``fracas report`` was asked, beyond the file (and what ``fracas run`` shares)."""
 
-    output: Path | None = None
     plot: Path | None = None
-    stm_file: Path | None = None
-    reference_deck: Path | None = None
-    trajectory_deck: Path | None = None
     as_json: bool = False
     quiet: bool = False
     verbose: bool = False
     velocity_unit: str = "mm/s"
     width: int | None = None
+
+
+@dataclass(frozen=True)
+class RunOptions(ReportOptions):
+    """What ``fracas run`` (and ``fracas sweep``) was asked, beyond the deck."""
+
+    output: Path | None = None
+    stm_file: Path | None = None
+    reference_deck: Path | None = None
+    trajectory_deck: Path | None = None
     workers: int | None = None
     scheduler: str | None = None
     resume: bool = True
     vary: tuple[str, ...] = ()
     debug: bool = False
-
-
-@dataclass(frozen=True)
-class ReportOptions:
-    """What ``fracas report`` was asked, beyond the file."""
-
-    plot: Path | None = None
-    as_json: bool = False
-    quiet: bool = False
-    verbose: bool = False
-    velocity_unit: str = "mm/s"
-    width: int | None = None
 
 
 @dataclass(frozen=True)
@@ -182,7 +176,24 @@ def verbosity(opts: RunOptions | ReportOptions) -> str:
     return "quiet" if opts.quiet else ("verbose" if opts.verbose else "normal")
 
 
-def say_plots(console: Console, written: Iterator[Path] | Sequence[Path]) -> None:
-    """``plot: PATH`` for each plot written."""
-    for w in written:
+def print_results(
+    file: Path,
+    opts: ReportOptions,
+    console: Console,
+    label: str,
+    summary: Callable[[int], str],
+    as_json: dict[str, Any],
+    plot: Callable[[Path], Sequence[Path]],
+) -> None:
+    """``fracas report``'s common shape: the summary at ``opts.width`` (or one JSON object),
+    each plot written (``plot: PATH``), then ``<label> file: FILE``."""
+    import json
+
+    if opts.as_json:
+        console.echo(json.dumps(as_json))
+    else:
+        console.echo(summary(opts.width or 80))
+    for w in plot(opts.plot) if opts.plot is not None else []:
         console.say(f"plot: {w}")
+    if not opts.as_json:
+        console.say(f"{label} file: {file}")

@@ -13,8 +13,9 @@ from fracas.config.trajectory import TrajectoryDeck, load_deck, parse_deck
 from fracas.io.atomic import check_output_path
 from fracas.io.trajectory_file import TrajectoryData
 from fracas.modes.base import Console, Mode, ReportOptions, RunOptions, Stage, default_output, say_to
+from fracas.validate import trajectory_problems
 
-__all__ = ["MODE", "propagate_deck", "run_propagation", "trajectory_problems"]
+__all__ = ["MODE", "propagate_deck", "run_propagation"]
 
 
 def run_propagation(problem: Any) -> tuple[Any, Any]:
@@ -118,13 +119,6 @@ def report(file: Path, opts: ReportOptions, console: Console) -> None:
     if opts.plot is not None:
         console.say(f"plot: {opts.plot}")
     console.say(f"trajectory file: {file}")
-
-
-def trajectory_problems(deck: TrajectoryDeck) -> list[str]:
-    """``fracas validate`` on a trajectory deck (:func:`fracas.validate.trajectory_problems`)."""
-    from fracas.validate import trajectory_problems as problems
-
-    return problems(deck)
 
 
 MODE = Mode(

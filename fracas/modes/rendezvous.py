@@ -14,9 +14,19 @@ from typing import Any
 
 import numpy as np
 
-from fracas.config.rendezvous import parse_rendezvous_deck
+from fracas.config.rendezvous import parse_rendezvous_deck, rendezvous_problems
 from fracas.io.atomic import check_output_path
-from fracas.modes.base import Console, Mode, ReportOptions, RunOptions, Stage, plot_path, results_path, say_to
+from fracas.modes.base import (
+    Console,
+    Mode,
+    ReportOptions,
+    RunOptions,
+    Stage,
+    plot_path,
+    print_results,
+    results_path,
+    say_to,
+)
 
 __all__ = ["MODE", "run_rendezvous"]
 
@@ -139,21 +149,16 @@ def report(file: Path, opts: ReportOptions, console: Console) -> None:
     from fracas.report.rendezvous import plot_rendezvous, summary_text
 
     res = read_rendezvous_results(file)
-    if opts.as_json:
-        console.echo(json.dumps({"file": str(file), "roles": res.roles, "n_runs": res.n_runs}))
-    else:
-        console.echo(summary_text(res, width=opts.width or 80))
-    for w in plot_rendezvous(res, opts.plot) if opts.plot is not None else []:
-        console.say(f"plot: {w}")
-    if not opts.as_json:
-        console.say(f"rendezvous results file: {file}")
-
-
-def rendezvous_problems(deck: Any) -> list[str]:
-    """``fracas validate`` on a rendezvous deck (:func:`fracas.config.rendezvous.rendezvous_problems`)."""
-    from fracas.config.rendezvous import rendezvous_problems as problems
-
-    return problems(deck)
+    summary = {"file": str(file), "roles": res.roles, "n_runs": res.n_runs}
+    print_results(
+        file,
+        opts,
+        console,
+        "rendezvous results",
+        lambda w: summary_text(res, width=w),
+        summary,
+        lambda png: plot_rendezvous(res, png),
+    )
 
 
 MODE = Mode(

@@ -30,6 +30,7 @@ from fracas.modes.base import (
 )
 from fracas.modes.stm import build_stm, load_team, read_reference, reference_failed
 from fracas.status import RunStatus
+from fracas.validate import team_problems
 
 __all__ = ["MODE", "run_team", "team_report"]
 
@@ -261,13 +262,6 @@ def command(deck: Path, opts: RunOptions, console: Console) -> None:
 def report(file: Path, opts: ReportOptions, console: Console) -> None:
     """``fracas report`` on a TEAM results file."""
     team_report(file, opts.plot, opts, console, written=False)
-
-
-def team_problems(deck: Any) -> list[str]:
-    """``fracas validate`` on a TEAM deck (:func:`fracas.validate.team_problems`)."""
-    from fracas.validate import team_problems as problems
-
-    return problems(deck)
 
 
 MODE = Mode(

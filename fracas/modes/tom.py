@@ -16,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from fracas.config.tom import parse_tom_deck
+from fracas.config.tom import parse_tom_deck, tom_problems
 from fracas.io.atomic import check_output_path
-from fracas.modes.base import Console, Mode, ReportOptions, RunOptions, Stage, beside, say_to
+from fracas.modes.base import Console, Mode, ReportOptions, RunOptions, Stage, beside, print_results, say_to
 from fracas.modes.tom_search import first_guess, search_stage, start_problem
 
 __all__ = ["MODE", "run_tom", "tom_outputs"]
@@ -274,21 +274,16 @@ def report(file: Path, opts: ReportOptions, console: Console) -> None:
     from fracas.report.tom import plot_tom, summary_text
 
     res = read_tom_results(file)
-    if opts.as_json:
-        console.echo(json.dumps({"file": str(file), "attrs": {k: str(v) for k, v in res["attrs"].items()}}))
-    else:
-        console.echo(summary_text(res, width=opts.width or 80))
-    for w in plot_tom(res, opts.plot) if opts.plot is not None else []:
-        console.say(f"plot: {w}")
-    if not opts.as_json:
-        console.say(f"TOM results file: {file}")
-
-
-def tom_problems(deck: Any) -> list[str]:
-    """``fracas validate`` on a TOM deck (:func:`fracas.config.tom.tom_problems`)."""
-    from fracas.config.tom import tom_problems as problems
-
-    return problems(deck)
+    summary = {"file": str(file), "attrs": {k: str(v) for k, v in res["attrs"].items()}}
+    print_results(
+        file,
+        opts,
+        console,
+        "TOM results",
+        lambda w: summary_text(res, width=w),
+        summary,
+        lambda png: plot_tom(res, png),
+    )
 
 
 MODE = Mode(

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from fracas.config.tsim import parse_tsim_deck
-from fracas.modes.base import Console, Mode, ReportOptions, RunOptions, plot_path
+from fracas.modes.base import Console, Mode, ReportOptions, RunOptions, plot_path, print_results
 
 __all__ = ["MODE", "run_tsim"]
 
@@ -71,14 +71,16 @@ def report(file: Path, opts: ReportOptions, console: Console) -> None:
     from fracas.report.tsim import plot_tsim, summary_text
 
     res = read_tsim_results(file)
-    if opts.as_json:
-        console.echo(json.dumps({"file": str(file), "counts": res.counts}))
-    else:
-        console.echo(summary_text(res, width=opts.width or 80))
-    for w in plot_tsim(res, opts.plot) if opts.plot is not None else []:
-        console.say(f"plot: {w}")
-    if not opts.as_json:
-        console.say(f"TSIM results file: {file}")
+    summary = {"file": str(file), "counts": res.counts}
+    print_results(
+        file,
+        opts,
+        console,
+        "TSIM results",
+        lambda w: summary_text(res, width=w),
+        summary,
+        lambda png: plot_tsim(res, png),
+    )
 
 
 def tsim_problems(deck: Any) -> list[str]:

@@ -1,4 +1,4 @@
-"""The pipeline and the command line as one chain (fracas/pipeline.py, fracas/cli.py).
+"""The pipeline and the command line as one chain (fracas/modes, fracas/cli).
 
 References: a run of the same study from a deck file (for the in-memory config entry
 point), the results file itself (for ``fracas report``), the deck's own mode line (for

@@ -1,4 +1,4 @@
-"""fracas.validate.validate_path: every bundled deck is valid; broken copies list every
+"""fracas.modes.validate_path: every bundled deck is valid; broken copies list every
 problem, one line each naming the file and the field; no JAX is imported.
 
 Timings (warm process, 2-core development machine): 1-8 ms per bundled deck

@@ -4,7 +4,7 @@ Each mutant (1-3 mutations of one bundled deck: delete a key, rename a key with 
 replace a value with 0, -1, 1e308, "nan", a 400-digit integer, 3,000-deep nesting, a
 100 kB string, a boolean, an empty array or table; duplicate a table; swap two values;
 prepend a BOM; truncate the text) goes through :func:`fracas.modes.parse_any` and
-:func:`fracas.validate.validate_path` in this process (no JAX).  Nothing may escape but a
+:func:`fracas.modes.validate_path` in this process (no JAX).  Nothing may escape but a
 DeckError / ConfigError of one line naming the file; validate_path returns one-line
 problems and never raises; each deck takes < 2 s (a hang detector, not a speed test).
 

@@ -1,4 +1,4 @@
-"""Legacy FRACAS namelist decks <-> TOML decks (fracas/config/namelist.py, ``fracas import-namelist``).
+"""Legacy FRACAS namelist decks <-> TOML decks (fracas/config/namelist/, ``fracas import-namelist``).
 
 References: the bundled TOML decks themselves (a namelist written from a deck must import back
 to the same validated deck, field by field, and propagate to the same final state), the

@@ -2,7 +2,7 @@
 names the file, the field and what was expected; through the command line, exit code 2,
 the message on stderr and no traceback.
 
-References are the deck documentation (fracas/config/team.py docstring) and the
+References are the deck documentation (fracas/config/team/__init__.py docstring) and the
 catalogues: DSN stations (goldstone, madrid, canberra), the bodies of the trajectory's
 force model, N_STATIONS per measurement type.
 """

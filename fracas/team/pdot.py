@@ -24,6 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fracas import _jax  # noqa: F401  (x64 before jax)
+from fracas.constants import body_names_at
 from fracas.filters.covariance import Layout
 from fracas.filters.process_noise import pdot_propagate, white_direction, white_Qc
 from fracas.integrate.propagate import propagate
@@ -84,8 +85,7 @@ def _node_states(study: Study, ref: Reference, all_t: np.ndarray) -> tuple[np.nd
     xs = np.empty((all_t.size, 7))
     xs[order] = np.asarray(traj.x)[1:]
     prim_names = np.empty(all_t.size, dtype=object)
-    bodies = pr.model.bodies
-    prim_names[order] = [bodies[int(i)] for i in np.asarray(traj.primary)[1:]]
+    prim_names[order] = body_names_at(pr.model.bodies, np.asarray(traj.primary)[1:])
     return xs, prim_names
 
 

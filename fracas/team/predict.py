@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fracas.constants import body_names_at
 from fracas.filters import covariance as cov
 from fracas.integrate.propagate import propagate_with_sensitivities
 from fracas.status import RunStatus
@@ -57,8 +58,7 @@ def predict_from(res, k: int, t_to: float):
         phi[0] = np.eye(7)
         theta = np.array(sens.par_step)
         theta[0] = 0.0
-        bodies = pr.model.bodies
-        prim = [bodies[int(i)] for i in np.asarray(traj.primary)]
+        prim = body_names_at(pr.model.bodies, np.asarray(traj.primary))
         sub = Reference(t_out, np.array(traj.x), prim, phi, theta, labels, "prediction")
     phis = augmented_transitions(study, sub)
     if getattr(res, "noise_states", False) and study.propagation == "phi":  # exact GM: carry the noise states

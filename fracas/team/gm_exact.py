@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fracas.filters.gauss_markov import GM_NODES, compose, piece_nodes, piece_noise
-from fracas.team.study import Study
+from fracas.team.study import NOISE_STATE_LABELS, Study
 from fracas.team.transitions import TIME_MERGE_S, noise_partials, reference_through_nodes
 
 __all__ = [
@@ -183,7 +183,7 @@ def augmented_view(study: Study, P0_assumed: np.ndarray, P0_true: np.ndarray) ->
     from fracas.filters.covariance import Layout
 
     L = study.layout
-    labels = ["eta_proportionality", "eta_in_plane_rad", "eta_out_of_plane_rad"]
+    labels = list(NOISE_STATE_LABELS)
     pc = study.P0_control if study.P0_control is not None else study.P0_true
     pc_aug = augment_P0(pc, study.noise_sigma_true if study.gencov else study.noise_sigma_assumed)
     if study.P0_noise_states is not None:  # punched with the noise states

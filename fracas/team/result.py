@@ -24,7 +24,7 @@ from fracas.team.eigen import eigen_summary
 from fracas.team.measure import MeasurementSet
 from fracas.team.predict import predictions
 from fracas.team.reference import Reference
-from fracas.team.study import Study
+from fracas.team.study import NOISE_STATE_LABELS, Study
 
 __all__ = [
     "TeamResult",
@@ -37,7 +37,6 @@ __all__ = [
     "team_product",
 ]
 
-NOISE_STATE_LABELS = ["eta_proportionality", "eta_in_plane_rad", "eta_out_of_plane_rad"]
 NOISE_STATE_UNITS = ["1", "rad", "rad"]
 EIGEN_EVENTS = frozenset({"eigenvector", "thrust_on", "thrust_off", "final"})  # events that print eigenvectors
 

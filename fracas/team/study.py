@@ -20,9 +20,11 @@ from fracas.measurements.stations import Station
 from fracas.params import STATE_LABELS, STATE_UNITS
 from fracas.team.schedule import Schedule
 
-__all__ = ["Study", "TrackingSpec", "GuidanceSpec", "NOISE_COMPONENTS"]
+__all__ = ["Study", "TrackingSpec", "GuidanceSpec", "NOISE_COMPONENTS", "NOISE_STATE_LABELS"]
 
 NOISE_COMPONENTS = ("proportionality", "in_plane", "out_of_plane")  # Gauss-Markov thrust errors, in this order
+#: the labels of the three thrust-error states when exact Gauss-Markov carries them (NOISE_COMPONENTS' order)
+NOISE_STATE_LABELS = ["eta_proportionality", "eta_in_plane_rad", "eta_out_of_plane_rad"]
 
 
 @dataclass(frozen=True)

@@ -33,10 +33,12 @@ import h5py
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+ROOT_FILE = "tree_root.txt"
+TMP_NAME = re.compile(r"/tmp[a-z0-9_]{8}/")
 SKIP = re.compile(r"(^|/)provenance(/|$)")
 #: wall-clock measurements (seconds a stage took, missions per second): they differ between two
 #: runs of the same code, so they are not compared
-TIMING = re.compile(r"(^|[/@])(timing|wall_s|missions_per_s)")
+TIMING = re.compile(r"(^|[/@])(timing|wall_s|missions_per_s)|^wall_s$")
 VERBOSE = "-v" in sys.argv
 
 
@@ -56,6 +58,7 @@ def _mode(deck: Path) -> str:
 def run(out: Path) -> None:
     out = out.resolve()
     out.mkdir(parents=True, exist_ok=True)
+    (out / ROOT_FILE).write_text(str(ROOT), encoding="utf-8")  # paths under it compare as <root>
     for path in sorted((ROOT / "namelists").glob("*.toml")):
         deck, mode = path.stem, _mode(path)
         rel = f"namelists/{path.name}"
@@ -84,7 +87,8 @@ def run(out: Path) -> None:
     # the same small study with PDOT time updates (a deck variant beside the original)
     src = (ROOT / "tests/data/team_small.toml").read_text(encoding="utf-8")
     with tempfile.TemporaryDirectory(dir=ROOT / "tests/data") as tmp:
-        deck = Path(tmp) / "team_small_pdot.toml"
+        deck = Path(tmp) / "compare" / "team_small_pdot.toml"  # the same name in every run
+        deck.parent.mkdir()
         text = src.replace('deck = "team_small_traj.toml"', f'deck = "{ROOT / "tests/data/team_small_traj.toml"}"')
         text = re.sub(r"(?m)^\[punch\][^\[]*", "", text)
         deck.write_text(text + '\n[errcon]\npropagation = "pdot"\n', encoding="utf-8")
@@ -108,14 +112,21 @@ def _items(f: h5py.File) -> dict[str, object]:
     return out
 
 
+def _normal(text: str, folder: Path) -> str:
+    """``text`` with the run's own output folder written as <out>, the tree it ran in as <root>
+    and a temporary folder's random name as <tmp> (paths the files record)."""
+    text = text.replace(str(folder.resolve()), "<out>")
+    root = folder / ROOT_FILE
+    if root.is_file():
+        text = text.replace(root.read_text(encoding="utf-8"), "<root>")
+    return TMP_NAME.sub("/<tmp>/", text)
+
+
 def _text(v, folder: Path) -> np.ndarray:
-    """String values with the run's own output folder written as <out> (the STM file's path)."""
+    """String values with the run's folders normalised (:func:`_normal`)."""
     a = np.asarray(v)
     if a.dtype.kind in "OSU":
-        f = np.vectorize(
-            lambda x: (x.decode() if isinstance(x, bytes) else str(x)).replace(str(folder.resolve()), "<out>"),
-            otypes=[object],
-        )
+        f = np.vectorize(lambda x: _normal(x.decode() if isinstance(x, bytes) else str(x), folder), otypes=[object])
         return f(a) if a.size else a
     return a
 
@@ -175,10 +186,24 @@ def compare_file(a: Path, b: Path, rtol: float, exact: bool = False) -> list[str
     return bad
 
 
+def _without_timings(text: str) -> str:
+    """A CSV table without its wall-clock columns (``wall_s``)."""
+    import csv
+    import io
+
+    rows = list(csv.reader(io.StringIO(text)))
+    if not rows:
+        return text
+    keep = [k for k, name in enumerate(rows[0]) if not TIMING.search(name)]
+    return "\n".join(",".join(r[k] for k in keep if k < len(r)) for r in rows)
+
+
 def compare_text(a: Path, b: Path) -> list[str]:
-    """A written deck or table: the same text once each run's own folder reads <out>."""
-    ta = a.read_text(encoding="utf-8").replace(str(a.parent.resolve()), "<out>")
-    tb = b.read_text(encoding="utf-8").replace(str(b.parent.resolve()), "<out>")
+    """A written deck or table: the same text once each run's folders are normalised
+    (:func:`_normal`) and a table's wall-clock columns are left out."""
+    ta, tb = (_normal(p.read_text(encoding="utf-8"), p.parent) for p in (a, b))
+    if a.suffix == ".csv":
+        ta, tb = _without_timings(ta), _without_timings(tb)
     print(f"{a.name:28s} {len(ta.splitlines()):4d} lines  {'OK' if ta == tb else 'DIFFER'}")
     return [] if ta == tb else [f"{a.name}: text differs"]
 

@@ -6,7 +6,8 @@ Prints one table:
 - modules over 500 lines, and the largest;
 - functions over 80 lines, and the longest (its body, decorators and docstring included);
 - mode dispatchers: functions that branch on two or more mode names (``mode == "tom"``,
-  ``mode in ("team", ...)``) or test a deck against two or more mode deck classes;
+  ``mode in ("team", ...)``) or results-file kinds, or test a deck against two or more mode
+  deck classes;
 - the annotated share: functions whose every parameter (but ``self``/``cls``) and return
   carry an annotation, over all functions;
 - duplicated blocks: the pair count the workplace ``duplicates`` tool reports for the
@@ -23,6 +24,15 @@ import sys
 from pathlib import Path
 
 MODE_NAMES = {"propagate", "team", "sweep", "tom", "tsim", "rendezvous"}
+#: results-file kinds, one a mode (``fracas report`` dispatching on them is a mode dispatcher too)
+RESULT_KINDS = {
+    "fracas-trajectory",
+    "fracas-team-results",
+    "fracas sweep table",
+    "fracas-tom-results",
+    "fracas-tsim-results",
+    "fracas-rendezvous-results",
+}
 DECK_CLASSES = {"TrajectoryDeck", "TeamDeck", "SweepDeck", "TomDeck", "TsimDeck", "RendezvousDeck"}
 
 
@@ -46,7 +56,7 @@ def _mode_names(node: ast.AST) -> set[str]:
         if isinstance(sub, ast.Compare):
             for comp in sub.comparators:
                 for c in ast.walk(comp):
-                    if isinstance(c, ast.Constant) and c.value in MODE_NAMES:
+                    if isinstance(c, ast.Constant) and (c.value in MODE_NAMES or c.value in RESULT_KINDS):
                         names.add(c.value)
     return names
 

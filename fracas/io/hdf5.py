@@ -48,6 +48,7 @@ from fracas.io.hdf5_integrity import (
     ErrorType,
     _opened,
     file_problem,
+    h5_errors,
     one_line,
     open_h5,
     probe_timeout_s,
@@ -58,6 +59,7 @@ from fracas.io.hdf5_integrity import (
 __all__ = [
     "CHECKSUM_ATTR",
     "Checked",
+    "EPOCH_MEANING",
     "ErrorType",
     "HDF5_SIGNATURE",
     "LIBRARIES",
@@ -74,6 +76,7 @@ __all__ = [
     "digest_strings",
     "dtype_name",
     "file_problem",
+    "h5_errors",
     "kind_attr",
     "library_versions",
     "one_line",
@@ -84,10 +87,12 @@ __all__ = [
     "read_provenance",
     "read_str",
     "schema_version",
+    "schema_version_attr",
     "seal",
     "set_attr",
     "verify_file",
     "write",
+    "write_epoch",
     "write_provenance",
     "write_strings",
 ]
@@ -133,6 +138,14 @@ def read_kind(path: str | os.PathLike, error: ErrorType = ResultsFileError, what
         return tag
     with _opened(Path(path), error, what) as f:
         return kind_attr(f)
+
+
+EPOCH_MEANING = "epoch of t = 0, TDB seconds past J2000 (2000-01-01T12:00:00 TDB)"
+
+
+def write_epoch(group: h5py.Group, epoch_et_s: float) -> h5py.Dataset:
+    """Dataset ``epoch_et_s`` (float64, s): the epoch of t = 0, TDB seconds past J2000."""
+    return write(group, "epoch_et_s", np.float64(epoch_et_s), "s", meaning=EPOCH_MEANING)
 
 
 def write_strings(
@@ -263,15 +276,21 @@ def attr_int(obj: h5py.HLObject, key: str, error: Exception | None = None) -> in
     return int(val)
 
 
-def schema_version(f: h5py.File, src: Any, latest: int, error: ErrorType, what: str) -> int:
-    """The root attribute ``schema_version`` of a ``what`` file, an integer from 1 to ``latest``;
-    else ``error`` (one line naming ``src``)."""
+def schema_version_attr(f: h5py.File, src: Any, error: ErrorType) -> int | None:
+    """The root attribute ``schema_version`` as an integer (None if absent); ``error`` (one line
+    naming ``src``) if it is not an integer."""
     raw = f.attrs.get("schema_version")
-    version = attr_int(
+    return attr_int(
         f,
         "schema_version",
         error(f"{src}: attribute schema_version is {type(raw).__name__} ({raw!r}), expected an integer"),
     )
+
+
+def schema_version(f: h5py.File, src: Any, latest: int, error: ErrorType, what: str) -> int:
+    """The root attribute ``schema_version`` of a ``what`` file, an integer from 1 to ``latest``;
+    else ``error`` (one line naming ``src``)."""
+    version = schema_version_attr(f, src, error)
     if version is None or not 1 <= version <= latest:
         raise error(f"{src}: {what} schema_version = {version}, this fracas reads 1 to {latest}")
     return version

@@ -326,9 +326,18 @@ def _opened(p: Path, error: ErrorType, what: str) -> Iterator[h5py.File]:
         f = h5py.File(p, "r")
     except (OSError, ValueError, RuntimeError) as exc:
         raise error(f"{p}: unreadable HDF5 file (damaged or truncated?): {one_line(exc)}") from None
+    with h5_errors(p, error, what), f:
+        yield f
+
+
+@contextlib.contextmanager
+def h5_errors(p: Path, error: ErrorType, what: str) -> Iterator[None]:
+    """``with h5_errors(path, Error, "STM file"):`` -- an error of the HDF5 library or of a
+    missing item while reading an open file (KeyError, OSError, ValueError, TypeError,
+    IndexError, RuntimeError, AttributeError) becomes one line ``error(f"{path}: incomplete
+    {what}: ...")``; a FracasError passes through unchanged."""
     try:
-        with f:
-            yield f
+        yield
     except FracasError:
         raise
     except KeyError as exc:

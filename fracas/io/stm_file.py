@@ -39,6 +39,7 @@ import hashlib
 import os
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -51,6 +52,7 @@ from fracas.io.hdf5 import (
     provenance,
     set_attr,
     write,
+    write_epoch,
     write_provenance,
     write_strings,
 )
@@ -152,18 +154,26 @@ def _write_par_step(g: h5py.Group, data: StmData, n: int, n_p: int, mat_attrs: d
     return ds
 
 
+def _write_state_columns(g: h5py.Group, name: str, values: np.ndarray, units: str, **attrs: Any) -> h5py.Dataset:
+    """A float64 dataset whose columns are the state (col_labels, col_units: x y z vx vy vz m),
+    then ``attrs`` in their order."""
+    return write(
+        g,
+        name,
+        np.asarray(values, np.float64),
+        units,
+        col_labels=list(STATE_LABELS),
+        col_units=list(STATE_UNITS),
+        **attrs,
+    )
+
+
 def _write_stm_group(f: h5py.File, data: StmData, n: int, n_p: int, mat_attrs: dict[str, list[str]]) -> h5py.Dataset:
     """/stm: epoch, times, events, states, primaries and the step matrices; returns par_step, open."""
     g = f.create_group("stm")
     set_attr(g, "state_labels", list(STATE_LABELS))
     set_attr(g, "state_units", list(STATE_UNITS))
-    write(
-        g,
-        "epoch_et_s",
-        np.float64(data.epoch_et_s),
-        "s",
-        meaning="epoch of t = 0, TDB seconds past J2000 (2000-01-01T12:00:00 TDB)",
-    )
+    write_epoch(g, data.epoch_et_s)
     write(
         g,
         "times_s",
@@ -172,23 +182,15 @@ def _write_stm_group(f: h5py.File, data: StmData, n: int, n_p: int, mat_attrs: d
         meaning="times on the file, s from the epoch, non-decreasing",
     )
     write_strings(g, "event_types", data.event_types, meaning="event type(s) at each time ('+' joins several)")
-    write(
-        g,
-        "states",
-        np.asarray(data.states, np.float64),
-        "col_units[j]",
-        col_labels=list(STATE_LABELS),
-        col_units=list(STATE_UNITS),
-        meaning="r km, v km/s, m kg relative to primary[i], ICRF",
+    _write_state_columns(
+        g, "states", data.states, "col_units[j]", meaning="r km, v km/s, m kg relative to primary[i], ICRF"
     )
     write_strings(g, "primary", data.primary, meaning="centre body of states[i]")
-    write(
+    _write_state_columns(
         g,
         "stm_step",
-        np.asarray(data.stm_step, np.float64),
+        data.stm_step,
         "row_units[i]/col_units[j]",
-        col_labels=list(STATE_LABELS),
-        col_units=list(STATE_UNITS),
         **mat_attrs,
         meaning="Phi(t_i, t_{i-1}) = dx(t_i)/dx(t_{i-1}); i = 0: from t = 0 to times_s[0]",
         dims="(time, row, col)",

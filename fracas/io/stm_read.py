@@ -25,6 +25,7 @@ from fracas.io.hdf5 import (
     attr_text,
     digest_array,
     dtype_name,
+    h5_errors,
     one_line,
     read_provenance,
     verify_file,
@@ -246,15 +247,8 @@ def read_stm_file(
     nearest), another epoch.
     """
     src, f = _open(path, verify)
-    try:
-        with f:
-            data = _read_checked(src, f, labels, verify)
-    except StmFileError:
-        raise
-    except KeyError as exc:
-        raise StmFileError(f"{src}: incomplete STM file: {one_line(exc)} is missing") from None
-    except (OSError, ValueError, IndexError, TypeError, RuntimeError, AttributeError) as exc:
-        raise StmFileError(f"{src}: unreadable or incomplete STM file: {type(exc).__name__}: {one_line(exc)}") from None
+    with h5_errors(src, StmFileError, "STM file"), f:
+        data = _read_checked(src, f, labels, verify)
     if epoch_et_s is not None and not abs(float(epoch_et_s) - data.epoch_et_s) <= TIME_TOL_S:
         raise StmFileError(
             f"{src}: stm/epoch_et_s = {data.epoch_et_s!r} s, expected the study's epoch {float(epoch_et_s)!r} s "

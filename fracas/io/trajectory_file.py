@@ -28,14 +28,15 @@ from fracas.errors import StmFileError
 from fracas.io.hdf5 import (
     Checked,
     atomic_h5,
-    attr_int,
     attr_strs,
     attr_text,
     one_line,
     open_h5,
     read_provenance,
+    schema_version_attr,
     set_attr,
     write,
+    write_epoch,
     write_provenance,
 )
 from fracas.params import STATE_LABELS, STATE_UNITS  # noqa: F401  (re-exported)
@@ -95,13 +96,7 @@ def write_trajectory_file(path: str | os.PathLike, data: TrajectoryData) -> Path
 
             g = f.create_group("trajectory")
             g.attrs["epoch_tdb"] = data.epoch_tdb
-            write(
-                g,
-                "epoch_et_s",
-                np.float64(data.epoch_et_s),
-                "s",
-                meaning="epoch of t = 0, TDB seconds past J2000 (2000-01-01T12:00:00 TDB)",
-            )
+            write_epoch(g, data.epoch_et_s)
             write(
                 g,
                 "t_s",
@@ -195,12 +190,7 @@ def read_trajectory_file(path: str | os.PathLike, *, verify: bool = True) -> Tra
                 raise StmFileError(
                     f"{src}: not a fracas trajectory file (format attribute = {fmt!r}, expected {FORMAT!r})"
                 )
-            raw = f.attrs.get("schema_version")
-            version = attr_int(
-                f,
-                "schema_version",
-                StmFileError(f"{src}: attribute schema_version is {type(raw).__name__} ({raw!r}), expected an integer"),
-            )
+            version = schema_version_attr(f, src, StmFileError)
             if version is None or not 1 <= version <= SCHEMA_VERSION:
                 raise StmFileError(f"{src}: schema_version = {version}: this fracas reads 1 to {SCHEMA_VERSION}")
             c = Checked(f, src, StmFileError, verify=verify, require_checksum=version >= 2)

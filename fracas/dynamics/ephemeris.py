@@ -45,7 +45,7 @@ import math
 import os
 from collections.abc import Sequence
 from fractions import Fraction
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -158,7 +158,7 @@ def _jd_to_et(jd: float) -> float:
     return (jd - constants.J2000_JD) * constants.DAY_S
 
 
-def _components(body: str) -> list[tuple[str, Fraction | float]]:
+def _components(body: str) -> list[tuple[str, Fraction | float | np.floating[Any]]]:
     """(series, weight) pairs whose weighted sum is the heliocentric position of ``body``."""
     if body == "sun":
         return []

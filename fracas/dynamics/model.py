@@ -19,7 +19,7 @@ following cos u (flipping at the antinodes, Edelbaum's steering) when ``arc_fram
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -206,7 +206,7 @@ def default_params(model: ForceModel, **overrides: npt.ArrayLike) -> Params:
     cat = [constants.BODIES[b] for b in model.bodies]
     parent = [float(model.bodies.index(b.parent)) if b.parent in model.bodies else -1.0 for b in cat]
     f = np.float64
-    p = {
+    p: dict[str, Any] = {
         "mu": np.array([b.mu_km3_s2 for b in cat], f),
         "j2": np.array([b.j2 for b in cat], f),
         "radius": np.array([b.radius_km for b in cat], f),

@@ -204,24 +204,25 @@ class Pool:
         self.close()
 
 
+def _done(index: int, result: Callable[[], Any], catch: bool) -> Done:
+    """Task ``index``'s :class:`Done` of ``result()``; with ``catch``, the exception it raises
+    is the Done's error instead of passing on."""
+    if not catch:
+        return Done(index, result())
+    try:
+        return Done(index, result())
+    except Exception as exc:  # noqa: BLE001 - a lost worker, a pickling error, the task's failure
+        return Done(index, error=exc)
+
+
 def _called(index: int, fn: Callable[..., Any], args: tuple[Any, ...], catch: bool) -> Done:
     """A task run in this process."""
-    if not catch:
-        return Done(index, fn(*args))
-    try:
-        return Done(index, fn(*args))
-    except Exception as exc:  # noqa: BLE001 - the task's failure, reported with its index
-        return Done(index, error=exc)
+    return _done(index, lambda: fn(*args), catch)
 
 
 def _result(index: int, fut: Any, catch: bool) -> Done:
     """A task run on a Dask worker (its future)."""
-    if not catch:
-        return Done(index, fut.result())
-    try:
-        return Done(index, fut.result())
-    except Exception as exc:  # noqa: BLE001 - a lost worker, a pickling error, the task's failure
-        return Done(index, error=exc)
+    return _done(index, fut.result, catch)
 
 
 def start(

@@ -58,6 +58,22 @@ def _norm(x: Array) -> Array:
     return jnp.sqrt(_dot(x, x))
 
 
+def _t_r_axes(s_hat: Array, pole: Array, shape: tuple[int, ...]) -> tuple[Array, Array]:
+    """T = unit(S x pole) and R = S x T, with a fallback reference (x_hat, else y_hat) when
+    S is (nearly) parallel to the pole; ``shape``: the states' (..., 3)."""
+    sxp = jnp.cross(s_hat, pole)
+    n_sxp = _dot(sxp, sxp)
+    bad = n_sxp < 1e-24
+    alt = jnp.where(
+        (jnp.abs(s_hat[..., 0]) < 0.9)[..., None],
+        jnp.broadcast_to(jnp.array([1.0, 0.0, 0.0]), shape),
+        jnp.broadcast_to(jnp.array([0.0, 1.0, 0.0]), shape),
+    )
+    t_raw = jnp.where(bad[..., None], jnp.cross(s_hat, alt), sxp)
+    t_hat = t_raw / _norm(t_raw)[..., None]
+    return t_hat, jnp.cross(s_hat, t_hat)
+
+
 @jax.jit
 def b_plane(
     r: ArrayLike, v: ArrayLike, mu: ArrayLike, ref_pole: ArrayLike | Sequence[float] = (0.0, 0.0, 1.0)
@@ -96,19 +112,7 @@ def b_plane(
     b_mag = hmag / vinf
     b_vec = b_mag[..., None] * jnp.cross(s_hat, w)
 
-    # T, R with a fallback reference when S is (nearly) parallel to the pole
-    sxp = jnp.cross(s_hat, pole)
-    n_sxp = _dot(sxp, sxp)
-    bad = n_sxp < 1e-24
-    alt = jnp.where(
-        (jnp.abs(s_hat[..., 0]) < 0.9)[..., None],
-        jnp.broadcast_to(jnp.array([1.0, 0.0, 0.0]), r.shape),
-        jnp.broadcast_to(jnp.array([0.0, 1.0, 0.0]), r.shape),
-    )
-    t_raw = jnp.where(bad[..., None], jnp.cross(s_hat, alt), sxp)
-    t_hat = t_raw / _norm(t_raw)[..., None]
-    r_hat = jnp.cross(s_hat, t_hat)
-
+    t_hat, r_hat = _t_r_axes(s_hat, pole, r.shape)
     bt = _dot(b_vec, t_hat)
     br = _dot(b_vec, r_hat)
     theta = jnp.arctan2(br, bt)

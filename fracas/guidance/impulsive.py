@@ -164,8 +164,14 @@ def dv_covariance(gamma: ArrayLike, p_tilde: ArrayLike) -> jax.Array:
     return gamma @ jnp.asarray(p_tilde) @ gamma.T
 
 
-def _pointing_variance(sigma_beta1: ArrayLike, sigma_beta2: ArrayLike) -> Array:
-    return 0.5 * (jnp.square(sigma_beta1) + jnp.square(sigma_beta2))
+def _gates_form(
+    m: Array, trace_m: Array, sigma_p: ArrayLike, sigma_beta1: ArrayLike, sigma_beta2: ArrayLike, sigma_res: ArrayLike
+) -> Array:
+    """σ_p² M + σ̄_β² (tr M · I − M) + σ_res² I, σ̄_β² = (σ_β1² + σ_β2²)/2 (digest (G-6)):
+    Gates's covariance for M = d dᵀ, its average over d for M = E[d dᵀ]."""
+    sb2 = 0.5 * (jnp.square(sigma_beta1) + jnp.square(sigma_beta2))
+    eye = jnp.eye(3)
+    return jnp.square(sigma_p) * m + sb2 * (trace_m * eye - m) + jnp.square(sigma_res) * eye
 
 
 def gates_covariance(
@@ -183,10 +189,7 @@ def gates_covariance(
     σ_res (km/s) as the digest writes it.  Errors of App. 9.1 (report L2722) are the defaults.
     """
     d = jnp.asarray(dv)
-    ddt = jnp.outer(d, d)
-    sb2 = _pointing_variance(sigma_beta1, sigma_beta2)
-    eye = jnp.eye(3)
-    return jnp.square(sigma_p) * ddt + sb2 * (jnp.dot(d, d) * eye - ddt) + jnp.square(sigma_res) * eye
+    return _gates_form(jnp.outer(d, d), jnp.dot(d, d), sigma_p, sigma_beta1, sigma_beta2, sigma_res)
 
 
 def execution_error_covariance(
@@ -208,9 +211,7 @@ def execution_error_covariance(
     """
     d0 = jnp.asarray(dv_nominal)
     mm = jnp.outer(d0, d0) + jnp.asarray(p_dv)
-    sb2 = _pointing_variance(sigma_beta1, sigma_beta2)
-    eye = jnp.eye(3)
-    return jnp.square(sigma_p) * mm + sb2 * (jnp.trace(mm) * eye - mm) + jnp.square(sigma_res) * eye
+    return _gates_form(mm, jnp.trace(mm), sigma_p, sigma_beta1, sigma_beta2, sigma_res)
 
 
 def post_guidance_covariance(

@@ -18,14 +18,14 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from functools import partial
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from fracas import _jax  # noqa: F401
-from fracas.dynamics.model import ForceModel, IntegratorSettings, Params
+from fracas.dynamics.model import ForceModel, Params
 from fracas.dynamics.parameters import get_values, set_values
 from fracas.integrate import encke
 
@@ -80,7 +80,18 @@ def _finish(model, outs, c_final, t_out):
     )
 
 
-def split_model(model: ForceModel):
+#: the traced integrator settings (:func:`split_model`'s ``dyn``, in this order) and their dtypes
+_TRACED_SETTINGS = (
+    ("c_nom", np.float64),
+    ("dt_max_s", np.float64),
+    ("rect_ratio", np.float64),
+    ("eps_t_s", np.float64),
+    ("max_steps", np.int32),
+    ("tolerance", np.float64),
+)
+
+
+def split_model(model: ForceModel) -> tuple[ForceModel, tuple[Any, ...]]:
     """(static model, dynamic integrator settings): c_nom, dt_max, the rectification ratio,
     eps_t, max_steps and the tolerance are traced values, so changing them does not
     recompile; method, formulation and step control stay static."""
@@ -88,39 +99,17 @@ def split_model(model: ForceModel):
 
     # numpy scalars (creating jax scalars here costs ~0.2 ms each per call); traced values
     # (settings batched by propagate_batch) pass through as they are
-    def scalar(v, dtype):
+    def scalar(v: Any, dtype: type) -> Any:
         return v if isinstance(v, jax.core.Tracer) else dtype(v)
 
-    dyn = (
-        scalar(st.c_nom, np.float64),
-        scalar(st.dt_max_s, np.float64),
-        scalar(st.rect_ratio, np.float64),
-        scalar(st.eps_t_s, np.float64),
-        scalar(st.max_steps, np.int32),
-        scalar(st.tolerance, np.float64),
-    )
+    dyn = tuple(scalar(getattr(st, name), dtype) for name, dtype in _TRACED_SETTINGS)
     return dataclasses.replace(model, integrator=st.static_part()), dyn
 
 
-def join_model(static: ForceModel, dyn) -> ForceModel:
+def join_model(static: ForceModel, dyn: Sequence[Any]) -> ForceModel:
     """Inverse of :func:`split_model` inside a trace."""
-    c_nom, dt_max, ratio, eps_t, max_steps, tol = dyn
-    st = static.integrator
-    return dataclasses.replace(
-        static,
-        integrator=IntegratorSettings(
-            c_nom=c_nom,
-            dt_max_s=dt_max,
-            rect_ratio=ratio,
-            eps_t_s=eps_t,
-            max_steps=max_steps,
-            tolerance=tol,
-            method=st.method,
-            formulation=st.formulation,
-            step_control=st.step_control,
-            stage_loop=st.stage_loop,
-        ),
-    )
+    traced = {name: value for (name, _), value in zip(_TRACED_SETTINGS, dyn, strict=True)}
+    return dataclasses.replace(static, integrator=dataclasses.replace(static.integrator, **traced))
 
 
 def propagate(model: ForceModel, params: Params, ephem, epoch_et_s, x0, t_out) -> Trajectory:

@@ -71,6 +71,24 @@ def _nodes(c) -> tuple[np.ndarray, np.ndarray]:
     return node, nodes
 
 
+def _plan(
+    name: str,
+    c: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    e: np.ndarray | None,
+    *,
+    bbar: np.ndarray | None = None,
+    ebar: np.ndarray | None = None,
+    e_aux: np.ndarray | None = None,
+    first_order: bool = False,
+) -> StagePlan:
+    """The :class:`StagePlan` of nodes ``c``, coupling ``a`` and the weights, with the node
+    indices and the distinct nodes of ``c``."""
+    node, nodes = _nodes(c)
+    return StagePlan(name, c, a, node, nodes, b, bbar, e, ebar, e_aux, first_order)
+
+
 def _fold_nystrom(tab: NystromTableau) -> StagePlan:
     s = tab.stages
     root: list[int] = []
@@ -95,20 +113,7 @@ def _fold_nystrom(tab: NystromTableau) -> StagePlan:
 
     a = np.stack([fold(tab.a_bar[i]) for i in keep])
     c = np.array([float(tab.c[i]) for i in keep])
-    node, nodes = _nodes(c)
-    return StagePlan(
-        name=tab.name,
-        c=c,
-        a=a,
-        node=node,
-        nodes=nodes,
-        b=fold(tab.b),
-        bbar=fold(tab.bbar),
-        e=fold(tab.e),
-        ebar=fold(tab.ebar),
-        e_aux=None,
-        first_order=False,
-    )
+    return _plan(tab.name, c, a, fold(tab.b), fold(tab.e), bbar=fold(tab.bbar), ebar=fold(tab.ebar))
 
 
 def _extend_rk(tab: RungeKuttaTableau) -> StagePlan:
@@ -118,20 +123,8 @@ def _extend_rk(tab: RungeKuttaTableau) -> StagePlan:
     a[s, :s] = np.asarray(tab.b, float)
     c = np.concatenate([np.asarray(tab.c, float), [1.0]])
     b = np.concatenate([np.asarray(tab.b, float), [0.0]])
-    node, nodes = _nodes(c)
-    return StagePlan(
-        name=tab.name,
-        c=c,
-        a=a,
-        node=node,
-        nodes=nodes,
-        b=b,
-        bbar=None,
-        e=np.asarray(tab.e, float),
-        ebar=None,
-        e_aux=None if tab.e_aux is None else np.asarray(tab.e_aux, float),
-        first_order=True,
-    )
+    e_aux = None if tab.e_aux is None else np.asarray(tab.e_aux, float)
+    return _plan(tab.name, c, a, b, np.asarray(tab.e, float), e_aux=e_aux, first_order=True)
 
 
 @functools.cache

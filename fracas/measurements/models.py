@@ -36,6 +36,8 @@ unit partial (TRAKM eq. 8 and the closing remark on angle biases), which
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
@@ -76,6 +78,9 @@ __all__ = [
 KINDS = kinds.KINDS
 N_STATIONS = kinds.N_STATIONS
 
+#: a position or velocity argument of the station kinds: a 3-vector (km or km/s), any array-like
+Vec = ArrayLike
+
 
 def _f64(x: ArrayLike) -> Array:
     return jnp.asarray(x, dtype=jnp.float64)
@@ -85,9 +90,7 @@ def _zeros3() -> Array:
     return jnp.zeros(3, dtype=jnp.float64)
 
 
-def _rel(
-    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
-) -> tuple[Array, Array]:
+def _rel(sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st_r: Vec, st_v: Vec) -> tuple[Array, Array]:
     """Station-relative position p and velocity w (sc - earth computed first, so two
     stations share its rounding)."""
     d_r = _f64(sc_r) - _f64(earth_r)
@@ -103,17 +106,13 @@ def _range_rate_terms(p: Array, w: Array) -> tuple[Array, Array, Array]:
 
 
 # --- 2-way range and Doppler (TRAKM eqs. 1-8) --------------------------------------
-def range2(
-    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
-) -> Array:
+def range2(sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st_r: Vec, st_v: Vec) -> Array:
     """2-way range rho = |sc_r - earth_r - st_r| (km) (FRACAS TRAKM, eq. 1 model)."""
     p, _ = _rel(sc_r, sc_v, earth_r, earth_v, st_r, st_v)
     return jnp.linalg.norm(p)
 
 
-def range2_partials(
-    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
-) -> tuple[Array, Array]:
+def range2_partials(sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st_r: Vec, st_v: Vec) -> tuple[Array, Array]:
     """d rho / d(sc r, v) = (u, 0) (TRAKM eq. 1); d rho / d(st r, v) = (-u, 0) (eq. 2)."""
     p, _ = _rel(sc_r, sc_v, earth_r, earth_v, st_r, st_v)
     u = p / jnp.linalg.norm(p)
@@ -121,9 +120,7 @@ def range2_partials(
     return h_sc, -h_sc
 
 
-def doppler2(
-    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
-) -> Array:
+def doppler2(sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st_r: Vec, st_v: Vec) -> Array:
     """2-way Doppler as range rate rho_dot = u . (sc_v - earth_v - st_v) (km/s) (TRAKM)."""
     p, w = _rel(sc_r, sc_v, earth_r, earth_v, st_r, st_v)
     return jnp.dot(p, w) / jnp.linalg.norm(p)
@@ -135,9 +132,7 @@ def _doppler_grad_r(rho: Array, u: Array, w: Array, rdot: Array) -> Array:
     return (w - rdot * u) / rho
 
 
-def doppler2_partials(
-    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
-) -> tuple[Array, Array]:
+def doppler2_partials(sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st_r: Vec, st_v: Vec) -> tuple[Array, Array]:
     """d rho_dot / d(sc r, v) = ((w - rho_dot u)/rho, u) (TRAKM eqs. 3-5, 7); station: minus
     that (eq. 6)."""
     p, w = _rel(sc_r, sc_v, earth_r, earth_v, st_r, st_v)
@@ -147,77 +142,44 @@ def doppler2_partials(
 
 
 # --- 3-way (QVLBI) range and Doppler (TRAKM eqs. 9-10) -----------------------------
-def range3(
-    sc_r: ArrayLike,
-    sc_v: ArrayLike,
-    earth_r: ArrayLike,
-    earth_v: ArrayLike,
-    st1_r: ArrayLike,
-    st1_v: ArrayLike,
-    st2_r: ArrayLike,
-    st2_v: ArrayLike,
-) -> Array:
+def _summed_partials(partials: Callable[..., tuple[Array, Array]], *state: Vec) -> tuple[Array, Array, Array]:
+    """The partials of a 3-way kind, the sum of a 2-way kind over both stations: the two
+    stations' spacecraft partials summed, each station's own (``partials``: the 2-way one;
+    ``state``: the 3-way arguments sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v)."""
+    sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v = state
+    h1, s1 = partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v)
+    h2, s2 = partials(sc_r, sc_v, earth_r, earth_v, st2_r, st2_v)
+    return h1 + h2, s1, s2
+
+
+def range3(sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st1_r: Vec, st1_v: Vec, st2_r: Vec, st2_v: Vec) -> Array:
     """3-way range rho_3 = rho_1 + rho_2 (km) (TRAKM eq. 9; c dt is a separate bias)."""
     return range2(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v) + range2(sc_r, sc_v, earth_r, earth_v, st2_r, st2_v)
 
 
 def range3_partials(
-    sc_r: ArrayLike,
-    sc_v: ArrayLike,
-    earth_r: ArrayLike,
-    earth_v: ArrayLike,
-    st1_r: ArrayLike,
-    st1_v: ArrayLike,
-    st2_r: ArrayLike,
-    st2_v: ArrayLike,
+    sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st1_r: Vec, st1_v: Vec, st2_r: Vec, st2_v: Vec
 ) -> tuple[Array, Array, Array]:
     """Sum of the two stations' 2-way partials (TRAKM text after eq. 10)."""
-    h1, s1 = range2_partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v)
-    h2, s2 = range2_partials(sc_r, sc_v, earth_r, earth_v, st2_r, st2_v)
-    return h1 + h2, s1, s2
+    return _summed_partials(range2_partials, sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v)
 
 
-def doppler3(
-    sc_r: ArrayLike,
-    sc_v: ArrayLike,
-    earth_r: ArrayLike,
-    earth_v: ArrayLike,
-    st1_r: ArrayLike,
-    st1_v: ArrayLike,
-    st2_r: ArrayLike,
-    st2_v: ArrayLike,
-) -> Array:
+def doppler3(sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st1_r: Vec, st1_v: Vec, st2_r: Vec, st2_v: Vec) -> Array:
     """3-way Doppler rho_dot_3 = rho_dot_1 + rho_dot_2 (km/s) (TRAKM eq. 10, rebuilt: the
     scan prints ranges on the right-hand side; c df/f is a separate bias)."""
     return doppler2(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v) + doppler2(sc_r, sc_v, earth_r, earth_v, st2_r, st2_v)
 
 
 def doppler3_partials(
-    sc_r: ArrayLike,
-    sc_v: ArrayLike,
-    earth_r: ArrayLike,
-    earth_v: ArrayLike,
-    st1_r: ArrayLike,
-    st1_v: ArrayLike,
-    st2_r: ArrayLike,
-    st2_v: ArrayLike,
+    sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st1_r: Vec, st1_v: Vec, st2_r: Vec, st2_v: Vec
 ) -> tuple[Array, Array, Array]:
     """Sum of the two stations' 2-way Doppler partials (TRAKM text after eq. 10)."""
-    h1, s1 = doppler2_partials(sc_r, sc_v, earth_r, earth_v, st1_r, st1_v)
-    h2, s2 = doppler2_partials(sc_r, sc_v, earth_r, earth_v, st2_r, st2_v)
-    return h1 + h2, s1, s2
+    return _summed_partials(doppler2_partials, sc_r, sc_v, earth_r, earth_v, st1_r, st1_v, st2_r, st2_v)
 
 
 # --- differenced range and Doppler (TRAKM eqs. 11-16), cancellation-free -----------
 def _diff_terms(
-    sc_r: ArrayLike,
-    sc_v: ArrayLike,
-    earth_r: ArrayLike,
-    earth_v: ArrayLike,
-    st1_r: ArrayLike,
-    st1_v: ArrayLike,
-    st2_r: ArrayLike,
-    st2_v: ArrayLike,
+    sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st1_r: Vec, st1_v: Vec, st2_r: Vec, st2_v: Vec
 ) -> dict[str, Array]:
     """Common terms of the differenced kinds, free of the rho_1 - rho_2 cancellation.
 
@@ -253,14 +215,7 @@ def _diff_terms(
 
 
 def diff_range(
-    sc_r: ArrayLike,
-    sc_v: ArrayLike,
-    earth_r: ArrayLike,
-    earth_v: ArrayLike,
-    st1_r: ArrayLike,
-    st1_v: ArrayLike,
-    st2_r: ArrayLike,
-    st2_v: ArrayLike,
+    sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st1_r: Vec, st1_v: Vec, st2_r: Vec, st2_v: Vec
 ) -> Array:
     """Differenced range rho_1 - rho_2 (km) (TRAKM eq. 11; c dt is a separate bias),
     evaluated as dr^T (p1 + p2) / (rho1 + rho2) (eqs. 14-15 rebuilt): no digits are lost
@@ -269,14 +224,7 @@ def diff_range(
 
 
 def diff_range_partials(
-    sc_r: ArrayLike,
-    sc_v: ArrayLike,
-    earth_r: ArrayLike,
-    earth_v: ArrayLike,
-    st1_r: ArrayLike,
-    st1_v: ArrayLike,
-    st2_r: ArrayLike,
-    st2_v: ArrayLike,
+    sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st1_r: Vec, st1_v: Vec, st2_r: Vec, st2_v: Vec
 ) -> tuple[Array, Array, Array]:
     """d/d sc = (u1 - u2, 0) with u1 - u2 from eq. 16 (TRAKM eq. 13); d/d st1 = (-u1, 0),
     d/d st2 = (u2, 0)."""
@@ -286,14 +234,7 @@ def diff_range_partials(
 
 
 def diff_doppler(
-    sc_r: ArrayLike,
-    sc_v: ArrayLike,
-    earth_r: ArrayLike,
-    earth_v: ArrayLike,
-    st1_r: ArrayLike,
-    st1_v: ArrayLike,
-    st2_r: ArrayLike,
-    st2_v: ArrayLike,
+    sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st1_r: Vec, st1_v: Vec, st2_r: Vec, st2_v: Vec
 ) -> Array:
     """Differenced Doppler rho_dot_1 - rho_dot_2 (km/s) (TRAKM eq. 12; c df/f a separate
     bias), as (u1 - u2).w1 + u2.(st2_v - st1_v) with u1 - u2 from eq. 16."""
@@ -301,14 +242,7 @@ def diff_doppler(
 
 
 def diff_doppler_partials(
-    sc_r: ArrayLike,
-    sc_v: ArrayLike,
-    earth_r: ArrayLike,
-    earth_v: ArrayLike,
-    st1_r: ArrayLike,
-    st1_v: ArrayLike,
-    st2_r: ArrayLike,
-    st2_v: ArrayLike,
+    sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st1_r: Vec, st1_v: Vec, st2_r: Vec, st2_v: Vec
 ) -> tuple[Array, Array, Array]:
     """Partials of :func:`diff_doppler`, the spacecraft ones cancellation-free.
 
@@ -344,9 +278,7 @@ def _topocentric(
     return p, jnp.linalg.norm(p), smag, up, east, north, cphi, up[2]
 
 
-def elevation(
-    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
-) -> Array:
+def elevation(sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st_r: Vec, st_v: Vec) -> Array:
     """Elevation beta (rad) above the station's horizon plane (normal to the geocentric
     station radius, spherical Earth): sin beta = u . up (TRAKM eq. 17/18), evaluated as
     atan2(p.up, |p - (p.up) up|) for full accuracy near the zenith."""
@@ -355,9 +287,7 @@ def elevation(
     return jnp.arctan2(e, jnp.linalg.norm(p - e * up))
 
 
-def elevation_partials(
-    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
-) -> tuple[Array, Array]:
+def elevation_partials(sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st_r: Vec, st_v: Vec) -> tuple[Array, Array]:
     """Analytic partials of :func:`elevation` (TRAKM eqs. 19-20, rebuilt):
 
         d beta / d sc_r = (up - sin b u) / (rho cos b)
@@ -376,9 +306,7 @@ def elevation_partials(
     return h_sc, h_st
 
 
-def azimuth(
-    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
-) -> Array:
+def azimuth(sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st_r: Vec, st_v: Vec) -> Array:
     """Azimuth alpha (rad, in [0, 2 pi)), from local north toward east:
     alpha = atan2(p.east, p.north) (standard topocentric definition; replaces the
     geocentric-ecliptic construction of TRAKM eqs. 21-23)."""
@@ -386,9 +314,7 @@ def azimuth(
     return jnp.mod(jnp.arctan2(jnp.dot(p, east), jnp.dot(p, north)), 2.0 * jnp.pi)
 
 
-def azimuth_partials(
-    sc_r: ArrayLike, sc_v: ArrayLike, earth_r: ArrayLike, earth_v: ArrayLike, st_r: ArrayLike, st_v: ArrayLike
-) -> tuple[Array, Array]:
+def azimuth_partials(sc_r: Vec, sc_v: Vec, earth_r: Vec, earth_v: Vec, st_r: Vec, st_v: Vec) -> tuple[Array, Array]:
     """Analytic partials of :func:`azimuth` (replacing TRAKM eqs. 24-30).
 
     With n = p.north, E = p.east, e = p.up, h^2 = n^2 + E^2 and geocentric latitude phi:

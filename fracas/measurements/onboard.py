@@ -73,6 +73,9 @@ __all__ = [
     "altitude_partials",
 ]
 
+#: a scalar input (a radius or an altitude, km; a flag): a float or a traced 0-d array
+Scalar = float | Array
+
 _N_GEODETIC_ITER = 8  # fixed-point iterations for the geodetic latitude (converged to eps near Earth)
 
 
@@ -193,8 +196,8 @@ def doppler_count_1way_partials(
 
 # --- horizon sensor (UNF c = 3, orbit navigation; digest A.7.2) -------------------------
 def horizon_geometry(
-    r: ArrayLike, axes: ArrayLike, pole: ArrayLike, a_f: float | Array, b_f: float | Array, gamma_h: float | Array
-) -> dict[str, float | Array]:
+    r: ArrayLike, axes: ArrayLike, pole: ArrayLike, a_f: Scalar, b_f: Scalar, gamma_h: Scalar
+) -> dict[str, Scalar]:
     """The horizon routine (UNF, digest A.7.2): tangent point of the line of sight in the
     scan plane (normal i_2 = axes[2], through the body centre) on the limb ellipse.
 
@@ -240,13 +243,7 @@ def horizon_geometry(
 
 
 def horizon_angle(
-    sc_r: ArrayLike,
-    body_r: ArrayLike,
-    axes: ArrayLike,
-    pole: ArrayLike,
-    a_f: float | Array,
-    b_f: float | Array,
-    gamma_h: float | Array,
+    sc_r: ArrayLike, body_r: ArrayLike, axes: ArrayLike, pole: ArrayLike, a_f: Scalar, b_f: Scalar, gamma_h: Scalar
 ) -> Array:
     """UNF horizon measurement psi (c = 3): theta of the spacecraft -> horizon line of sight on
     the horizon-sensor axes (rad; positive above the boresight i_xm toward i_ym)."""
@@ -255,13 +252,7 @@ def horizon_angle(
 
 
 def horizon_angle_partials(
-    sc_r: ArrayLike,
-    body_r: ArrayLike,
-    axes: ArrayLike,
-    pole: ArrayLike,
-    a_f: float | Array,
-    b_f: float | Array,
-    gamma_h: float | Array,
+    sc_r: ArrayLike, body_r: ArrayLike, axes: ArrayLike, pole: ArrayLike, a_f: Scalar, b_f: Scalar, gamma_h: Scalar
 ) -> tuple[Array, Array, Array]:
     """(d psi/d sc (r, v) (6,), d psi/d gamma_H (1/km), rho_H (km)).
 
@@ -284,7 +275,7 @@ def horizon_angle_partials(
 
 
 # --- altitude (UNF c = 4) --------------------------------------------------------------
-def _geodetic(r: Array, pole: Array, a_f: float | Array, b_f: float | Array) -> tuple[Array, Array]:
+def _geodetic(r: Array, pole: Array, a_f: Scalar, b_f: Scalar) -> tuple[Array, Array]:
     """(height h km, unit ellipsoid normal n (3,)) of r (relative to the body centre)."""
     z = jnp.dot(r, pole)
     w = r - z * pole
@@ -300,33 +291,28 @@ def _geodetic(r: Array, pole: Array, a_f: float | Array, b_f: float | Array) -> 
     return h, cp * (w / rho) + sp * pole
 
 
+def _body_geodetic(
+    sc_r: ArrayLike, body_r: ArrayLike, pole: ArrayLike, a_f: Scalar, b_f: Scalar
+) -> tuple[Array, Array, Array]:
+    """(r = sc_r - body_r (3,), its geodetic height h km, the unit ellipsoid normal n (3,))."""
+    r = _f64(sc_r) - _f64(body_r)
+    h, n = _geodetic(r, _f64(pole), a_f, b_f)
+    return r, h, n
+
+
 def altitude(
-    sc_r: ArrayLike,
-    body_r: ArrayLike,
-    pole: ArrayLike,
-    a_f: float | Array,
-    b_f: float | Array,
-    r_ref: float | Array,
-    geodetic: float | Array,
+    sc_r: ArrayLike, body_r: ArrayLike, pole: ArrayLike, a_f: Scalar, b_f: Scalar, r_ref: Scalar, geodetic: Scalar
 ) -> Array:
     """UNF c = 4: altitude (km).  ``geodetic`` false (0.0): spherical h = |r| - r_ref (UNF
     r_ET); true (1.0): geodetic height above the ellipsoid (a_f, b_f, pole; r_ref unused)."""
-    r = _f64(sc_r) - _f64(body_r)
-    h_geo, _ = _geodetic(r, _f64(pole), a_f, b_f)
+    r, h_geo, _ = _body_geodetic(sc_r, body_r, pole, a_f, b_f)
     return jnp.where(geodetic > 0.5, h_geo, jnp.linalg.norm(r) - r_ref)
 
 
 def altitude_partials(
-    sc_r: ArrayLike,
-    body_r: ArrayLike,
-    pole: ArrayLike,
-    a_f: float | Array,
-    b_f: float | Array,
-    r_ref: float | Array,
-    geodetic: float | Array,
+    sc_r: ArrayLike, body_r: ArrayLike, pole: ArrayLike, a_f: Scalar, b_f: Scalar, r_ref: Scalar, geodetic: Scalar
 ) -> Array:
     """(d h/d sc (r, v) (6,)): (i_r, 0) spherical, (n, 0) geodetic (the foot point's normal)."""
-    r = _f64(sc_r) - _f64(body_r)
-    _, n = _geodetic(r, _f64(pole), a_f, b_f)
+    r, _, n = _body_geodetic(sc_r, body_r, pole, a_f, b_f)
     g = jnp.where(geodetic > 0.5, n, _unit(r))
     return jnp.concatenate([g, _zeros3()])

@@ -60,6 +60,13 @@ def _sym(p: np.ndarray) -> np.ndarray:
     return 0.5 * (p + p.T)
 
 
+def _correction_cov(gamma: np.ndarray, p_c: np.ndarray, p_k: np.ndarray, mode: str) -> np.ndarray:
+    """The covariance Γ P̃ Γᵀ of the commanded correction (digest (G-5)), P̃ that of the
+    estimated deviation (:func:`fracas.guidance.impulsive.estimate_deviation_covariance`)."""
+    p_tilde = np.asarray(imp.estimate_deviation_covariance(p_c, p_k, mode))
+    return _sym(gamma @ p_tilde @ gamma.T)
+
+
 def _common(study: Study, g: GuidanceSpec, k: int, body: str, t_s: float, cutoff_s: float) -> dict:
     """The fields every event's outcome shares."""
     return {
@@ -77,20 +84,13 @@ def _common(study: Study, g: GuidanceSpec, k: int, body: str, t_s: float, cutoff
 
 
 def _impulsive(
-    study: Study,
-    span: ReferenceSpan,
-    g: GuidanceSpec,
-    k: int,
-    p_c: np.ndarray,
-    p_k: np.ndarray,
-    summary: bool = True,
+    study: Study, span: ReferenceSpan, g: GuidanceSpec, k: int, p_c: np.ndarray, p_k: np.ndarray, summary: bool = True
 ) -> Outcome:
     nx, mode = study.nx, study.guidance_model
     psi, body = _target_psi(study, span, g, g.time_s)
     gm = imp.guidance_matrix(_law_columns(psi, study), g.weights, g.tolerances)
     gamma = np.asarray(gm.gamma)
-    p_tilde = np.asarray(imp.estimate_deviation_covariance(p_c, p_k, mode))
-    p_dv = _sym(gamma @ p_tilde @ gamma.T)
+    p_dv = _correction_cov(gamma, p_c, p_k, mode)
     sig_ex = np.asarray(
         imp.execution_error_covariance(
             np.zeros(3), p_dv, g.sigma_p, g.sigma_pointing_rad, g.sigma_pointing_rad, g.sigma_res_km_s
@@ -121,13 +121,7 @@ def _impulsive(
 
 
 def _low_thrust(
-    study: Study,
-    span: ReferenceSpan,
-    g: GuidanceSpec,
-    k: int,
-    p_c: np.ndarray,
-    p_k: np.ndarray,
-    summary: bool = True,
+    study: Study, span: ReferenceSpan, g: GuidanceSpec, k: int, p_c: np.ndarray, p_k: np.ndarray, summary: bool = True
 ) -> Outcome:
     from fracas.guidance.low_thrust import (
         control_sensitivity,
@@ -148,8 +142,7 @@ def _low_thrust(
     lam = psi_c @ phi_aug
     gamma_u, rank = weighted_correction_matrix(k_mat, _law_columns(lam, study), g.weights, g.tolerances)
     gamma_u = np.asarray(gamma_u)
-    p_tilde = np.asarray(imp.estimate_deviation_covariance(p_c, p_k, mode))
-    p_u = _sym(gamma_u @ p_tilde @ gamma_u.T)
+    p_u = _correction_cov(gamma_u, p_c, p_k, mode)
     sig_u = np.asarray(execution_covariance(tuple(g.controls), p_u, g.sigma_p))
     s_aug = np.zeros((n, s7.shape[1]))
     s_aug[:nx] = s7[:nx]
@@ -194,13 +187,7 @@ def _low_thrust(
 
 
 def _none(
-    study: Study,
-    span: ReferenceSpan,
-    g: GuidanceSpec,
-    k: int,
-    p_c: np.ndarray,
-    p_k: np.ndarray,
-    summary: bool = True,
+    study: Study, span: ReferenceSpan, g: GuidanceSpec, k: int, p_c: np.ndarray, p_k: np.ndarray, summary: bool = True
 ) -> Outcome:
     psi, body = _target_psi(study, span, g, g.time_s)
     before = _sym(psi @ p_c @ psi.T)

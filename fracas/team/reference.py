@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fracas.integrate.propagate import propagate_with_sensitivities
+from fracas.constants import body_names_at
+from fracas.integrate.propagate import Trajectory, propagate_with_sensitivities
 from fracas.products import TIME_TOL_S, ReferenceTrajectory, chain, time_indices
 from fracas.status import RunStatus
 from fracas.team.study import Study
@@ -98,16 +99,35 @@ def integrate_reference(study: Study) -> Reference:
     t_out = np.concatenate([[0.0], times]) if lead else times
     traj, sens, status, failed_at = run_reference(study.problem, t_out, labels)
     sl = slice(1, None) if lead else slice(None)
-    phi = np.array(sens.stm_step)[sl]
-    theta = np.array(sens.par_step)[sl]
+    phi, theta = _from_first(np.array(sens.stm_step)[sl], np.array(sens.par_step)[sl])
+    prim = body_names_at(study.problem.model.bodies, np.asarray(traj.primary)[sl])
+    return _integrated(times, np.array(traj.x)[sl], prim, phi, theta, labels, status, failed_at, traj)
+
+
+def _from_first(phi: np.ndarray, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Φ, Θ with their first step (from the first time to itself) set to I, 0 (in place)."""
     phi[0] = np.eye(7)
     theta[0] = 0.0
-    bodies = study.problem.model.bodies
-    prim = [bodies[int(i)] if 0 <= int(i) < len(bodies) else "" for i in np.asarray(traj.primary)[sl]]
+    return phi, theta
+
+
+def _integrated(
+    times: np.ndarray,
+    states: np.ndarray,
+    primary: list[str],
+    phi: np.ndarray,
+    theta: np.ndarray,
+    labels: list[str],
+    status: RunStatus,
+    failed_at: float,
+    traj: Trajectory,
+    product: ReferenceTrajectory | None = None,
+) -> Reference:
+    """An in-line :class:`Reference` (source "integrated") of the propagation ``traj``."""
     return Reference(
         times,
-        np.array(traj.x)[sl],
-        prim,
+        states,
+        primary,
         phi,
         theta,
         labels,
@@ -115,6 +135,7 @@ def integrate_reference(study: Study) -> Reference:
         status=status,
         failed_at_s=failed_at,
         integrator_status=int(traj.status),
+        product=product,
     )
 
 
@@ -123,17 +144,14 @@ def _integrate_with_cells(study: Study, times: np.ndarray, t_all: np.ndarray, la
     in-memory ReferenceTrajectory and read back at the schedule times."""
     pr = study.problem
     traj, sens = propagate_with_sensitivities(pr.model, pr.params, pr.ephem, pr.epoch_et_s, pr.x0, t_all, labels)
-    bodies = pr.model.bodies
-    stm_step = np.array(sens.stm_step, np.float64)
-    stm_step[0] = np.eye(7)  # t_all[0] = 0: from the epoch to itself
-    par_step = np.array(sens.par_step, np.float64)
-    par_step[0] = 0.0
+    # t_all[0] = 0: from the epoch to itself
+    stm_step, par_step = _from_first(np.array(sens.stm_step, np.float64), np.array(sens.par_step, np.float64))
     data = ReferenceTrajectory(
         times_s=t_all,
         epoch_et_s=float(pr.epoch_et_s),
         event_types=["grid"] * len(t_all),
         states=np.array(traj.x, np.float64),
-        primary=[bodies[int(i)] if 0 <= int(i) < len(bodies) else "" for i in np.asarray(traj.primary)],
+        primary=body_names_at(pr.model.bodies, np.asarray(traj.primary)),
         stm_step=stm_step,
         par_step=par_step,
         param_labels=list(labels),
@@ -145,9 +163,7 @@ def _integrate_with_cells(study: Study, times: np.ndarray, t_all: np.ndarray, la
         title="in-line reference",
     )
     idx = time_indices(data, times)
-    phi, theta = chain(data, times)
-    phi[0] = np.eye(7)
-    theta[0] = 0.0
+    phi, theta = _from_first(*chain(data, times))
     # a failure counts at the first schedule time whose transition is not finite (an
     # integration that ends after the schedule, on the way to a prediction target, does
     # not fail the reference: the prediction reports it)
@@ -155,18 +171,8 @@ def _integrate_with_cells(study: Study, times: np.ndarray, t_all: np.ndarray, la
     status, failed_at = RunStatus.OK, float("nan")
     if not np.all(finite):
         status, failed_at = RunStatus.OUTSIDE_TRAJECTORY, float(times[int(np.argmax(~finite))])
-    return Reference(
-        times,
-        data.states[idx],
-        [data.primary[int(i)] for i in idx],
-        phi,
-        theta,
-        labels,
-        "integrated",
-        status=status,
-        failed_at_s=failed_at,
-        integrator_status=int(traj.status),
-        product=data,
+    return _integrated(
+        times, data.states[idx], [data.primary[int(i)] for i in idx], phi, theta, labels, status, failed_at, traj, data
     )
 
 
@@ -177,9 +183,7 @@ def reference_from_product(study: Study, data: ReferenceTrajectory, source: str)
     (:func:`fracas.io.stm_file.read_stm_file` with ``labels`` and ``times_s`` checks both).
     """
     times = study.schedule.times_s
-    phi, theta = chain(data, times)
-    phi[0] = np.eye(7)
-    theta[0] = 0.0
+    phi, theta = _from_first(*chain(data, times))
     idx = time_indices(data, times)
     prim = [data.primary[int(i)] for i in idx]
     return Reference(

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from fracas import cli
+from fracas.cli import console as cli_console
 from fracas.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -62,8 +62,8 @@ def _listing(folder: Path) -> dict[str, int]:
 def terminal():
     """The command line as on an 80-column terminal (one-line summaries and errors wrap)."""
     mp = pytest.MonkeyPatch()
-    mp.setattr(cli, "_stdout_is_terminal", lambda: True)
-    mp.setattr(cli, "_stderr_is_terminal", lambda: True)
+    mp.setattr(cli_console, "_stdout_is_terminal", lambda: True)
+    mp.setattr(cli_console, "_stderr_is_terminal", lambda: True)
     mp.setenv("COLUMNS", "80")
     yield mp
     mp.undo()

@@ -27,7 +27,7 @@ from fracas.config.sweep import (
 from fracas.config.team import TeamDeck
 from fracas.config.trajectory import read_deck_text
 from fracas.errors import DeckError
-from fracas.modes import stm
+from fracas.modes import stm as stm_mode
 from fracas.modes.base import default_output
 
 __all__ = [
@@ -162,7 +162,7 @@ def stm_file(cfg: SweepDeck, base: TeamDeck, todo: list[int]) -> str | None:
         return None
     stm_path = cfg.resolve(sw.stm_file)
     if not stm_path.exists() and todo:
-        stm.build_stm(base, stm_path)
+        stm_mode.build_stm(base, stm_path)
     return str(stm_path)
 
 

@@ -26,7 +26,8 @@ from fracas.config.team import TeamDeck, load_team_deck
 from fracas.config.trajectory import deck_error
 from fracas.errors import FracasError
 from fracas.io.atomic import check_output_path
-from fracas.modes import stm, team
+from fracas.modes import stm as stm_mode
+from fracas.modes import team as team_mode
 from fracas.modes.sweep.plan import (
     base_hash,
     batch_groups,
@@ -95,7 +96,7 @@ def run_one(
     try:
         cfg = study_deck(base, fields, values)
         out = None if results is None else Path(results)
-        product, _, _ = team.run_team(cfg, stm=stm, output=out, write_results=out is not None)
+        product, _, _ = team_mode.run_team(cfg, stm=stm, output=out, write_results=out is not None)
         vals, units = outputs_of(product, outputs)
         row.update(vals)
         row.update(status="ok", error="", units=units)
@@ -117,7 +118,7 @@ def _setup_for(gkey: str, study: Any, stm: str | None) -> tuple[Any, Any]:
     if hit is not None:
         return hit
     if stm is not None:
-        ref = stm.reference_from_stm(study, stm)
+        ref = stm_mode.reference_from_stm(study, stm)
     else:
         from fracas.team.reference import integrate_reference
 
@@ -204,7 +205,7 @@ def _build_studies(
             if ref is not None and numbers_only and derivable(ref, deck):
                 st = derive_study(ref, deck)
             else:
-                st = stm.load_team(deck).study
+                st = stm_mode.load_team(deck).study
                 ref = st if ref is None else ref
             built.append((i, v, k, st))
         except Exception:  # noqa: BLE001 - run_one records the failure with its message

@@ -33,7 +33,7 @@ from fracas.config.trajectory import deck_error
 from fracas.config.tsim import TsimDeck, load_tsim_deck, tsim_problems, tsim_team_deck
 from fracas.errors import DeckError
 from fracas.io.atomic import check_output_path
-from fracas.modes import team
+from fracas.modes import team as team_mode
 from fracas.modes.base import default_output
 
 __all__ = ["run_tsim", "checkpoint_path", "plan_key", "fly_blocks", "assemble"]
@@ -140,7 +140,7 @@ def _team_for(cfg: TsimDeck, say, output_dir: Path | None = None):
         return _TEAM_RUNS[key]
     say("running TEAM (guidance model tsim) for the knowledge and guidance matrices")
     case = load_team(team_deck)  # built once: the TEAM run and TSIM's plan share it
-    prod, _, _ = team.run_team(team_deck, write_results=False, on_stage=say, output_dir=output_dir, case=case)
+    prod, _, _ = team_mode.run_team(team_deck, write_results=False, on_stage=say, output_dir=output_dir, case=case)
     if prod is None or not prod.guidance:
         raise DeckError(f"{cfg.source_path}: insim.team_deck: the TEAM run made no guidance events")
     _TEAM_RUNS[key] = (team_deck, case, prod)

@@ -97,10 +97,8 @@ def _write_reference_deck(case: Any, u_final: np.ndarray, ref_path: Path) -> str
 def _team_deck_for(ref_path: Path) -> Any:
     """The TEAM deck (validated, never text) that builds the STM file of a reference deck:
     every thrust-noise column, a 1 h grid besides the trajectory's own times, no analysis."""
-    from pydantic import ValidationError
-
     from fracas.config.team import TeamDeck
-    from fracas.config.trajectory import deck_error, validation_problems
+    from fracas.config.trajectory import validate_sourced
 
     source = str(ref_path.with_suffix(".team.toml"))
     data = {
@@ -109,12 +107,7 @@ def _team_deck_for(ref_path: Path) -> Any:
         "ertraj": {"deck": str(ref_path)},
         "stm": {"grid_hours": 1.0},
     }
-    try:
-        team = TeamDeck.model_validate(data, context={"source": source})
-    except ValidationError as exc:
-        raise deck_error(validation_problems(exc, source, TeamDeck, data)) from None
-    team._source_path = source
-    return team
+    return validate_sourced(data, source, TeamDeck)
 
 
 def tom_stm_file(cfg: Any, ref_path: Path) -> Path:

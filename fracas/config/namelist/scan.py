@@ -15,7 +15,8 @@ from typing import Any
 import f90nml
 
 from fracas.config.namelist.fields import _MODE_LABELS
-from fracas.config.trajectory import MAX_DECK_BYTES, cut
+from fracas.config.trajectory import cut
+from fracas.config.trajectory.reading import read_deck_bytes
 from fracas.errors import DeckError
 
 _GROUP_START = re.compile(r"^\s*[&$]([A-Za-z][A-Za-z0-9_]*)")
@@ -56,16 +57,7 @@ def _read_text(text_or_path: str | Path, source: str | None) -> tuple[str, str]:
     ):
         p = Path(text_or_path)
         src = source or str(p)
-        try:
-            raw = p.read_bytes()
-        except FileNotFoundError:
-            raise DeckError(f"{src}: no such file") from None
-        except IsADirectoryError:
-            raise DeckError(f"{src}: is a directory, expected a FRACAS namelist deck") from None
-        except OSError as exc:
-            raise DeckError(f"{src}: cannot read: {exc.strerror or exc}") from None
-        if len(raw) > MAX_DECK_BYTES:
-            raise DeckError(f"{src}: is {len(raw)} bytes; a deck is at most {MAX_DECK_BYTES} bytes")
+        raw = read_deck_bytes(p, src, "a FRACAS namelist deck")
         try:
             return raw.decode("utf-8"), src
         except UnicodeDecodeError:

@@ -82,6 +82,7 @@ from fracas.config.trajectory.reading import (
     parse_sourced,
     read_deck_text,
     trajectory_hash,
+    validate_sourced,
 )
 from fracas.config.trajectory.reading import _strip_bom as _strip_bom
 from fracas.config.trajectory.sections import (
@@ -145,6 +146,7 @@ __all__ = [
     "raise_problems",
     "SourcedDeck",
     "parse_sourced",
+    "validate_sourced",
     "read_deck_text",
     "trajectory_hash",
     "cut",

@@ -9,7 +9,7 @@ import hashlib
 import json
 import re
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import tomllib
 from pydantic import ValidationError
@@ -25,6 +25,9 @@ MAX_NESTING = 16
 MAX_DECK_BYTES = 16 * 1024 * 1024
 #: TOML integers are 64-bit signed (TOML 1.0); tomllib accepts any size
 _INT_MIN, _INT_MAX = -(2**63), 2**63 - 1
+
+
+_Deck = TypeVar("_Deck", bound=SourcedDeck)
 
 
 def _strip_bom(text: str) -> str:
@@ -138,20 +141,29 @@ def _wrong_kind(data: dict, source: str, cls: type[SourcedDeck]) -> None:
     raise DeckError(f"{source}: this is {what} ({how}), not {_KIND_NAMES[want][0]}: run it with {command}")
 
 
-def parse_sourced(text: str, source: str, cls: type[SourcedDeck]) -> SourcedDeck:
+def parse_sourced(text: str, source: str, cls: type[_Deck]) -> _Deck:
     """Validate TOML text as a ``cls`` deck; any problem -> DeckError('source: field = value: expected').
 
     The DeckError's ``problems`` lists every problem found, one line each."""
     text = _strip_bom(text)
     data = load_toml(text, source)
     _wrong_kind(data, source, cls)
+    return validate_sourced(data, source, cls, text=text)
+
+
+def validate_sourced(
+    data: dict, source: str, cls: type[_Deck], path: str | None = None, text: str | None = None
+) -> _Deck:
+    """Validate a deck's data (a TOML document, or one a program builds) as a ``cls`` deck
+    that remembers ``path`` (default ``source``: relative paths resolve against it) and
+    ``text``; any problem -> DeckError naming ``source``, every problem one line."""
     try:
         deck = cls.model_validate(data, context={"source": source})
     except ValidationError as exc:
         raise deck_error(validation_problems(exc, source, cls, data)) from None
     except RecursionError:  # defensive: load_toml bounds the nesting
         raise DeckError(f"{source}: nested too deeply to validate") from None
-    deck._source_path = source
+    deck._source_path = source if path is None else path
     deck._source_text = text
     return deck
 
@@ -161,20 +173,26 @@ def parse_deck(text: str, source: str = "<deck>") -> TrajectoryDeck:
     return parse_sourced(text, source, TrajectoryDeck)
 
 
-def read_deck_text(path: str | Path) -> str:
-    """The UTF-8 text of a deck file; every failure is a one-line DeckError."""
-    p = Path(path)
-    source = str(path)
+def read_deck_bytes(path: str | Path, source: str, expected: str = "a TOML deck file") -> bytes:
+    """The bytes of a deck file (at most MAX_DECK_BYTES); every failure is a one-line
+    DeckError naming ``source`` (a folder: "is a directory, expected ``expected``")."""
     try:
-        raw = p.read_bytes()
+        raw = Path(path).read_bytes()
     except FileNotFoundError:
         raise DeckError(f"{source}: no such file") from None
     except IsADirectoryError:
-        raise DeckError(f"{source}: is a directory, expected a TOML deck file") from None
+        raise DeckError(f"{source}: is a directory, expected {expected}") from None
     except OSError as exc:
         raise DeckError(f"{source}: cannot read: {exc.strerror or exc}") from None
     if len(raw) > MAX_DECK_BYTES:
         raise DeckError(f"{source}: is {len(raw)} bytes; a deck is at most {MAX_DECK_BYTES} bytes") from None
+    return raw
+
+
+def read_deck_text(path: str | Path) -> str:
+    """The UTF-8 text of a deck file; every failure is a one-line DeckError."""
+    source = str(path)
+    raw = read_deck_bytes(path, source)
     if raw.startswith(b"\xef\xbb\xbf"):
         raw = raw[3:]
     try:

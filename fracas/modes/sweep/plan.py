@@ -302,19 +302,11 @@ def sweep_deck_for(deck_path: str | Path, specs: list[str]) -> SweepDeck:
         raise DeckError(f'{path}: a sweep runs a TEAM deck or a sweep deck (mode = "sweep"), not mode = "{mode.name}"')
     if not specs:
         raise DeckError(f"{path}: a TEAM deck: give the fields to vary with --vary FIELD=VALUES")
-    from pydantic import ValidationError
-
-    from fracas.config.trajectory import deck_error, validation_problems
+    from fracas.config.trajectory import validate_sourced
 
     data = {
         "mode": "sweep",
         "sweep": {"study": path.name, "vary": [parse_vary(s) for s in specs]},
         "output": {"table": f"out/{path.stem}_sweep.h5"},
     }
-    src = f"{path} (--vary)"
-    try:
-        cfg = SweepDeck.model_validate(data)
-    except ValidationError as exc:
-        raise deck_error(validation_problems(exc, src, SweepDeck, data)) from None
-    cfg._source_path = str(path)
-    return cfg
+    return validate_sourced(data, f"{path} (--vary)", SweepDeck, path=str(path))

@@ -30,15 +30,6 @@ def _debug(ctx: click.Context, debug: bool) -> bool:
     return debug or bool((ctx.obj or {}).get("debug"))
 
 
-def _run_mode(deck: Path, opts: object, debug: bool) -> None:
-    """The deck's mode (the registry), its run options checked, then its command."""
-    from fracas.modes import mode_of_deck, modes
-
-    mode = mode_of_deck(deck)
-    mode.check_run_options(deck, opts, modes())
-    mode.command(deck, opts, TerminalConsole())
-
-
 def _host_devices(ctx: click.Context, _param, value: int | None) -> int | None:
     """Choose the XLA host-device count before anything imports jax (the command line's
     default stays one device per core, so batches shard over the machine's cores)."""
@@ -227,11 +218,14 @@ def run(ctx: click.Context, deck: Path, debug: bool, **options: Any) -> None:
     navigation; mode = "sweep": a parametric sweep; a trajectory deck: a propagation).  Every
     file the run writes goes beside -o when it is given (files the deck names keep their
     names); an STM file the deck names stays where it says."""
-    debug = _debug(ctx, debug)
-    with _errors(debug):
+    with _errors(_debug(ctx, debug)):
+        from fracas.modes import mode_of_deck, modes
         from fracas.modes.base import RunOptions
 
-        _run_mode(deck, RunOptions(debug=debug, **options), debug)
+        opts = RunOptions(**options)
+        mode = mode_of_deck(deck)  # the registry: the deck's mode, its options checked, its command
+        mode.check_run_options(deck, opts, modes())
+        mode.command(deck, opts, TerminalConsole())
 
 
 @main.command()

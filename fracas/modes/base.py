@@ -85,7 +85,6 @@ class RunOptions(ReportOptions):
     scheduler: str | None = None
     resume: bool = True
     vary: tuple[str, ...] = ()
-    debug: bool = False
 
 
 @dataclass(frozen=True)

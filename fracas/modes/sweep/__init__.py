@@ -13,18 +13,12 @@ from typing import Any
 from fracas.config.sweep import parse_sweep_deck
 from fracas.config.trajectory import cut
 from fracas.modes.base import Console, Mode, ReportOptions, RunOptions
+from fracas.modes.sweep.run import sweep_main
 
 __all__ = ["MODE", "SWEEP_FAILED_EXIT", "sweep_problems"]
 
 #: exit status of a sweep whose table is written but some studies failed
 SWEEP_FAILED_EXIT = 3
-
-
-def run_sweep(*args: Any, **kw: Any) -> Any:
-    """The sweep orchestrator (:func:`fracas.modes.sweep.run.sweep_main`)."""
-    from fracas.modes.sweep.run import sweep_main
-
-    return sweep_main(*args, **kw)
 
 
 def command(deck: Path, opts: RunOptions, console: Console) -> None:
@@ -37,7 +31,7 @@ def command(deck: Path, opts: RunOptions, console: Console) -> None:
             stage.count(done, total)
 
         stage("preparing the sweep (the first study compiles)")
-        table, summary, failed = run_sweep(
+        table, summary, failed = sweep_main(
             deck, list(opts.vary), opts.workers, opts.scheduler, opts.resume, opts.output, progress=progress
         )
     console.echo(summary)
@@ -137,7 +131,7 @@ MODE = Mode(
     noun="sweep",
     summary="a TEAM study run with fields varied (parametric sweep table)",
     parse=parse_sweep_deck,
-    run=run_sweep,
+    run=sweep_main,
     command=command,
     results_kinds=("fracas sweep table",),
     report=report,

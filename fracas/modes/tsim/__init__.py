@@ -11,20 +11,12 @@ from typing import Any
 
 from fracas.config.tsim import parse_tsim_deck
 from fracas.modes.base import Console, Mode, ReportOptions, RunOptions, plot_path, print_results
+from fracas.modes.tsim.run import missions_per_second, run_tsim
 
 __all__ = ["MODE", "run_tsim"]
 
 
-def run_tsim(*args: Any, **kw: Any) -> Any:
-    """The TSIM orchestrator (:func:`fracas.modes.tsim.run.run_tsim`)."""
-    from fracas.modes.tsim.run import run_tsim as run
-
-    return run(*args, **kw)
-
-
 def _json_summary(product: Any, path: Path, written: list[Path]) -> str:
-    from fracas.modes.tsim.run import missions_per_second
-
     return json.dumps(
         {
             "results": str(path),
@@ -40,7 +32,6 @@ def command(deck: Path, opts: RunOptions, console: Console) -> None:
     """``fracas run`` on a TSIM deck: stages, a progress bar over the missions, the summary."""
     from fracas.config.tsim import load_tsim_deck
     from fracas.io.atomic import check_output_path
-    from fracas.modes.tsim.run import missions_per_second
     from fracas.report.tsim import plot_tsim, summary_text
 
     cfg = load_tsim_deck(deck)

@@ -28,6 +28,7 @@ from pathlib import Path
 from fracas.build.trajectory import model_bodies
 from fracas.config.limits import team_size_problems
 from fracas.config.team import TeamDeck
+from fracas.config.team.span import team_span_problems
 from fracas.config.trajectory import (
     BACKWARD_TEAM_PROBLEM,
     TrajectoryDeck,
@@ -227,7 +228,11 @@ def _reference_deck(deck: TeamDeck, src: str) -> tuple[TrajectoryDeck | None, li
 
 def _against_trajectory(deck: TeamDeck, tdeck: TrajectoryDeck, src: str) -> list[str | None]:
     """Labels, sizes, guidance and event times checked against the trajectory deck."""
-    out: list[str | None] = [*trajectory_problems(tdeck), *team_size_problems(deck, tdeck)]
+    out: list[str | None] = [
+        *trajectory_problems(tdeck),
+        *team_span_problems(deck, tdeck),
+        *team_size_problems(deck, tdeck),
+    ]
     model = _model(tdeck)
     stations = set(_BUILTIN_STATIONS) | {s.name for s in deck.station}
     for k, p in enumerate(deck.parameter):

@@ -195,6 +195,7 @@ def _force_model(deck: TrajectoryDeck, bodies: tuple[str, ...]) -> ForceModel:
         n_arcs=len(deck.thrust_arc),
         steering=any(a.steered for a in deck.thrust_arc),
         n_impulses=len(deck.impulse),
+        yaw_switch=any(a.frame == "velocity_yaw_switch" for a in deck.thrust_arc),
         integrator=integrator_settings(ig, bool(deck.thrust_arc)),
         stop=StopCondition(
             kind=deck.stop.condition,

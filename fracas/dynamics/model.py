@@ -119,7 +119,12 @@ class ForceModel:
     power: 'solar' (P = P0 (1 AU / r_sun)^2) or 'nuclear' (P = P0 exp(-t/tau));
     change_primary_at_soi: switch the primary when entering/leaving a sphere of influence;
     steering: the arcs' pointing follows their Legendre laws (``Params.arc_alpha_p1`` ...), so
-    the angles are evaluated at every stage instead of once per step.
+    the angles are evaluated at every stage instead of once per step;
+    yaw_switch: some arc may use ``velocity_yaw_switch`` pointing (``arc_frame`` 2): the sign
+    of cos u is then carried by the loop (``Carry.yaw_sign``, held over each step) and its
+    changes are located as events, where the state transition matrix takes its saltation
+    jump (:mod:`fracas.integrate.events`).  Without it (a model built by hand with frame 2
+    but no flag) the sign is taken from the state at every evaluation, unlocated.
     """
 
     bodies: tuple[str, ...] = ("earth",)
@@ -135,6 +140,7 @@ class ForceModel:
     n_arcs: int = 0
     steering: bool = False  # pointing varies within an arc (Params.arc_alpha_p1 ...): angles per evaluation
     n_impulses: int = 0
+    yaw_switch: bool = False
     integrator: IntegratorSettings = field(default_factory=IntegratorSettings)
     stop: StopCondition = field(default_factory=StopCondition)
 

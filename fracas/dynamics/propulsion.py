@@ -68,8 +68,26 @@ def angles_to_unit(alpha: Array, beta: Array) -> Array:
     return jnp.stack([cb * jnp.cos(alpha), cb * jnp.sin(alpha), jnp.sin(beta)])
 
 
+def node_dot_r(r: Array, v: Array) -> Array:
+    """(z x h) . r = h_x r_y - h_y r_x (km^3/s), h = r x v: the ascending-node vector dotted
+    with the position, |h| |r| sin(i) cos(u); its sign is that of cos u (module docstring)."""
+    h = jnp.cross(r, v)
+    return h[0] * r[1] - h[1] * r[0]
+
+
+def yaw_sign_of(r: Array, v: Array) -> Array:
+    """sign(cos u) as +-1.0 (+1 on the boundary), the yaw switch's instantaneous sign."""
+    return jnp.where(node_dot_r(r, v) >= 0.0, 1.0, -1.0)
+
+
 def thrust_direction(
-    r: Array, v: Array, alpha: Array, beta: Array, frame: Array, u_angles: Array | None = None
+    r: Array,
+    v: Array,
+    alpha: Array,
+    beta: Array,
+    frame: Array,
+    u_angles: Array | None = None,
+    yaw_sign: Array | None = None,
 ) -> Array:
     """Unit thrust vector in the inertial frame.
 
@@ -77,11 +95,16 @@ def thrust_direction(
     pointing, 2 velocity frame with the out-of-plane sign switched at the antinodes (module
     docstring).  ``u_angles``: ``angles_to_unit(alpha, beta)`` when already known (the
     integrator computes it once per step, so its stages do no trigonometry); the yaw switch
-    flips its third component (sin beta is odd, cos beta even)."""
+    flips its third component (sin beta is odd, cos beta even).  ``yaw_sign``: the sign of
+    cos u held by the propagation loop (``ForceModel.yaw_switch``: the flip is a located
+    event, so the dynamics are smooth within a step); None takes it from (r, v)."""
     inertial = (frame > 0.5) & (frame < 1.5)
     switch = frame > 1.5
     h = jnp.cross(r, v)
-    sign_cos_u = jnp.where(h[0] * r[1] - h[1] * r[0] >= 0.0, 1.0, -1.0)
+    if yaw_sign is None:
+        sign_cos_u = jnp.where(h[0] * r[1] - h[1] * r[0] >= 0.0, 1.0, -1.0)
+    else:
+        sign_cos_u = yaw_sign
     u_fixed = angles_to_unit(alpha, beta) if u_angles is None else u_angles
     u_z = jnp.where(switch, sign_cos_u, 1.0) * u_fixed[2]
     x, y, z = _frame_axes(r, v, h)

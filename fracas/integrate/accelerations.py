@@ -71,6 +71,9 @@ class StepControls(NamedTuple):
     # the active arc's pointing law (``ForceModel.steering``; None otherwise): (8,) = arc centre
     # (s), 2 / arc duration (1/s), then the Legendre P1..P3 coefficients of alpha and of beta (rad)
     law: jax.Array | None = None
+    # the sign of cos u held over the step (``ForceModel.yaw_switch``: set by the loop from
+    # ``Carry.yaw_sign``; None: taken from the state at each evaluation)
+    yaw_sign: jax.Array | None = None
 
 
 def step_controls(model: ForceModel, params: Params, t_mid: ArrayLike) -> StepControls:
@@ -164,9 +167,11 @@ def perturbation(
         tmag = ctl.thrust_factor * propulsion.thrust_magnitude(p_kw, params.efficiency, params.exhaust_velocity_km_s)
         if ctl.law is not None:
             alpha, beta = steered_angles(ctl, t)
-            u = propulsion.thrust_direction(r, v, alpha, beta, ctl.inertial)
+            u = propulsion.thrust_direction(r, v, alpha, beta, ctl.inertial, yaw_sign=ctl.yaw_sign)
         else:
-            u = propulsion.thrust_direction(r, v, ctl.alpha, ctl.beta, ctl.inertial, ctl.u_angles)
+            u = propulsion.thrust_direction(
+                r, v, ctl.alpha, ctl.beta, ctl.inertial, ctl.u_angles, yaw_sign=ctl.yaw_sign
+            )
         force = force + tmag * u
         mdot = -tmag / params.exhaust_velocity_km_s
     return a, force, mdot

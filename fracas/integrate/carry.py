@@ -52,6 +52,12 @@ class Carry(NamedTuple):
     h_next: jax.Array  # s, step size the controller proposes next (magnitude; tolerance control)
     n_reject: jax.Array  # int32: steps rejected by the error control
     phi: jax.Array  # (7, 7 + np) explicit variational sensitivities, or (0,) when not integrated
+    # the yaw switch (``ForceModel.yaw_switch``; +1.0, 0, nan otherwise): the sign of cos u the
+    # thrust uses, held over steps and flipped at each located antinode; flips located so
+    # far; the time (s) of the last one
+    yaw_sign: jax.Array = 1.0  # type: ignore[assignment]
+    n_flips: jax.Array = 0  # type: ignore[assignment]
+    t_flip: jax.Array = float("nan")  # type: ignore[assignment]
 
 
 def _break_candidates(params: Params) -> jax.Array:
@@ -140,7 +146,8 @@ def init_carry(
     if model.stop.kind == STOP_RADIUS:
         rb = r + pos[model.primary] - pos[model.stop.body]
         radius_sign = jnp.where(jnp.linalg.norm(rb) >= model.stop.radius_km, 1.0, -1.0)
-    g = event_functions(model, params, r, v, primary, pos, vel, radius_sign)
+    yaw_sign = propulsion.yaw_sign_of(r, v) if model.yaw_switch else jnp.ones(())
+    g = event_functions(model, params, r, v, primary, pos, vel, radius_sign, yaw_sign)
     z3 = jnp.zeros(3)
     zi = jnp.zeros((), jnp.int32)
     c = Carry(
@@ -164,6 +171,9 @@ def init_carry(
         h_next=_initial_step(model, params, r, v, primary),
         n_reject=zi,
         phi=jnp.zeros((0,)),
+        yaw_sign=jax.lax.stop_gradient(yaw_sign),
+        n_flips=zi,
+        t_flip=jnp.asarray(jnp.nan),
     )
     if model.n_impulses:
         # impulses exactly at the start time are applied before the first step

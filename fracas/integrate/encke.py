@@ -39,7 +39,7 @@ import jax
 import jax.numpy as jnp
 
 from fracas import _jax  # noqa: F401
-from fracas.dynamics import forces
+from fracas.dynamics import forces, propulsion
 from fracas.dynamics.kepler import kepler_fg, predict_universal_anomaly
 from fracas.dynamics.model import STOP_TIME, ForceModel, Params
 from fracas.integrate import highorder
@@ -63,7 +63,7 @@ from fracas.integrate.carry import (
     init_carry,
     state_of,
 )
-from fracas.integrate.events import _INACTIVE, _n_events, event_functions
+from fracas.integrate.events import _INACTIVE, _n_events, event_functions, yaw_event_function, yaw_event_index
 from fracas.status import RunStatus
 
 if TYPE_CHECKING:
@@ -98,6 +98,11 @@ STATUS_OK = int(RunStatus.OK)  # reached the final time
 STATUS_STOPPED = int(RunStatus.STOPPED)  # the stop condition was met (located)
 STATUS_MAX_STEPS = int(RunStatus.MAX_STEPS)  # max_steps reached
 STATUS_NONFINITE = int(RunStatus.NONFINITE)  # the state became NaN/inf
+
+
+def _held(model: ForceModel, ctl: StepControls, c: Carry) -> StepControls:
+    """``ctl`` with the carry's held yaw sign (``ForceModel.yaw_switch``; unchanged otherwise)."""
+    return ctl._replace(yaw_sign=c.yaw_sign) if model.yaw_switch else ctl
 
 
 _encke_accel = forces.encke_deviation_accel  # Doc. 4 eq. 4.1-3 (kept under its old name)
@@ -225,7 +230,7 @@ def _take_step(seg: _Segment, c: Carry, dt: jax.Array) -> tuple[Carry, tuple[jax
     """(state after the step and its impulses, body states at its end, error ratio)."""
     model, params = seg.model, seg.params
     st = model.integrator
-    ctl = step_controls(model, params, c.t + 0.5 * dt)
+    ctl = _held(model, step_controls(model, params, c.t + 0.5 * dt), c)
     if seg.faithful:
         (t1, rc1, vc1, d1, n1, m1), body4 = _nystrom_step(model, params, seg.ephem, seg.epoch_et, c, dt, ctl)
         err = jnp.zeros(())
@@ -301,11 +306,11 @@ def _newton_dt(seg: _Segment, p: jax.Array, k_ev: jax.Array, c: Carry) -> jax.Ar
     r = c.rc + c.delta
     v = c.vc + c.nu
     pos, _ = body_states(model, params, ephem, epoch_et + c.t)
-    ctl0 = step_controls(model, params, c.t)
+    ctl0 = _held(model, step_controls(model, params, c.t), c)
 
     def g_of(tt, rr, vv):
         ps, vs = body_states(model, params, ephem, epoch_et + tt)
-        return event_functions(model, params, rr, vv, p, ps, vs, seg.radius_sign)[k_ev]
+        return event_functions(model, params, rr, vv, p, ps, vs, seg.radius_sign, c.yaw_sign)[k_ev]
 
     acc = total_acceleration(model, params, c.t, r, v, c.m, p, pos, ctl0)
     g_val, g_dot = jax.jvp(g_of, (c.t, r, v), (jnp.ones(()), v, acc))
@@ -349,7 +354,7 @@ def _note_crossings(
     pos4, vel4 = body4
     r1 = new.rc + new.delta
     v1 = new.vc + new.nu
-    g_new = event_functions(seg.model, seg.params, r1, v1, p, pos4, vel4, seg.radius_sign)
+    g_new = event_functions(seg.model, seg.params, r1, v1, p, pos4, vel4, seg.radius_sign, c.yaw_sign)
     g_new = jnp.where(accepted, g_new, c.g_prev)
     # a crossing in this (normal, accepted) step starts the location of the earliest event
     crossed = (c.g_prev > 0.0) & (g_new <= 0.0) & (~locating) & accepted
@@ -370,8 +375,57 @@ def _switch_at_event(seg: _Segment, p: jax.Array, c: Carry, new: Carry) -> Carry
     parent = params.parent[jnp.maximum(b, 0)].astype(jnp.int32)
     new_p = jnp.where(is_exit, parent, b)
     switched = _switch_primary(model, params, c, new_p, pos, vel)
-    g_sw = event_functions(model, params, switched.rc, switched.vc, switched.primary, pos, vel, seg.radius_sign)
+    if model.yaw_switch:  # cos u about the new primary
+        switched = switched._replace(yaw_sign=propulsion.yaw_sign_of(switched.rc, switched.vc))
+    g_sw = event_functions(
+        model, params, switched.rc, switched.vc, switched.primary, pos, vel, seg.radius_sign, switched.yaw_sign
+    )
     return switched._replace(g_prev=g_sw, locating=jnp.asarray(-1, jnp.int32))
+
+
+def _flip_yaw(seg: _Segment, c: Carry, k_yaw: int) -> Carry:
+    """The carry at a located yaw flip: the held sign reversed, the flip counted, its event
+    function restarted on the new side, and (explicit variational equations) the STM and
+    parameter matrix multiplied by the saltation matrix :func:`_saltation`."""
+    r, v = c.rc + c.delta, c.vc + c.nu
+    new_sign = -c.yaw_sign
+    if seg.var_labels is not None:
+        c = c._replace(phi=_saltation(seg, c, new_sign) @ c.phi)
+    g = c.g_prev.at[k_yaw].set(yaw_event_function(r, v, new_sign))
+    return c._replace(
+        yaw_sign=new_sign, n_flips=c.n_flips + 1, t_flip=c.t, g_prev=g, locating=jnp.asarray(-1, jnp.int32)
+    )
+
+
+def _saltation(seg: _Segment, c: Carry, new_sign: jax.Array) -> jax.Array:
+    """The saltation matrix (7, 7) of a yaw flip at the carry's state x = (r, v, m):
+
+        S = I + (f+ - f-) g_x^T / (g_x . f-)
+
+    f-, f+ = xdot with the old and the new sign of the out-of-plane thrust, g the flip's event
+    function (:func:`fracas.integrate.events.yaw_event_function`; no explicit time
+    dependence).  A perturbation dx moves the flip by dt = -g_x . dx / (g_x . f-), and over
+    dt the state follows f- instead of f+; so Phi(t+) = S Phi(t-), and every column of the
+    parameter matrix alike (the flip's surface does not depend on the parameters)
+    (Aizerman & Gantmacher, Q. J. Mech. Appl. Math. 11, 1958; Mueller, Chaos Solitons
+    Fractals 5, 1995).  Zero jump (S = I) when no switching arc is on."""
+    model, params = seg.model, seg.params
+    r, v, m = c.rc + c.delta, c.vc + c.nu, c.m
+    pos, _ = body_states(model, params, seg.ephem, seg.epoch_et + c.t)
+    ctl = step_controls(model, params, c.t)
+
+    def xdot(sign):
+        cc = ctl._replace(yaw_sign=sign)
+        a_free, force, mdot = perturbation(model, params, c.t, r, v, c.primary, pos, cc)
+        acc = forces.point_mass_accel(r, params.mu[c.primary]) + a_free + force / m
+        return jnp.concatenate([v, acc, jnp.reshape(mdot, (1,))])
+
+    f_minus, f_plus = xdot(c.yaw_sign), xdot(new_sign)
+    g_r, g_v = jax.grad(lambda rr, vv: yaw_event_function(rr, vv, c.yaw_sign), argnums=(0, 1))(r, v)
+    g_x = jnp.concatenate([g_r, g_v, jnp.zeros(1)])
+    g_dot = jnp.sum(g_x * f_minus)
+    g_dot = jnp.where(g_dot == 0.0, 1e-300, g_dot)
+    return jnp.eye(7) + (f_plus - f_minus)[:, None] * (g_x / g_dot)[None, :]
 
 
 def _body_events(seg: _Segment, c: Carry) -> Carry:
@@ -389,9 +443,13 @@ def _body_events(seg: _Segment, c: Carry) -> Carry:
     stop_now = located & (c.locating == 0)
     new = jax.tree_util.tree_map(lambda a, b: jnp.where(located, a, b), c, new)
     new = new._replace(n_steps=c.n_steps + 1, n_reject=jnp.where(located, c.n_reject, new.n_reject))
+    k_yaw = yaw_event_index(seg.model)
     if seg.model.change_primary_at_soi:
-        do_switch = located & (c.locating > 0)
+        do_switch = located & (c.locating > 0) & (c.locating != k_yaw)
         new = jax.lax.cond(do_switch, lambda c, new: _switch_at_event(seg, p, c, new), lambda c, new: new, c, new)
+    if seg.model.yaw_switch:
+        do_flip = located & (c.locating == k_yaw)
+        new = jax.lax.cond(do_flip, lambda new: _flip_yaw(seg, new, k_yaw), lambda new: new, new)
     new = _check_finite(c, new, stop_now)
     return new._replace(locating=jnp.where(stop_now, -1, new.locating))
 
@@ -420,7 +478,7 @@ def advance(
         arrived = (jnp.abs(t_end - c.t) < eps_t) & (c.locating < 0)
         return (~c.done) & (~arrived) & (c.n_steps < st.max_steps)
 
-    has_events = model.stop.kind != STOP_TIME or model.change_primary_at_soi
+    has_events = model.stop.kind != STOP_TIME or model.change_primary_at_soi or model.yaw_switch
 
     faithful = st.method == "rkn4" and st.formulation == "encke"
     if var_labels is not None and not highorder.variational_supported(model, var_labels):

@@ -432,7 +432,7 @@ def _variational_rk(model, params, nd, plan, c, dt, ctl, tol, perturbation, step
 
     def f(i, xx, pp):
         prm = params_of(pp) if n_p else params
-        cc = step_controls(model, prm, t_mid) if (model.thrust and n_p) else ctl
+        cc = step_controls(model, prm, t_mid)._replace(yaw_sign=ctl.yaw_sign) if (model.thrust and n_p) else ctl
         pos = None
         if n_p and model.conic_bodies:  # the DE421 table does not depend on parameters
             pos = nd.body_states(model, prm, nd.ephem, nd.epoch_et + nd.t_of(i))[0]

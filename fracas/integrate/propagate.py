@@ -43,6 +43,10 @@ class Trajectory(NamedTuple):
     n_steps: jax.Array
     n_rect: jax.Array
     n_reject: jax.Array = 0  # steps rejected by the error control (tolerance step control)
+    # yaw switch (``ForceModel.yaw_switch``; :func:`propagate` only): flips located up to each
+    # output time (n,), and the time (s) of the last of them (n,) (NaN before the first)
+    n_flips: jax.Array = 0
+    t_flip: jax.Array = float("nan")
 
 
 class Sensitivities(NamedTuple):
@@ -61,7 +65,7 @@ def _segment(model, params, ephem, epoch_et, carry, x, t_end, radius_sign):
     return encke.state_of(c), c
 
 
-def _finish(model, outs, c_final, t_out):
+def _finish(model, outs, c_final, t_out, flips=(0, float("nan"))):
     xs, ts, prim, valid = outs
     nan = jnp.nan
     xs = jnp.where(valid[:, None], xs, nan)
@@ -77,6 +81,8 @@ def _finish(model, outs, c_final, t_out):
         n_steps=c_final.n_steps,
         n_rect=c_final.n_rect,
         n_reject=c_final.n_reject,
+        n_flips=flips[0],
+        t_flip=flips[1],
     )
 
 
@@ -134,10 +140,10 @@ def _propagate(static: ForceModel, dyn, params: Params, ephem, epoch_et_s, x0, t
         x1, c1 = _segment(model, params, ephem, epoch_et_s, jax.lax.stop_gradient(c), x, t_end, rs)
         valid = ~c1.done | (c1.status == encke.STATUS_OK)
         valid = valid & (jnp.abs(c1.t - t_end) < model.integrator.eps_t_s)
-        return c1, (x1, c1.t, c1.primary, valid)
+        return c1, (x1, c1.t, c1.primary, valid, c1.n_flips, c1.t_flip)
 
     c_final, outs = jax.lax.scan(step, c0, t_out)
-    return _finish(model, outs, c_final, t_out)
+    return _finish(model, outs[:4], c_final, t_out, outs[4:])
 
 
 def propagate_with_sensitivities(

@@ -36,6 +36,7 @@ from fracas.config.trajectory import (
     load_deck,
     trajectory_hash,
 )
+from fracas.config.trajectory.plausible import state_warnings, warn
 from fracas.errors import FracasError, OutputPathError
 from fracas.io.atomic import check_output_path
 from fracas.measurements.kinds import check_measurement_label, is_measurement_label
@@ -194,6 +195,9 @@ def _content_problem(path: Path, kind: str) -> str | None:
 
 
 def trajectory_problems(tdeck: TrajectoryDeck) -> list[str]:
+    """A trajectory deck's labels against its force model; an implausible initial state is
+    warned about on stderr (:mod:`fracas.config.trajectory.plausible`), not refused."""
+    warn(state_warnings(tdeck))
     src = tdeck.source_path or "<deck>"
     model = _model(tdeck)
     out = []

@@ -22,6 +22,7 @@ from fracas.config.limits import check_team_sizes
 from fracas.config.team import SIGMA_UNITS, APriori, GenCov, TeamDeck, ThrustNoise, WhiteNoise
 from fracas.config.team.span import check_team_span
 from fracas.config.trajectory import BACKWARD_TEAM_PROBLEM, TrajectoryDeck, load_deck
+from fracas.config.trajectory.plausible import state_warnings, warn
 from fracas.constants import DAY_S
 from fracas.errors import DeckError
 from fracas.filters.apriori import shaped_covariance
@@ -45,6 +46,7 @@ def trajectory_problem(deck: TeamDeck, src: str) -> tuple[TrajectoryDeck, Proble
     tdeck = load_deck(path)
     if tdeck.backward:
         raise _err(src, "ertraj.deck", deck.ertraj.deck, BACKWARD_TEAM_PROBLEM)
+    warn(state_warnings(tdeck))  # a unit slip in the initial state, most likely (the run goes on)
     check_team_span(deck, tdeck)  # refuse a study that runs past its trajectory (it would be cut short)
     check_team_sizes(deck, tdeck)  # refuse a study too big for its trajectory before building anything
     return tdeck, build_propagation(tdeck)

@@ -36,6 +36,7 @@ from fracas.build.tom_reference import _wrap_deg, reference_deck_text
 from fracas.build.trajectory import build_propagation
 from fracas.config.tom import TomDeck, TomSettings, tom_trajectory_deck
 from fracas.config.trajectory import TrajectoryDeck
+from fracas.config.trajectory.plausible import state_warnings, warn
 from fracas.dynamics.model import ForceModel, Params
 from fracas.integrate.problem import Problem
 from fracas.tom.problem import ControlMap, TargetSet, TomProblem
@@ -72,6 +73,7 @@ class _Targets:
 
 def _base_problem(deck: TomDeck, traj: TrajectoryDeck) -> Problem:
     """The trajectory's propagation problem, its model steering when a control moves a pointing law."""
+    warn(state_warnings(traj))  # a unit slip in the initial state, most likely (the run goes on)
     base = build_propagation(traj)
     if any(_steering_control(c) for c in deck.control) and not base.model.steering:
         # a pointing-law coefficient is a control: the arcs evaluate their laws at every stage

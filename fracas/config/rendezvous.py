@@ -63,6 +63,7 @@ from fracas.config.trajectory import (
     parse_sourced,
     read_deck_text,
 )
+from fracas.config.trajectory.plausible import state_warnings, warn
 from fracas.errors import DeckError
 
 #: a covariance's correlation form may dip this far below zero (rounding); fracas.filters.covariance.PSD_TOLERANCE
@@ -336,6 +337,7 @@ def rendezvous_problems(deck: RendezvousDeck) -> list[str]:
     for which in ("chaser", "target"):
         try:
             decks[which] = vehicle_deck(deck, which)
+            warn(state_warnings(decks[which]))  # a unit slip in the initial state, most likely (not refused)
         except DeckError as exc:
             out.extend(exc.problems or [str(exc)])
     if len(decks) == 2:

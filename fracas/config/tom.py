@@ -55,6 +55,7 @@ from fracas.config.trajectory import (
     read_deck_text,
     validation_problems,
 )
+from fracas.config.trajectory.plausible import state_warnings, warn
 from fracas.errors import DeckError
 from fracas.guidance.target_kinds import TARGET_KINDS
 from fracas.params import CONTROL_KINDS
@@ -360,6 +361,7 @@ def tom_problems(deck: TomDeck) -> list[str]:  # noqa: C901
         traj = tom_trajectory_deck(deck)
     except DeckError as exc:
         return list(exc.problems) or [str(exc)]
+    warn(state_warnings(traj))  # a unit slip in the initial state, most likely (not refused)
     out = []
     n_arcs, n_imp = len(traj.thrust_arc), len(traj.impulse)
     for j, c in enumerate(deck.control):

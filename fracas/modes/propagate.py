@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from fracas.config.trajectory import TrajectoryDeck, load_deck, parse_deck
+from fracas.config.trajectory.plausible import state_warnings, warn
 from fracas.io.atomic import check_output_path
 from fracas.io.trajectory_file import TrajectoryData
 from fracas.modes.base import Console, Mode, ReportOptions, RunOptions, Stage, default_output, say_to
@@ -49,6 +50,7 @@ def propagate_deck(
     output = check_output_path(output or default_output(cfg.source_path), "trajectory file")
     if plot is not None:
         check_output_path(plot, "plot")
+    warn(state_warnings(cfg))  # a unit slip in the initial state, most likely (the run goes on)
     say("building the force model and ephemeris")
     problem = build_propagation(cfg)
     say("compiling and propagating" + (" with sensitivities" if problem.sensitivities else ""))

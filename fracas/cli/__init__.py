@@ -19,7 +19,16 @@ from typing import Any
 import click
 
 from fracas import __version__
-from fracas.cli.console import TerminalConsole, _error_line, _errors, _fit_block, _progress, _say
+from fracas.cli.console import (
+    InputFile,
+    OutputFile,
+    TerminalConsole,
+    _error_line,
+    _errors,
+    _fit_block,
+    _progress,
+    _say,
+)
 from fracas.cli.exchange import compare_oem, export, import_namelist_command
 
 #: exit status of a sweep whose table is written but some studies failed
@@ -68,15 +77,13 @@ def main(ctx: click.Context, debug: bool) -> None:
 @click.option(
     "-o",
     "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=OutputFile("trajectory file"),
     help="Trajectory file to write (default out/<deck stem>.h5).",
 )
 @click.option(
     "--json", "as_json", is_flag=True, help="Print one JSON object with the final state instead of the table."
 )
-@click.option(
-    "--plot", type=click.Path(dir_okay=False, path_type=Path), help="Also write a PNG plot of the trajectory."
-)
+@click.option("--plot", type=OutputFile("plot"), help="Also write a PNG plot of the trajectory.")
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
 @click.pass_context
 def propagate(
@@ -101,7 +108,7 @@ def stm() -> None:
 @click.option(
     "-o",
     "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=OutputFile("STM file"),
     help="STM file to write (default: errcon.stm_file, else stm_files/<deck stem>.h5).",
 )
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
@@ -121,7 +128,7 @@ def stm_build(ctx: click.Context, deck: Path, output: Path | None, debug: bool) 
 
 
 @stm.command("info")
-@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("file", type=InputFile())
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
 @click.pass_context
 def stm_info(ctx: click.Context, file: Path, debug: bool) -> None:
@@ -164,18 +171,18 @@ def _run_only_options(f: Any) -> Any:
             click.option(
                 "--stm",
                 "stm_file",
-                type=click.Path(dir_okay=False, path_type=Path),
+                type=InputFile(),
                 help="Read the reference and transition matrices from this STM file instead of integrating.",
             ),
             click.option(
                 "--reference-deck",
-                type=click.Path(dir_okay=False, path_type=Path),
+                type=OutputFile("reference deck"),
                 help="TOM: the optimized trajectory deck to write (default: beside -o, else the deck's [tom] "
                 "reference_deck).",
             ),
             click.option(
                 "--trajectory-deck",
-                type=click.Path(dir_okay=False, path_type=Path),
+                type=InputFile(),
                 help="TEAM: the reference trajectory deck to use instead of the one [ertraj] deck names.",
             ),
             click.option(
@@ -203,10 +210,10 @@ def _run_only_options(f: Any) -> Any:
 @click.option(
     "-o",
     "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=OutputFile("results file"),
     help="Results file to write (default: the deck's [output] results, else out/<deck stem>.h5).",
 )
-@click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), help="Also write a PNG plot.")
+@click.option("--plot", type=OutputFile("plot"), help="Also write a PNG plot.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON summary instead of the tables.")
 @click.option("--quiet", is_flag=True, help="Print only the one-line summary.")
 @_print_options
@@ -229,8 +236,8 @@ def run(ctx: click.Context, deck: Path, debug: bool, **options: Any) -> None:
 
 
 @main.command()
-@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--plot", type=click.Path(dir_okay=False, path_type=Path), help="Also write a PNG plot.")
+@click.argument("file", type=InputFile())
+@click.option("--plot", type=OutputFile("plot"), help="Also write a PNG plot.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON summary instead of the tables.")
 @click.option("--quiet", is_flag=True, help="Print only the one-line summary.")
 @_print_options
@@ -260,7 +267,7 @@ def report(
         if plot is not None:
             from fracas.io.atomic import check_output_path
 
-            check_output_path(plot, "plot")
+            check_output_path(plot, "plot", (file,))
         if kind == "fracas-stm":
             from fracas.io.stm_file import describe
 
@@ -304,7 +311,7 @@ def report(
 @click.option(
     "-o",
     "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=OutputFile("sweep table"),
     help="Sweep table to write (HDF5, with a CSV beside it).",
 )
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")

@@ -84,42 +84,192 @@ def _stderr_is_terminal() -> bool:
     return _is_terminal(sys.stderr)
 
 
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+
+
+def _one_line(text: str) -> str:
+    """``text`` with control characters (a newline in a file name) escaped, and characters
+    that cannot be encoded (a file name that is not UTF-8) written as ``\\xNN``: one line."""
+    text = text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    return _CONTROL.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), text)
+
+
 def _say(text: str) -> None:
     """A line of the printout on stdout ("written: PATH", a one-line summary): wrapped to 80
     columns at word boundaries on a terminal; one line when piped (logs and scripts grep it)."""
+    text = _one_line(text)
     click.echo(_fill(text) if _stdout_is_terminal() else text)
 
 
 def _error_line(text: str) -> None:
     """An error on stderr: one line when stderr is not a terminal (logs, scripts: one line
     per problem to grep), wrapped to 80 columns with indented continuation lines on one."""
+    text = _one_line(text)
     if _stderr_is_terminal():
         text = _fill(text)
     click.echo(text, err=True)
 
 
+def _interrupted() -> None:
+    click.echo("fracas: interrupted", err=True)
+    sys.stderr.flush()
+
+
+def _quiet_shutdown() -> None:
+    """After an interrupt: Dask's and Tornado's loggers say nothing more (a cluster closing
+    under Ctrl-C logs pages of warnings about the workers it is stopping)."""
+    import logging
+
+    for name in ("distributed", "tornado", "asyncio"):
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+
+class _Interrupts:
+    """While a command runs: the first SIGINT raises KeyboardInterrupt (as Python's default
+    handler does) and is remembered; later ones are only remembered (the clean-up the first
+    started is not cut short; a third ends the process at once).  A KeyboardInterrupt that
+    Python could not raise (inside a ``__del__`` or a callback: "Exception ignored") is
+    remembered, not printed.  The command then ends with one line and exit 130, however
+    far its work got."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self._saved: tuple[Any, Any] | None = None
+
+    def _handler(self, signum: int, frame: Any) -> None:
+        self.count += 1
+        if self.count == 1:
+            _quiet_shutdown()
+            raise KeyboardInterrupt
+        if self.count >= 3:
+            import os
+
+            _interrupted()
+            os._exit(130)
+
+    def _unraisable(self, info: Any) -> None:
+        if issubclass(info.exc_type, KeyboardInterrupt):
+            self.count = max(self.count, 1)
+            _quiet_shutdown()
+            return
+        if self._saved is not None:
+            self._saved[1](info)
+
+    def __enter__(self) -> _Interrupts:
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread():
+            self._saved = (signal.signal(signal.SIGINT, self._handler), sys.unraisablehook)
+            sys.unraisablehook = self._unraisable
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._saved is None:
+            return
+        import signal
+
+        signal.signal(signal.SIGINT, self._saved[0])
+        sys.unraisablehook = self._saved[1]
+        self._saved = None
+
+
 @contextmanager
 def _errors(debug: bool):
-    """Map FracasError to one line + exit 2 (re-raise under --debug)."""
+    """Map FracasError to one line + exit 2 (re-raise under --debug); an interrupt to one line
+    + exit 130; a failing write (a full disk) to one line + exit 2.  The inputs the command
+    reads are noted for its output checks (:func:`fracas.io.inputs.input_scope`)."""
     from fracas.errors import FracasError
+    from fracas.io.inputs import input_scope, path_text
 
+    interrupts = _Interrupts()
     try:
-        yield
+        with interrupts, input_scope():
+            yield
     except FracasError as exc:
+        if interrupts.count:
+            _interrupted()
+            sys.exit(130)
         if debug:
             raise
         _error_line(f"fracas: error: {exc}")
         sys.exit(exc.exit_code)
     except KeyboardInterrupt:
-        click.echo("fracas: interrupted", err=True)
+        _interrupted()
         sys.exit(130)
     except (click.exceptions.Exit, click.ClickException, SystemExit):
+        if interrupts.count:
+            _interrupted()
+            sys.exit(130)
         raise
+    except OSError as exc:  # the system refused: a full disk, a permission; not a bug
+        if interrupts.count:
+            _interrupted()
+            sys.exit(130)
+        if debug:
+            raise
+        where = f"{path_text(exc.filename)}: " if exc.filename else ""
+        _error_line(f"fracas: error: {where}{exc.strerror or exc}")
+        sys.exit(2)
     except Exception as exc:  # a bug: say so briefly, the traceback is one flag away
+        if interrupts.count:
+            _interrupted()
+            sys.exit(130)
         if debug:
             raise
         _error_line(f"fracas: internal error: {type(exc).__name__}: {exc} (rerun with --debug for the traceback)")
         sys.exit(1)
+    if interrupts.count:  # an interrupt swallowed where Python could not raise it
+        _interrupted()
+        sys.exit(130)
+
+
+class _OneLineError(click.ClickException):
+    """A bad option value as one line ``fracas: error: ...`` and exit 2 (not click's usage block)."""
+
+    exit_code = 2
+
+    def show(self, file: Any = None) -> None:
+        _error_line(f"fracas: error: {self.message}")
+
+
+class OutputFile(click.ParamType):
+    """An output file option (``-o``, ``--plot``, ...): the value as the user wrote it is
+    checked before click's Path would drop a trailing ``/`` or turn ``''`` into ``.``; an
+    empty name, a name ending in ``/`` or an existing directory is one line, exit 2.  The
+    rest of the checks are the orchestrator's (:func:`fracas.io.atomic.check_output_path`)."""
+
+    name = "file"
+
+    def __init__(self, what: str) -> None:
+        self.what = what
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> Any:
+        from pathlib import Path
+
+        if isinstance(value, Path):
+            return value
+        text = str(value)
+        if text.strip() in ("", ".", "..") or text.endswith("/") or Path(text).is_dir():
+            from fracas.errors import OutputPathError
+            from fracas.io.atomic import check_output_path
+
+            try:
+                check_output_path(text, self.what)
+            except OutputPathError as exc:
+                raise _OneLineError(str(exc)) from None
+        return Path(text)
+
+
+class InputFile(click.ParamType):
+    """A file to read: a Path; whether it can be read is the reader's one-line check."""
+
+    name = "file"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> Any:
+        from pathlib import Path
+
+        return value if isinstance(value, Path) else Path(value)
 
 
 def _duration(seconds: float) -> str:

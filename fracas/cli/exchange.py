@@ -10,16 +10,16 @@ from typing import Any
 
 import click
 
-from fracas.cli.console import _error_line, _errors, _say
+from fracas.cli.console import InputFile, OutputFile, _error_line, _errors, _say
 
 
 @click.command()
-@click.argument("file", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--oem", "oem_out", type=click.Path(dir_okay=False, path_type=Path), help="Write a CCSDS OEM.")
+@click.argument("file", type=InputFile())
+@click.option("--oem", "oem_out", type=OutputFile("OEM"), help="Write a CCSDS OEM.")
 @click.option(
     "--team",
     "team_file",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=InputFile(),
     help="With a trajectory FILE: a TEAM results file whose covariances go into the OEM.",
 )
 @click.option(
@@ -37,8 +37,8 @@ from fracas.cli.console import _error_line, _errors, _say
     help="TEAM events for --opm/--csv: an event name (final, eigenvector, ...), days from the epoch, "
     "an ISO TDB epoch, #index or all (repeatable).",
 )
-@click.option("--opm", "opm_out", type=click.Path(dir_okay=False, path_type=Path), help="Write CCSDS OPM(s).")
-@click.option("--csv", "csv_out", type=click.Path(dir_okay=False, path_type=Path), help="Write the covariances as CSV.")
+@click.option("--opm", "opm_out", type=OutputFile("OPM"), help="Write CCSDS OPM(s).")
+@click.option("--csv", "csv_out", type=OutputFile("CSV"), help="Write the covariances as CSV.")
 @click.option("--xml", is_flag=True, help="OEM/OPM in XML instead of KVN.")
 @click.option("--object-name", default=None, help="OBJECT_NAME (default: the file's title).")
 @click.option("--object-id", default="UNKNOWN", show_default=True, help="OBJECT_ID.")
@@ -68,7 +68,7 @@ def export(
     with _errors(debug):
         from fracas.io import ccsds
 
-        _check_export(file, oem_out, opm_out, csv_out, events)
+        _check_export(file, oem_out, opm_out, csv_out, events, team_file)
         entries, team = _covariance_entries(file, events, covariance, before_update)
         if oem_out is not None:
             ccsds.write_oem(
@@ -89,7 +89,12 @@ def export(
 
 
 def _check_export(
-    file: Path, oem_out: Path | None, opm_out: Path | None, csv_out: Path | None, events: tuple[str, ...]
+    file: Path,
+    oem_out: Path | None,
+    opm_out: Path | None,
+    csv_out: Path | None,
+    events: tuple[str, ...],
+    team_file: Path | None = None,
 ) -> None:
     """What ``fracas export`` was asked is coherent, and every output can be written."""
     from fracas.errors import FracasError
@@ -103,7 +108,7 @@ def _check_export(
         raise FracasError(f"{file}: --covariance-at is for --opm or --csv")
     for out, what in ((oem_out, "OEM"), (opm_out, "OPM"), (csv_out, "CSV")):
         if out is not None:
-            check_output_path(out, what)
+            check_output_path(out, what, (file, team_file))
 
 
 def _covariance_entries(
@@ -155,8 +160,8 @@ def _write_covariances(
 
 
 @click.command("compare-oem")
-@click.argument("trajectory", type=click.Path(dir_okay=False, path_type=Path))
-@click.argument("oem_file", metavar="FILE.oem", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("trajectory", type=InputFile())
+@click.argument("oem_file", metavar="FILE.oem", type=InputFile())
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON summary instead of the table.")
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
 @click.pass_context
@@ -208,7 +213,7 @@ def compare_oem(ctx: click.Context, trajectory: Path, oem_file: Path, as_json: b
     "-o",
     "--output",
     required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=OutputFile("TOML deck"),
     help="TOML deck to write (sub-decks it names are written beside it).",
 )
 @click.option(
@@ -233,11 +238,11 @@ def import_namelist_command(
         from fracas.errors import OutputPathError
         from fracas.io.atomic import atomic_path, check_output_path
 
-        out = check_output_path(output, "TOML deck")
+        out = check_output_path(output, "TOML deck", (namelist,))
         result = import_namelist(namelist, str(namelist), mode=mode, name=out.stem)
         files = {out: result.toml, **{out.parent / name: text for name, text in result.companions.items()}}
         for path in files:
-            check_output_path(path, "TOML deck")
+            check_output_path(path, "TOML deck", (namelist,))
             if path.exists() and not force:
                 raise OutputPathError(f"{path}: exists; use --force to overwrite it")
         for path, text in files.items():

@@ -14,12 +14,16 @@ whose process is gone (judged only for temporaries of this host: on a shared fil
 another machine's pid means nothing here) or that are older than an hour
 (:func:`remove_stale_temps`), nothing else.
 
-:func:`check_output_path` checks an output path before a run starts, creating nothing.
+:func:`check_output_path` checks an output path before a run starts, creating nothing; it
+and :func:`atomic_path` refuse an output that is one of the run's inputs (its deck, a file
+the deck names: :mod:`fracas.io.inputs`).  A write that fails for want of room (a full disk,
+a quota) removes its temporary file and raises an OSError naming the destination.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import functools
 import hashlib
 import os
@@ -27,17 +31,19 @@ import re
 import socket
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
 from fracas.errors import OutputPathError
+from fracas.io.inputs import input_conflict, path_text
 
 __all__ = [
     "STALE_AGE_S",
     "TEMP_PATTERN",
     "atomic_path",
     "check_output_path",
+    "check_not_input",
     "file_mode",
     "host_tag",
     "remove_stale_temps",
@@ -134,6 +140,10 @@ def _fsync_dir(folder: Path) -> None:
             os.close(dfd)
 
 
+#: a full disk, a quota, a file too big: the write failed for want of room
+_NO_ROOM = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """``with atomic_path(dest) as tmp:`` write ``tmp``; on success it becomes ``dest``.
@@ -141,10 +151,13 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     ``tmp`` is an empty file ``.<name>.<pid>-<host>.<random>.tmp`` in ``dest``'s folder (created
     if needed); the writer may truncate or recreate it.  On leaving the block normally it is
     fsync-ed, given mode ``0o666 & ~umask`` and renamed over ``dest``; on any exception it
-    is removed and the exception propagates, ``dest`` untouched.  Stale temporary files of
-    killed runs in the folder are removed first (:func:`remove_stale_temps`).
+    is removed and the exception propagates, ``dest`` untouched (a full disk: an OSError
+    naming ``dest``, not the temporary file).  Stale temporary files of killed runs in the
+    folder are removed first (:func:`remove_stale_temps`).  A ``dest`` that is an input of
+    the run (:mod:`fracas.io.inputs`) is refused before anything is written.
     """
     dest = Path(path)
+    check_not_input(dest, "output file")
     folder = dest.parent
     folder.mkdir(parents=True, exist_ok=True)
     remove_stale_temps(folder)
@@ -158,9 +171,11 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
             os.fsync(fh.fileno())
         os.chmod(tmp, file_mode())
         os.replace(tmp, dest)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if isinstance(exc, OSError) and exc.errno in _NO_ROOM and exc.filename in (None, name, str(tmp)):
+            raise type(exc)(exc.errno, exc.strerror, str(dest)) from None
         raise
     _fsync_dir(folder)
 
@@ -178,43 +193,62 @@ def savefig_atomic(fig: Any, path: str | os.PathLike, **kwargs: Any) -> Path:
     return dest
 
 
-def check_output_path(path: str | os.PathLike, what: str) -> Path:
+def check_not_input(dest: str | os.PathLike, what: str, inputs: Iterable[str | os.PathLike | None] = ()) -> None:
+    """A one-line OutputPathError if ``dest`` is the same file (through symlinks and hard
+    links) as one of ``inputs`` or as a file this run has read (:mod:`fracas.io.inputs`)."""
+    other = input_conflict(dest, inputs)
+    if other is not None:
+        shown = path_text(dest)
+        same = "" if other == shown else f" (the same file as {other})"
+        raise OutputPathError(
+            f"{shown}: {what} is an input of this run{same}; expected another output path",
+            reason=f"is an input of this run{same}",
+        )
+
+
+def check_output_path(path: str | os.PathLike, what: str, inputs: Iterable[str | os.PathLike | None] = ()) -> Path:
     """The output ``path`` as a Path, or a one-line :class:`fracas.errors.OutputPathError`
     if it cannot be written: empty or ``.``, an existing directory (or a name ending in
-    ``/``), an existing non-regular file, or a folder that is a file, cannot be created or
-    is not writable.  Creates nothing.  ``what`` names the output in the message ("results
-    file", "plot", ...)."""
+    ``/``), an existing non-regular file, a folder that is a file, cannot be created or is
+    not writable, or a file the run reads (one of ``inputs``, or one noted by a reader:
+    :func:`check_not_input`).  Creates nothing.  ``what`` names the output in the message
+    ("results file", "plot", ...)."""
     text = os.fspath(path)
     if isinstance(text, bytes):
         text = os.fsdecode(text)
+    shown = path_text(text)
     if text.strip() in ("", ".", ".."):
-        raise OutputPathError(f"{what}: output path {text!r} is not a file name, expected e.g. out/{_example(what)}")
+        raise OutputPathError(f"{what}: output path {shown!r} is not a file name, expected e.g. out/{_example(what)}")
     dest = Path(text).expanduser()
     if text.endswith(("/", os.sep)) or dest.is_dir():
         raise OutputPathError(
-            f"{dest}: {what} is a directory, expected a file name inside it",
-            reason=f"is a directory ({dest}); expected a file name",
+            f"{shown}: {what} is a directory, expected a file name inside it",
+            reason=f"is a directory ({shown}); expected a file name",
         )
     if dest.exists() and not dest.is_file():
         raise OutputPathError(
-            f"{dest}: {what} exists and is not a regular file", reason=f"exists and is not a regular file ({dest})"
+            f"{shown}: {what} exists and is not a regular file", reason=f"exists and is not a regular file ({shown})"
         )
+    check_not_input(dest, what, inputs)
     folder = dest.parent
     probe = folder
     while not probe.exists():  # the nearest existing ancestor decides whether mkdir can work
         if probe.parent == probe:
             break
         probe = probe.parent
+    shown_probe, shown_folder = path_text(probe), path_text(folder)
     if not probe.is_dir():
         raise OutputPathError(
-            f"{dest}: {what}: folder {probe} is a file, expected a directory",
-            reason=f"cannot create its folder: {probe} is a file",
+            f"{shown}: {what}: folder {shown_probe} is a file, expected a directory",
+            reason=f"cannot create its folder: {shown_probe} is a file",
         )
     if not os.access(probe, os.W_OK | os.X_OK):
-        why = f"cannot write there: {probe} is not writable"
+        why = f"cannot write there: {shown_probe} is not writable"
         if probe == folder:
-            raise OutputPathError(f"{dest}: {what}: folder {folder} is not writable", reason=why)
-        raise OutputPathError(f"{dest}: {what}: cannot create folder {folder} ({probe} is not writable)", reason=why)
+            raise OutputPathError(f"{shown}: {what}: folder {shown_folder} is not writable", reason=why)
+        raise OutputPathError(
+            f"{shown}: {what}: cannot create folder {shown_folder} ({shown_probe} is not writable)", reason=why
+        )
     return dest
 
 

@@ -42,6 +42,7 @@ from fracas.io.ccsds_sources import (
     _Track,
     file_kind,
 )
+from fracas.io.inputs import check_regular
 from fracas.timescales import calendar_to_et, et_to_calendar
 
 # ----------------------------------------------------------------------------- OEM out
@@ -116,6 +117,8 @@ def _comment_lines(comments: list[str]) -> str:
 #: A coarser file (a TEAM run's measurement times, say) would be interpolated wildly by a
 #: reader, so it gets no INTERPOLATION at all.
 DENSE_FRACTION = 0.05
+#: the largest OEM read (a typo naming a disk image is refused before it is read)
+MAX_OEM_BYTES = 1 << 30
 
 
 def _dense_enough(et: np.ndarray, r: np.ndarray, v: np.ndarray) -> bool:
@@ -196,8 +199,7 @@ def read_oem(path: str | os.PathLike) -> OemFile:
     p = Path(path)
     if not p.exists():
         raise ResultsFileError(f"{p}: no such OEM file")
-    if p.is_dir():
-        raise ResultsFileError(f"{p}: is a directory, expected an OEM file")
+    check_regular(p, ResultsFileError, "an OEM file", limit=MAX_OEM_BYTES)  # a FIFO would block, a device never end
     try:
         from oem import OrbitEphemerisMessage
 

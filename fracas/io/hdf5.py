@@ -114,10 +114,30 @@ def atomic_h5(path: str | os.PathLike) -> Iterator[h5py.File]:
     ``kind``) as the block left it.
     """
     with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w", userblock_size=USERBLOCK_SIZE) as f:
+        # built in memory (the core driver, no backing store), then written with plain Python
+        # I/O: a full disk is an OSError here, never an HDF5 write failing inside h5py (which
+        # printed pages of "Exception ignored" and could crash the process on close); the
+        # bytes are those the file driver would have written
+        f = h5py.File(tmp, "w", driver="core", backing_store=False, userblock_size=USERBLOCK_SIZE)
+        try:
             yield f
             kind = kind_attr(f)
+            f.flush()
+            image = f.id.get_file_image()
+        finally:
+            f.close()
+        _write_image(tmp, image)
+        del image
         seal(tmp, kind)
+
+
+def _write_image(tmp: Path, image: bytes) -> None:
+    """The user block (zeros, :func:`seal` fills it) and the HDF5 image into ``tmp``."""
+    view = memoryview(image)
+    with open(tmp, "wb") as fh:
+        fh.write(bytes(USERBLOCK_SIZE))
+        for start in range(0, len(view), 1 << 24):
+            fh.write(view[start : start + (1 << 24)])
 
 
 def kind_attr(f: h5py.File) -> str:

@@ -30,6 +30,7 @@ from fracas.io.hdf5 import (
     read_provenance,
     verify_file,
 )
+from fracas.io.inputs import note_input
 from fracas.products import SCHEMA_VERSION, TIME_TOL_S, ReferenceTrajectory, _indices
 
 StmData = ReferenceTrajectory  # the STM file holds one reference-trajectory product
@@ -247,6 +248,7 @@ def read_stm_file(
     nearest), another epoch.
     """
     src, f = _open(path, verify)
+    note_input(path)  # an input of the run: no output may replace it
     with h5_errors(src, StmFileError, "STM file"), f:
         data = _read_checked(src, f, labels, verify)
     if epoch_et_s is not None and not abs(float(epoch_et_s) - data.epoch_et_s) <= TIME_TOL_S:

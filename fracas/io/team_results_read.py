@@ -16,6 +16,7 @@ import numpy as np
 
 from fracas.errors import DeckError, ResultsFileError
 from fracas.io.hdf5 import Checked, attr_text, one_line, open_h5, schema_version
+from fracas.io.inputs import note_input
 from fracas.io.team_layout import (
     _GUIDANCE_MATRICES,
     _GUIDANCE_SCALARS,
@@ -233,6 +234,7 @@ def read_punch(path: str | os.PathLike, source: str = "<deck>", *, verify: bool 
     file or damaged."""
     p = Path(path)
     head = f'{source}: a_priori.from_punch = "{path}"'
+    note_input(p)  # an input of the run: no output may replace it
 
     class _PunchError(DeckError):
         def __init__(self, msg: str) -> None:

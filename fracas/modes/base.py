@@ -166,6 +166,17 @@ def results_path(cfg: Any, output: str | Path | None) -> Path:
     return cfg.resolve(cfg.output.results) if cfg.output.results else default_output(cfg.source_path)
 
 
+def team_inputs(team: Any) -> tuple[Path | str | None, ...]:
+    """The files a TEAM deck reads (for the output checks of the runs that stand on one): the
+    deck, its trajectory deck, its STM file and the punch file of its a-priori."""
+    named = (
+        team.ertraj.deck,
+        team.errcon.stm_file,
+        team.a_priori.from_punch if team.a_priori is not None else None,
+    )
+    return (team.source_path, *(team.resolve(rel) for rel in named if rel))
+
+
 def verbosity(opts: RunOptions | ReportOptions) -> str:
     """ "quiet", "normal" or "verbose" (a FracasError for both flags)."""
     from fracas.errors import FracasError

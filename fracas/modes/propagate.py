@@ -12,6 +12,7 @@ from typing import Any
 from fracas.config.trajectory import TrajectoryDeck, load_deck, parse_deck
 from fracas.config.trajectory.plausible import state_warnings, warn
 from fracas.io.atomic import check_output_path
+from fracas.io.inputs import reading_inputs
 from fracas.io.trajectory_file import TrajectoryData
 from fracas.modes.base import Console, Mode, ReportOptions, RunOptions, Stage, default_output, say_to
 from fracas.validate import trajectory_problems
@@ -31,6 +32,7 @@ def run_propagation(problem: Any) -> tuple[Any, Any]:
     return traj, sens
 
 
+@reading_inputs
 def propagate_deck(
     deck: str | Path | TrajectoryDeck,
     output: str | Path | None = None,
@@ -47,9 +49,10 @@ def propagate_deck(
     say = say_to(on_stage)
     say("reading the deck")
     cfg = load_deck(deck) if isinstance(deck, (str, Path)) else deck
-    output = check_output_path(output or default_output(cfg.source_path), "trajectory file")
+    ins = (cfg.source_path,)  # and every file it names, noted as it was read (fracas.io.inputs)
+    output = check_output_path(output or default_output(cfg.source_path), "trajectory file", ins)
     if plot is not None:
-        check_output_path(plot, "plot")
+        check_output_path(plot, "plot", ins)
     warn(state_warnings(cfg))  # a unit slip in the initial state, most likely (the run goes on)
     say("building the force model and ephemeris")
     problem = build_propagation(cfg)

@@ -16,6 +16,7 @@ import numpy as np
 
 from fracas.config.rendezvous import parse_rendezvous_deck, rendezvous_problems
 from fracas.io.atomic import check_output_path
+from fracas.io.inputs import reading_inputs
 from fracas.modes.base import (
     Console,
     Mode,
@@ -75,6 +76,13 @@ def single_run_arrays(cfg: Any, study: Any, res: Any, say: Stage) -> dict[str, A
     return out
 
 
+def _inputs(cfg: Any) -> tuple:
+    """The files a rendezvous run reads: its deck, each vehicle's trajectory deck and STM file."""
+    named = [rel for v in (cfg.chaser, cfg.target) for rel in (v.trajectory, v.stm_file) if rel]
+    return (cfg.source_path, *(cfg.resolve(rel) for rel in named))
+
+
+@reading_inputs
 def run_rendezvous(
     deck: Any,
     output: str | Path | None = None,
@@ -98,10 +106,11 @@ def run_rendezvous(
     say("reading the deck")
     cfg = deck if isinstance(deck, RendezvousDeck) else load_rendezvous_deck(deck)
     out = results_path(cfg, output)
+    ins = _inputs(cfg)
     if write_results:
-        check_output_path(out, "results file")
+        check_output_path(out, "results file", ins)
     if plot is not None:
-        check_output_path(plot, "plot")
+        check_output_path(plot, "plot", ins)
     say("integrating both references and their STMs")
     study = build_rendezvous(cfg)
     _check_runs_size(cfg, study)

@@ -12,6 +12,7 @@ import numpy as np
 from fracas.constants import DAY_S
 from fracas.errors import NumericalError
 from fracas.io.atomic import check_output_path
+from fracas.io.inputs import reading_inputs
 from fracas.modes.base import Stage, default_output, say_to
 from fracas.status import RunStatus
 
@@ -73,6 +74,7 @@ def stm_product(case: Any) -> Any:
     return reference_product(pr, traj, sens, ev, tdeck.source_text or "", trajectory_hash(tdeck), tdeck.source_path)
 
 
+@reading_inputs
 def build_stm(
     deck: Any, output: str | Path | None = None, on_stage: Stage | None = None, case: Any = None
 ) -> tuple[Path, Any]:
@@ -88,7 +90,7 @@ def build_stm(
     if output is None:
         ec = case.deck.errcon
         output = case.deck.resolve(ec.stm_file) if ec.stm_file else default_output(case.deck.source_path, "stm_files")
-    output = check_output_path(output, "STM file")
+    output = check_output_path(output, "STM file", (case.deck.source_path,))
     say("integrating the reference and its sensitivities")
     data = stm_product(case)
     say("writing the STM file")

@@ -15,6 +15,7 @@ from fracas.config.team import parse_team_deck
 from fracas.constants import DAY_S
 from fracas.errors import NumericalError, StmFileError
 from fracas.io.atomic import check_output_path
+from fracas.io.inputs import reading_inputs
 from fracas.modes.base import (
     Console,
     Mode,
@@ -35,16 +36,20 @@ from fracas.validate import team_problems
 __all__ = ["MODE", "run_team", "team_report"]
 
 
-def _check_outputs(cfg: Any, out: Path, punch: Path | None, plot: str | Path | None, write_results: bool) -> None:
-    """Every file the analysis writes, checked before any work."""
+def _check_outputs(
+    cfg: Any, out: Path, punch: Path | None, plot: str | Path | None, write_results: bool, stm_in: Path | None
+) -> None:
+    """Every file the analysis writes, checked before any work: none may be a file the run
+    reads (the deck, the files it names, the STM file ``stm_in`` it is about to read)."""
     if not cfg.errcon.analysis:
         return
+    ins = (cfg.source_path, stm_in)
     if write_results:
-        check_output_path(out, "results file")
+        check_output_path(out, "results file", ins)
     if punch is not None:
-        check_output_path(punch, "punch file")
+        check_output_path(punch, "punch file", ins)
     if plot is not None:
-        check_output_path(plot, "plot")
+        check_output_path(plot, "plot", ins)
 
 
 def _stm_to_build(cfg: Any, stm: str | Path | None, where: Path | None) -> tuple[Path | None, bool]:
@@ -61,7 +66,7 @@ def _stm_to_build(cfg: Any, stm: str | Path | None, where: Path | None) -> tuple
             where.parent / f"{stem}_stm.h5" if where is not None else default_output(cfg.source_path, "stm_files")
         )
     if build:
-        check_output_path(stm_path, "STM file")
+        check_output_path(stm_path, "STM file", (cfg.source_path,))
     return stm_path, build
 
 
@@ -122,6 +127,7 @@ def _product(case: Any, res: Any, ref: Any) -> Any:
     )
 
 
+@reading_inputs
 def run_team(
     deck: Any,
     stm: str | Path | None = None,
@@ -157,8 +163,8 @@ def run_team(
     out: Path | None = results_path(cfg, output)
     where = Path(output) if output is not None else (Path(output_dir) / "-" if output_dir is not None else None)
     punch = beside(where, cfg.resolve(cfg.punch.file), None) if cfg.punch is not None else None
-    _check_outputs(cfg, out, punch, plot, write_results)
     stm_path, build = _stm_to_build(cfg, stm, where)
+    _check_outputs(cfg, out, punch, plot, write_results, None if build else stm_path)
     t1 = time.perf_counter()
     ref, product = _reference(case, stm_path, build, on_stage)
     t2 = time.perf_counter()

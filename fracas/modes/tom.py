@@ -18,6 +18,7 @@ import numpy as np
 
 from fracas.config.tom import parse_tom_deck, tom_problems
 from fracas.io.atomic import check_output_path
+from fracas.io.inputs import reading_inputs
 from fracas.modes.base import Console, Mode, ReportOptions, RunOptions, Stage, beside, print_results, say_to
 from fracas.modes.tom_search import first_guess, search_stage, start_problem
 
@@ -120,11 +121,16 @@ def tom_stm_file(cfg: Any, ref_path: Path) -> Path:
 
 
 def _check_outputs(cfg: Any, out: Path, ref_path: Path, png: Path | None) -> None:
-    check_output_path(out, "results file")
+    """Every file a TOM run writes, checked before any work: none may be a file it reads
+    (the deck, the files it names)."""
+    ins = (cfg.source_path,)
+    check_output_path(out, "results file", ins)
     if cfg.tom.submode != "grid":
-        check_output_path(ref_path, "reference deck")
+        check_output_path(ref_path, "reference deck", ins)
+        if cfg.tom.stm_file:
+            check_output_path(cfg.resolve(cfg.tom.stm_file), "STM file", ins)
     if png is not None:
-        check_output_path(png, "plot")
+        check_output_path(png, "plot", ins)
 
 
 def _build(cfg: Any, say: Stage, on_iteration: Callable | None) -> tuple[Any, str]:
@@ -137,6 +143,7 @@ def _build(cfg: Any, say: Stage, on_iteration: Callable | None) -> tuple[Any, st
     return build_tom(cfg), ""
 
 
+@reading_inputs
 def run_tom(
     deck: Any,
     output: str | Path | None = None,

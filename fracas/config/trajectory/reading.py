@@ -175,18 +175,13 @@ def parse_deck(text: str, source: str = "<deck>") -> TrajectoryDeck:
 
 def read_deck_bytes(path: str | Path, source: str, expected: str = "a TOML deck file") -> bytes:
     """The bytes of a deck file (at most MAX_DECK_BYTES); every failure is a one-line
-    DeckError naming ``source`` (a folder: "is a directory, expected ``expected``")."""
-    try:
-        raw = Path(path).read_bytes()
-    except FileNotFoundError:
-        raise DeckError(f"{source}: no such file") from None
-    except IsADirectoryError:
-        raise DeckError(f"{source}: is a directory, expected {expected}") from None
-    except OSError as exc:
-        raise DeckError(f"{source}: cannot read: {exc.strerror or exc}") from None
-    if len(raw) > MAX_DECK_BYTES:
-        raise DeckError(f"{source}: is {len(raw)} bytes; a deck is at most {MAX_DECK_BYTES} bytes") from None
-    return raw
+    DeckError naming ``source`` (a folder: "is a directory, expected ``expected``").  Only a
+    regular file is read (a FIFO or a device is refused before reading), and at most
+    MAX_DECK_BYTES + 1 bytes of it (:func:`fracas.io.inputs.read_bounded`); the file is
+    noted as an input of the run (no output may replace it)."""
+    from fracas.io.inputs import read_bounded
+
+    return read_bounded(path, MAX_DECK_BYTES, DeckError, expected, source)
 
 
 def read_deck_text(path: str | Path) -> str:

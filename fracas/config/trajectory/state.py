@@ -136,6 +136,9 @@ def _oem_file(path: str, source: str | None):
         key = (str(p), st.st_mtime_ns, st.st_size)
     except OSError:
         key = (str(p), 0, 0)
+    from fracas.io.inputs import note_input
+
+    note_input(p)  # an input of the run: no output may replace it
     return _read_oem_cached(*key)
 
 

@@ -26,8 +26,10 @@ from fracas.config.team import TeamDeck, load_team_deck
 from fracas.config.trajectory import deck_error
 from fracas.errors import FracasError
 from fracas.io.atomic import check_output_path
+from fracas.io.inputs import reading_inputs
 from fracas.modes import stm as stm_mode
 from fracas.modes import team as team_mode
+from fracas.modes.base import team_inputs
 from fracas.modes.sweep.plan import (
     base_hash,
     batch_groups,
@@ -358,6 +360,7 @@ def _run_tasks(todo: list[int], ctx: _Context, table: _Table, workers: int | Non
             table.record(record)
 
 
+@reading_inputs
 def run_sweep(
     cfg: SweepDeck,
     *,
@@ -401,11 +404,13 @@ def run_sweep(
         raise deck_error(problems)
     fields = cfg.fields
     outputs = list(sw.outputs)
-    out = check_output_path(table if table is not None else table_path(cfg), "sweep table")
+    ins = (cfg.source_path, *team_inputs(base), *((cfg.resolve(sw.stm_file),) if sw.stm_file else ()))
+    out = check_output_path(table if table is not None else table_path(cfg), "sweep table", ins)
+    check_output_path(out.with_suffix(".csv"), "sweep table (CSV)", ins)  # its CSV twin (io.sweep_table)
     # -o decides where every output goes: with a table path given, the deck's plot and results
     # folder keep their names but go beside it (the STM file the deck names stays where it says)
     beside = (lambda p: out.parent / Path(p).name) if table is not None else cfg.resolve
-    plot = check_output_path(beside(cfg.output.plot), "plot") if cfg.output.plot else None
+    plot = check_output_path(beside(cfg.output.plot), "plot", ins) if cfg.output.plot else None
     bh = base_hash(base)
     studies = cfg.studies()
     keys = [study_key(bh, fields, v) for v in studies]

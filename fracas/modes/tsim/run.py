@@ -33,8 +33,9 @@ from fracas.config.trajectory import deck_error
 from fracas.config.tsim import TsimDeck, load_tsim_deck, tsim_problems, tsim_team_deck
 from fracas.errors import DeckError
 from fracas.io.atomic import check_output_path
+from fracas.io.inputs import reading_inputs
 from fracas.modes import team as team_mode
-from fracas.modes.base import default_output
+from fracas.modes.base import default_output, team_inputs
 
 __all__ = ["run_tsim", "checkpoint_path", "plan_key", "fly_blocks", "assemble"]
 
@@ -122,6 +123,15 @@ def _team_key(team_deck) -> str:
     return h.hexdigest()
 
 
+def _inputs(cfg: TsimDeck) -> tuple:
+    """The files a TSIM run reads: its deck, the TEAM deck's (:func:`team_inputs`), the earlier
+    statistics (no output may replace one)."""
+    from fracas.config.tsim import tsim_team_deck
+
+    earlier = tuple(cfg.resolve(f) for f in cfg.insim.a_priori_statistics)
+    return (cfg.source_path, *team_inputs(tsim_team_deck(cfg)), *earlier)
+
+
 def _team_for(cfg: TsimDeck, say, output_dir: Path | None = None):
     """The TEAM run TSIM stands on (guidance model ``tsim``), once per process for the same
     TEAM deck, trajectory deck and STM file (a second TSIM run on them, e.g. the other half
@@ -171,6 +181,7 @@ def _fly(
         return pool.n_workers
 
 
+@reading_inputs
 def run_tsim(
     deck: str | Path | TsimDeck,
     output: str | Path | None = None,
@@ -202,9 +213,10 @@ def run_tsim(
     if problems:
         raise deck_error(problems)
     out = _results_path(cfg, output)
-    check_output_path(out, "results file")
+    ins = _inputs(cfg)
+    check_output_path(out, "results file", ins)
     ckpt = checkpoint_path(out)
-    check_output_path(ckpt / "task_00000000.h5", "checkpoint file")
+    check_output_path(ckpt / "task_00000000.h5", "checkpoint file", ins)
     earlier = []
     for f in cfg.insim.a_priori_statistics:
         earlier.append(tsim_statistics(cfg.resolve(f)))

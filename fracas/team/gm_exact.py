@@ -8,7 +8,8 @@ transition gains the exact blocks Gamma = int Phi(t_k, s) h(s) E(s, t_{k-1}) ds 
 E = diag(exp(-dt / tau)), and the exact noise Q over [x, eta]
 (:mod:`fracas.filters.gauss_markov`).  Both come from one integration of the reference
 (with its STM) through the Gauss nodes of *pieces*: the union of the schedule times, the
-thrust switches and a grid anchored at the epoch whose step is bounded by the dynamics
+thrust switches, the yaw-switch flips (where the STM jumps: ``white_acceleration.cut_at_flips``)
+and a grid anchored at the epoch whose step is bounded by the dynamics
 (:func:`piece_step`: omega L <= :data:`GM_PIECE_OMEGA`, L <= :data:`GM_PIECE_TAU` tau,
 L <= :data:`GM_PIECE_MAX_S`).  The pieces compose exactly, so the answer does not depend
 on the events (to the integration's round-off).  h = d xdot / d eta at the nodes comes
@@ -29,6 +30,7 @@ import numpy as np
 from fracas.filters.gauss_markov import GM_NODES, compose, piece_nodes, piece_noise
 from fracas.team.study import NOISE_STATE_LABELS, Study
 from fracas.team.transitions import TIME_MERGE_S, noise_partials, reference_through_nodes
+from fracas.team.white_acceleration import cut_at_flips
 
 __all__ = [
     "GM_PIECE_OMEGA",
@@ -138,7 +140,7 @@ def exact_pieces(study: Study, t: np.ndarray, x0: np.ndarray, states, primary) -
     if len(t) < 2 or t[-1] <= t[0]:
         return ExactPieces(np.zeros(0), np.zeros((0, GM_NODES, study.nx, 3)), np.zeros((0, study.nx, study.nx)),
                            np.zeros(len(t), int), step)  # fmt: skip
-    U = _edges(study, t, step)
+    U = cut_at_flips(study, x0, _edges(study, t, step), 0.0)  # yaw flips end pieces too
     nodes, L = piece_nodes(U[:-1], U[1:])
     phi_end, piece_phi, xs, prim = reference_through_nodes(study, x0, U, nodes)
     M, n = nodes.shape

@@ -15,12 +15,19 @@ import numpy as np
 
 from fracas import _jax  # noqa: F401
 from fracas.filters.process_noise import gauss_legendre, white_direction, white_q_nodes
-from fracas.integrate.propagate import propagate_with_sensitivities
+from fracas.integrate.propagate import propagate, propagate_with_sensitivities
 from fracas.team.noise_base import bucket
 from fracas.team.noise_cells import _noise_cells, _union, map_cell_noise
 from fracas.team.study import Study
 
-__all__ = ["WHITE_NODES", "reference_through_nodes", "white_unit_noise", "white_noise"]
+__all__ = [
+    "WHITE_NODES",
+    "reference_through_nodes",
+    "yaw_flip_times",
+    "cut_at_flips",
+    "white_unit_noise",
+    "white_noise",
+]
 
 WHITE_NODES = 4  # Gauss-Legendre points per piece: exact to degree 7 in the piece's time
 
@@ -57,6 +64,49 @@ def reference_through_nodes(study: Study, x0: np.ndarray, U: np.ndarray, nodes: 
     return phi_end, piece_phi, xs, prim
 
 
+def yaw_flip_times(study: Study, x0: np.ndarray, U: np.ndarray) -> np.ndarray:
+    """The times (s) of the reference's yaw-switch flips in (U[0], U[-1]) (``ForceModel.yaw_switch``:
+    empty without one), as the trajectory core locates them (``Trajectory.t_flip``): the
+    reference integrated from ``x0`` (7,) at U[0] through the times ``U`` (increasing), each
+    interval of U that holds two flips or more halved until none does (the noise pieces are
+    shorter than 1/omega, half a revolution is pi/omega, so this rarely happens)."""
+    pr = study.problem
+    if not pr.model.yaw_switch or len(U) < 2:
+        return np.zeros(0)
+    V = np.asarray(U, np.float64)
+    for _ in range(20):
+        nv = len(V)
+        Vp = np.concatenate([V, np.repeat(V[-1:], bucket(nv) - nv)])  # a few sizes share one compile
+        traj = propagate(pr.model, pr.params, pr.ephem, pr.epoch_et_s, x0, Vp)
+        n = np.asarray(traj.n_flips)[:nv]
+        inc = np.diff(n)
+        if np.all(inc <= 1):
+            return np.asarray(traj.t_flip)[1:nv][inc == 1]
+        many = np.flatnonzero(inc > 1)
+        V = np.sort(np.concatenate([V, 0.5 * (V[many] + V[many + 1])]))
+    raise RuntimeError("yaw flips: could not separate the flips of the reference")  # pragma: no cover
+
+
+def cut_at_flips(study: Study, x0: np.ndarray, U: np.ndarray, merge_s: float) -> np.ndarray:
+    """``U`` with the reference's yaw flips (:func:`yaw_flip_times`) added as piece ends (those
+    within ``merge_s`` of a time of U move it): across a flip the STM jumps (the saltation
+    matrix) and the thrust direction reverses out of plane, so a quadrature or an interpolated
+    noise kernel must not straddle one."""
+    flips = yaw_flip_times(study, x0, U)
+    if flips.size == 0:
+        return U
+    U = np.asarray(U, np.float64).copy()
+    extra = []
+    for tf in flips:
+        k = int(np.argmin(np.abs(U - tf)))
+        if abs(U[k] - tf) <= merge_s:
+            if 0 < k < len(U) - 1:
+                U[k] = tf
+        else:
+            extra.append(tf)
+    return np.sort(np.concatenate([U, np.asarray(extra, np.float64)]))
+
+
 def white_unit_noise(study: Study, t: np.ndarray, x0: np.ndarray, directions) -> dict[str, np.ndarray]:
     """The white-acceleration noise of unit spectral density (q = 1 km^2/s^3) over each
     interval (t_{k-1}, t_k] of ``t`` (element 0 zero), for each name in ``directions``:
@@ -74,6 +124,7 @@ def white_unit_noise(study: Study, t: np.ndarray, x0: np.ndarray, directions) ->
         return out
     cells = _noise_cells(study, float(t[0]), float(t[-1]), study.white_step_s)
     U = _union(cells, t)
+    U = cut_at_flips(study, x0, U, 0.0)  # keeps every time of t (the schedule's rows)
     M = len(U)
     nodes, w = gauss_legendre(WHITE_NODES, U[:-1], U[1:])
     phi_end, piece_phi, xn, _ = reference_through_nodes(study, x0, U, nodes)

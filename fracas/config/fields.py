@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from fracas.constants import DAY_S, SPEED_OF_LIGHT_KM_S
+from fracas.constants import DAY_S, G0_KM_S2, SPEED_OF_LIGHT_KM_S
 
 __all__ = [
     "DeckField",
@@ -25,6 +25,18 @@ __all__ = [
     "A_PRIORI_SECTIONS",
     "LIGHT_KM_S",
     "MAX_POSITION_SIGMA_KM",
+    "MAX_DISTANCE_KM",
+    "MAX_SPEED_KM_S",
+    "MAX_IMPULSE_KM_S",
+    "MAX_ANGLE_DEG",
+    "MAX_MASS_KG",
+    "MAX_POWER_KW",
+    "MAX_AREA_M2",
+    "MAX_DAYS",
+    "MAX_ISP_S",
+    "MAX_THRUST_SCALE",
+    "MAX_MU_KM3_S2",
+    "MIN_TOLERANCE",
     "thrust_noise_paths",
     "a_priori_paths",
     "markdown_table",
@@ -36,6 +48,40 @@ __all__ = [
 LIGHT_KM_S = SPEED_OF_LIGHT_KM_S
 #: the largest a-priori position sigma (km): 1e12 km (~6,700 AU) is no knowledge at all
 MAX_POSITION_SIGMA_KM = 1e12
+
+# The physical bounds of the decks' magnitudes (issue 32): a value beyond them is a typo
+# (an exponent, a unit) that would otherwise validate and then run for minutes to nowhere
+# (z = 8.3e18 km, an impulse of 1e6 km/s, alpha_deg = 1e300).  Each is far beyond any
+# mission, so that no real deck meets it.
+#: the largest distance from a centre (km): 1e12 km (~6,700 AU, 40 times Voyager 1's)
+MAX_DISTANCE_KM = 1e12
+#: the largest speed (km/s): the speed of light
+MAX_SPEED_KM_S = SPEED_OF_LIGHT_KM_S
+#: the largest impulsive ΔV (km/s, magnitude): no impulsive engine gives more (the largest
+#: chemical stages give ~10 km/s)
+MAX_IMPULSE_KM_S = 100.0
+#: the largest free angle (deg, magnitude): two turns (an angle written either way round);
+#: also each Legendre coefficient of a pointing law, so that the law's angle over an arc
+#: stays within a few turns of its mean
+MAX_ANGLE_DEG = 720.0
+#: the largest mass (kg): a million tonnes (~300 Saturn Vs)
+MAX_MASS_KG = 1e9
+#: the largest power (kW): 1 GW (nuclear-electric concepts are 1-10 MW)
+MAX_POWER_KW = 1e6
+#: the largest area (m^2): 100 km^2 (the largest solar sails studied are ~1 km^2)
+MAX_AREA_M2 = 1e8
+#: the largest time from the epoch and trajectory duration (days): ~2,700 years
+MAX_DAYS = 1e6
+#: the largest Isp (s): an exhaust at the speed of light
+MAX_ISP_S = SPEED_OF_LIGHT_KM_S / G0_KM_S2
+#: the largest thrust scale factor (a multiplier of the modelled thrust)
+MAX_THRUST_SCALE = 1000.0
+#: the largest GM of a body override (km^3/s^2): 10 x the Sun's
+MAX_MU_KM3_S2 = 1.5e12
+#: the smallest integrator tolerance: a step's error estimate is a difference of two
+#: solutions each rounded at float64's epsilon (2.2e-16) per operation, so its own noise is
+#: a few epsilon; 1e-15 (~5 epsilon) is the tightest a step can be held to
+MIN_TOLERANCE = 1e-15
 
 
 @dataclass(frozen=True)

@@ -47,6 +47,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, PositiveFloat, PositiveInt, model_validator
 
+from fracas.config.fields import LIGHT_KM_S, MAX_MASS_KG, MAX_POSITION_SIGMA_KM
 from fracas.config.trajectory import (
     FieldProblem,
     SourcedDeck,
@@ -54,22 +55,30 @@ from fracas.config.trajectory import (
     parse_sourced,
     read_deck_text,
 )
+from fracas.config.trajectory.values import at_most
 from fracas.errors import DeckError
 
 __all__ = ["TsimDeck", "InSim", "Injection", "Maneuver", "parse_tsim_deck", "load_tsim_deck", "tsim_problems"]
 
 MAX_MISSIONS = 10_000_000
 
-Vector3 = Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=3, max_length=3)]
+#: the largest dispersion scale: a deviation scaled further is no longer small, and the
+#: linear guidance TSIM flies (and compares with TEAM) is meaningless there
+MAX_SCALE = 100.0
+_Sigma = Annotated[float, Field(ge=0)]
+_PositionSigma = Annotated[_Sigma, at_most(MAX_POSITION_SIGMA_KM, "km", "no knowledge at all")]
+_VelocitySigma = Annotated[_Sigma, at_most(LIGHT_KM_S, "km/s", "the speed of light", strict=True)]
+PositionSigmas = Annotated[list[_PositionSigma], Field(min_length=3, max_length=3)]
+VelocitySigmas = Annotated[list[_VelocitySigma], Field(min_length=3, max_length=3)]
 
 
 class Injection(_Section):
     """Injection dispersions (1σ) in a stated frame (the TEAM deck's [control] otherwise)."""
 
     frame: Literal["inertial", "rtn"] = "inertial"
-    position_sigma_km: Vector3
-    velocity_sigma_km_s: Vector3
-    mass_sigma_kg: Annotated[float, Field(ge=0)] = 0.0
+    position_sigma_km: PositionSigmas
+    velocity_sigma_km_s: VelocitySigmas
+    mass_sigma_kg: Annotated[float, Field(ge=0), at_most(MAX_MASS_KG, "kg", "a million tonnes")] = 0.0
 
 
 class InSim(_Section):
@@ -80,7 +89,7 @@ class InSim(_Section):
     first_mission: Annotated[int, Field(ge=0)] = 0
     seed: Annotated[int, Field(ge=0, lt=2**31)] = 1
     batch_missions: PositiveInt = 256
-    scale: Annotated[float, Field(ge=0)] = 1.0
+    scale: Annotated[float, Field(ge=0), at_most(MAX_SCALE, "", "a larger dispersion is no longer small")] = 1.0
     sampling: Literal["eigen", "cholesky"] = "eigen"
     noise_step_days: PositiveFloat | None = None
     near_success_factor: Annotated[float, Field(ge=1)] = 10.0
@@ -98,8 +107,8 @@ class Maneuver(_Section):
     max_iterations: Annotated[int, Field(ge=1, le=50)] = 8
     tolerance: list[PositiveFloat] | None = None
     knowledge: Literal["team", "deck"] = "team"
-    knowledge_position_sigma_km: Vector3 | None = None
-    knowledge_velocity_sigma_km_s: Vector3 | None = None
+    knowledge_position_sigma_km: PositionSigmas | None = None
+    knowledge_velocity_sigma_km_s: VelocitySigmas | None = None
     enabled: bool = True
 
     @model_validator(mode="after")

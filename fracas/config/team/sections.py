@@ -13,7 +13,13 @@ from typing import Annotated, Literal
 
 from pydantic import BeforeValidator, Field, field_validator, model_validator
 
-from fracas.config.fields import A_PRIORI_FIELDS, LIGHT_KM_S, MAX_POSITION_SIGMA_KM, THRUST_NOISE_COMPONENTS
+from fracas.config.fields import (
+    A_PRIORI_FIELDS,
+    LIGHT_KM_S,
+    MAX_MASS_KG,
+    MAX_POSITION_SIGMA_KM,
+    THRUST_NOISE_COMPONENTS,
+)
 from fracas.config.team.bounds import NonNeg, _check_sigma, _kind_sigma
 from fracas.config.team.guidance import GUIDANCE_MODELS
 from fracas.config.trajectory import (
@@ -25,6 +31,7 @@ from fracas.config.trajectory import (
     canonical_name,
     raise_problems,
 )
+from fracas.config.trajectory.values import at_most
 from fracas.measurements.kinds import KINDS as MEASUREMENT_TYPES
 from fracas.params import DECK_ROLES
 
@@ -122,7 +129,7 @@ class APriori(_Section):
     position_rss_km: Annotated[float, Field(gt=0, le=MAX_POSITION_SIGMA_KM)] | None = None
     velocity_sigma_km_s: Vector3 | None = None
     velocity_rss_km_s: Annotated[float, Field(gt=0, lt=LIGHT_KM_S)] | None = None
-    mass_sigma_kg: NonNeg = 0.0
+    mass_sigma_kg: Annotated[NonNeg, at_most(MAX_MASS_KG, "kg", "a million tonnes")] = 0.0
     from_punch: str | None = None
     shaped: ShapedAPriori | None = None
 

@@ -8,11 +8,17 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
+from fracas.config.fields import LIGHT_KM_S, MAX_POSITION_SIGMA_KM
 from fracas.config.team.bounds import NonNeg, StationName, _kind_sigma
 from fracas.config.team.sections import Visibility
 from fracas.config.trajectory import FieldProblem, PositiveFloat, Vector3, _Section, raise_problems
+from fracas.config.trajectory.values import AngleDeg, PositionKm, at_most
 from fracas.measurements.kinds import KINDS as MEASUREMENT_TYPES
 from fracas.measurements.kinds import MEASUREMENT_KINDS, N_STATIONS
+
+#: a reset's sigmas: the a-priori's bounds (fracas.config.fields)
+PositionSigma = Annotated[float, Field(gt=0), at_most(MAX_POSITION_SIGMA_KM, "km", "no knowledge at all")]
+VelocitySigma = Annotated[float, Field(gt=0), at_most(LIGHT_KM_S, "km/s", "the speed of light", strict=True)]
 
 # The onboard (Shuttle UNF) fields of a [[tracking]] entry and the kinds that take them.
 _ONBOARD_FIELDS = {
@@ -41,14 +47,14 @@ class Tracking(_Section):
     interval_hours: PositiveFloat
     sigma: PositiveFloat
     body: str | None = None
-    star_ra_deg: float | None = None
+    star_ra_deg: AngleDeg | None = None
     star_dec_deg: float | None = None
     # onboard kinds (Shuttle UNF; fracas.measurements.onboard, docs/onboard_measurements.md)
     count_interval_s: PositiveFloat | None = None
     sensor_frame: Literal["inertial", "lvlh"] | None = None
     sensor_axes: list[Vector3] | None = None
     target: Literal["body", "point", "station"] | None = None
-    target_point_km: Vector3 | None = None
+    target_point_km: PositionKm | None = None
     target_station: StationName | None = None
     horizon_azimuth_deg: Annotated[float, Field(ge=-360, le=360)] | None = None
     boresight_depression_deg: Annotated[float, Field(ge=-90, le=90)] | None = None
@@ -135,8 +141,8 @@ class Event(_Section):
     stop_days: NonNeg | None = None
     interval_days: PositiveFloat | None = None
     predict_to_days: PositiveFloat | None = None
-    position_sigma_km: Annotated[list[Annotated[float, Field(gt=0)]], Field(min_length=3, max_length=3)] | None = None
-    velocity_sigma_km_s: Annotated[list[Annotated[float, Field(gt=0)]], Field(min_length=3, max_length=3)] | None = None
+    position_sigma_km: Annotated[list[PositionSigma], Field(min_length=3, max_length=3)] | None = None
+    velocity_sigma_km_s: Annotated[list[VelocitySigma], Field(min_length=3, max_length=3)] | None = None
 
     @model_validator(mode="after")
     def _consistent(self) -> Event:

@@ -63,8 +63,8 @@ def _speed(deck: TrajectoryDeck, r: float, mu: float) -> tuple[tuple, Any, float
     if st.oem is not None:
         return (("initial_state", "oem", "path"), st.oem.path, math.hypot(*st.oem.v_km_s)) if st.oem.v_km_s else None
     el = st.elements
-    v2 = mu * (2.0 / r - 1.0 / el.a_km)
-    return (("initial_state", "elements", "a_km"), el.a_km, math.sqrt(v2)) if v2 > 0.0 else None
+    v2 = mu * (2.0 / r - 1.0 / el.a_km) if el.a_km != 0.0 else math.inf
+    return (("initial_state", "elements", "a_km"), el.a_km, math.sqrt(v2)) if 0.0 < v2 < math.inf else None
 
 
 def _radius_field(deck: TrajectoryDeck) -> tuple[tuple, Any]:
@@ -132,7 +132,7 @@ def state_warnings(deck: TrajectoryDeck) -> list[str]:
     if speed is not None:
         loc, value, v = speed
         v_esc = math.sqrt(2.0 * mu / r)
-        if v > ESCAPE_FACTOR * v_esc:
+        if v_esc > 0.0 and math.isfinite(v) and v > ESCAPE_FACTOR * v_esc:
             guess = "likely m/s (the field is km/s)" if loc[-1] == "v_km_s" else "likely a unit slip"
             out.append(
                 _line(

@@ -7,24 +7,54 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal
 
-from pydantic import AfterValidator, Field, field_validator, model_validator
+from pydantic import AfterValidator, Field, PlainValidator, field_validator, model_validator
 
+from fracas.config.fields import (
+    MAX_AREA_M2,
+    MAX_IMPULSE_KM_S,
+    MAX_MU_KM3_S2,
+    MAX_POWER_KW,
+    MAX_SPEED_KM_S,
+    MAX_THRUST_SCALE,
+    MIN_TOLERANCE,
+)
 from fracas.config.trajectory.problems import FieldProblem, _exactly_one
 from fracas.config.trajectory.values import (
+    AngleDeg,
     BodyName,
+    Days,
+    DistanceKm,
     EpochValue,
+    IspS,
+    MassKg,
     ParamLabel,
     PositiveFloat,
-    Vector3,
     _check_body_keys,
     _no_repeats,
     _Section,
+    _vector3,
+    at_most,
+    norm_at_most,
 )
+
+#: an impulsive ΔV (km/s): at most MAX_IMPULSE_KM_S long
+ImpulseKmS = Annotated[
+    list[float], PlainValidator(_vector3), norm_at_most(MAX_IMPULSE_KM_S, "km/s", "no impulsive engine gives more")
+]
+
+
+def _tolerance(v: float) -> float:
+    if v < MIN_TOLERANCE:
+        raise ValueError(
+            f"must be >= {MIN_TOLERANCE:g}: float64 rounds every operation at 2.2e-16 (its epsilon), so a step's "
+            "error estimate is itself a few epsilon and a tighter tolerance can never be met"
+        )
+    return v
 
 
 class Spacecraft(_Section):
-    mass_kg: PositiveFloat
-    area_m2: Annotated[float, Field(ge=0)] = 0.0
+    mass_kg: MassKg
+    area_m2: Annotated[float, Field(ge=0), at_most(MAX_AREA_M2, "m^2", "100 km^2")] = 0.0
     cr: Annotated[float, Field(ge=0, le=2)] = 1.0
 
 
@@ -32,12 +62,14 @@ class Propulsion(_Section):
     """Electric propulsion: thrust T = 2 eta P / c, mass flow T / c (FRACAS EP)."""
 
     power_source: Literal["solar", "nuclear"] = "solar"
-    power_kw: PositiveFloat
+    power_kw: Annotated[float, Field(gt=0), at_most(MAX_POWER_KW, "kW", "1 GW")]
     decay_days: PositiveFloat | None = None
     efficiency: Annotated[float, Field(gt=0, le=1)]
-    exhaust_velocity_km_s: PositiveFloat | None = None
-    isp_s: PositiveFloat | None = None
-    thrust_scale: Annotated[float, Field(ge=0)] = 1.0
+    exhaust_velocity_km_s: (
+        Annotated[float, Field(gt=0), at_most(MAX_SPEED_KM_S, "km/s", "the speed of light", strict=True)] | None
+    ) = None
+    isp_s: IspS | None = None
+    thrust_scale: Annotated[float, Field(ge=0), at_most(MAX_THRUST_SCALE, "")] = 1.0
 
     @model_validator(mode="after")
     def _consistent(self) -> Propulsion:
@@ -54,17 +86,18 @@ class ThrustArc(_Section):
     beta's sign following cos u (the argument of latitude), flipping at the antinodes
     (Edelbaum's plane-change steering: beta > 0 raises the inclination, < 0 lowers it)."""
 
-    start_days: float
-    stop_days: float
+    start_days: Days
+    stop_days: Days
     frame: Literal["velocity", "inertial", "velocity_yaw_switch"] = "velocity"
-    alpha_deg: float = 0.0
+    alpha_deg: AngleDeg = 0.0
     beta_deg: Annotated[float, Field(ge=-90, le=90)] = 0.0
     throttle: Annotated[float, Field(ge=0, le=1)] = 1.0
     # pointing that varies within the arc: Legendre coefficients (P1, P2, P3) of alpha and beta in
     # the arc's normalised time s = (2t - start - stop)/(stop - start); alpha_deg/beta_deg stay the
     # arc's mean angles.  Up to three each; [] (the default) is constant pointing.
-    alpha_legendre_deg: Annotated[list[float], Field(max_length=3)] = []
-    beta_legendre_deg: Annotated[list[float], Field(max_length=3)] = []
+    # Each coefficient is at most MAX_ANGLE_DEG (|P_n| <= 1: the law stays within a few turns).
+    alpha_legendre_deg: Annotated[list[AngleDeg], Field(max_length=3)] = []
+    beta_legendre_deg: Annotated[list[AngleDeg], Field(max_length=3)] = []
 
     @model_validator(mode="after")
     def _ordered(self) -> ThrustArc:
@@ -83,27 +116,27 @@ class ThrustArc(_Section):
 
 
 class Impulse(_Section):
-    time_days: float
-    dv_km_s: Vector3
+    time_days: Days
+    dv_km_s: ImpulseKmS
     frame: Literal["velocity", "inertial"] = "velocity"
-    isp_s: PositiveFloat = 300.0
+    isp_s: IspS = 300.0
 
 
 class BodyOverride(_Section):
-    mu_km3_s2: PositiveFloat | None = None
-    j2: float | None = None
-    radius_km: PositiveFloat | None = None
+    mu_km3_s2: Annotated[float, Field(gt=0), at_most(MAX_MU_KM3_S2, "km^3/s^2", "10 x the Sun's")] | None = None
+    j2: Annotated[float, Field(ge=-1, le=1)] | None = None
+    radius_km: DistanceKm | None = None
 
 
 class ConicBody(_Section):
     """Heliocentric conic elements standing in for the body's ephemeris (FRACAS EPHEM)."""
 
-    a_km: PositiveFloat
+    a_km: DistanceKm
     e: Annotated[float, Field(ge=0, lt=1)]
     i_deg: Annotated[float, Field(ge=0, le=180)]
-    raan_deg: float
-    argp_deg: float
-    mean_anomaly_deg: float
+    raan_deg: AngleDeg
+    argp_deg: AngleDeg
+    mean_anomaly_deg: AngleDeg
     epoch: EpochValue
     frame: Literal["EME2000", "ECLIPJ2000"] = "EME2000"
 
@@ -134,7 +167,7 @@ class Integrator(_Section):
     method: Literal["auto", "dprkn12", "dprkn8", "dop853", "rkn4"] = "auto"
     formulation: Literal["auto", "cowell", "encke"] = "auto"
     step_control: Literal["auto", "tolerance", "c_nom"] = "auto"
-    tolerance: Annotated[float, Field(ge=1e-15, le=1e-3)] = 1e-12
+    tolerance: Annotated[float, Field(gt=0, le=1e-3), AfterValidator(_tolerance)] = 1e-12
     c_nom: Annotated[float, Field(gt=0, le=2)] = 0.3
     dt_max_s: PositiveFloat | None = None
     rect_ratio: Annotated[float, Field(gt=0, lt=1)] = 0.01
@@ -189,11 +222,11 @@ class Integrator(_Section):
 
 
 class Stop(_Section):
-    duration_days: float | None = None  # < 0: backward propagation
+    duration_days: Days | None = None  # < 0: backward propagation
     final_epoch: EpochValue | None = None
     condition: Literal["time", "soi_entry", "closest_approach", "radius"] = "time"
     body: BodyName | None = None
-    radius_km: PositiveFloat | None = None
+    radius_km: DistanceKm | None = None
 
     @model_validator(mode="after")
     def _consistent(self) -> Stop:

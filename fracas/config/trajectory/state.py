@@ -11,8 +11,20 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, PlainValidator, PrivateAttr, field_validator, model_validator
 
+from fracas.config.fields import MAX_DISTANCE_KM
 from fracas.config.trajectory.problems import FieldProblem, _exactly_one, _Given
-from fracas.config.trajectory.values import BodyName, IsoEpoch, PositiveFloat, Vector3, _iso_value, _Section
+from fracas.config.trajectory.values import (
+    AngleDeg,
+    BodyName,
+    DistanceKm,
+    IsoEpoch,
+    PositionKm,
+    SpeedKmS,
+    VelocityKmS,
+    _iso_value,
+    _Section,
+    at_most,
+)
 from fracas.timescales import epoch_to_et, et_to_calendar
 
 
@@ -34,8 +46,8 @@ class Epoch(_Section):
 
 
 class Cartesian(_Section):
-    r_km: Vector3
-    v_km_s: Vector3
+    r_km: PositionKm
+    v_km_s: VelocityKmS
 
     @field_validator("r_km")
     @classmethod
@@ -48,13 +60,13 @@ class Cartesian(_Section):
 class Elements(_Section):
     """Classical elements about the centre (a < 0 for hyperbolas, e >= 0, e != 1)."""
 
-    a_km: float
-    e: Annotated[float, Field(ge=0)]
+    a_km: Annotated[float, at_most(MAX_DISTANCE_KM, "km", "about 6,700 AU")]
+    e: Annotated[float, Field(ge=0, le=1e6)]
     i_deg: Annotated[float, Field(ge=0, le=180)]
-    raan_deg: float = 0.0
-    argp_deg: float = 0.0
-    mean_anomaly_deg: float | None = None
-    true_anomaly_deg: float | None = None
+    raan_deg: AngleDeg = 0.0
+    argp_deg: AngleDeg = 0.0
+    mean_anomaly_deg: float | None = None  # a hyperbola's grows without bound (e sinh H - H)
+    true_anomaly_deg: AngleDeg | None = None
 
     @model_validator(mode="after")
     def _consistent(self) -> Elements:
@@ -81,12 +93,12 @@ class Spherical(_Section):
     """Position/velocity in spherical form: flight-path angle gamma from the local
     horizontal, azimuth sigma from north towards east."""
 
-    r_km: PositiveFloat
+    r_km: DistanceKm
     lat_deg: Annotated[float, Field(ge=-90, le=90)]
-    lon_deg: float
-    v_km_s: Annotated[float, Field(ge=0)]
+    lon_deg: AngleDeg
+    v_km_s: SpeedKmS
     gamma_deg: Annotated[float, Field(ge=-90, le=90)]
-    sigma_deg: float
+    sigma_deg: AngleDeg
 
 
 def _oem_at(v: Any) -> str:

@@ -11,6 +11,7 @@ from typing import Annotated, Any
 
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, PlainValidator
 
+from fracas.config.fields import MAX_ANGLE_DEG, MAX_DAYS, MAX_DISTANCE_KM, MAX_ISP_S, MAX_MASS_KG, MAX_SPEED_KM_S
 from fracas.config.trajectory.problems import FieldProblem
 from fracas.constants import BODIES
 from fracas.errors import ConfigError
@@ -80,6 +81,55 @@ def _vector3(v: Any) -> list[float]:
 
 Vector3 = Annotated[list[float], PlainValidator(_vector3)]
 PositiveFloat = Annotated[float, Field(gt=0)]
+
+
+def at_most(limit: float, unit: str, why: str = "", strict: bool = False) -> AfterValidator:
+    """A validator of a number's magnitude (|x| <= limit, or < with ``strict``) whose message
+    names the bound, its unit and why: ``must be <= 720 deg in magnitude (two turns)``."""
+    op = "<" if strict else "<="
+    text = f"must be {op} {limit:.6g} {unit} in magnitude" + (f" ({why})" if why else "")
+
+    def check(v: float) -> float:
+        if not (abs(v) < limit if strict else abs(v) <= limit):
+            raise ValueError(text)
+        return v
+
+    return AfterValidator(check)
+
+
+def norm_at_most(limit: float, unit: str, why: str = "", strict: bool = False) -> AfterValidator:
+    """A validator of a 3-vector's length (as :func:`at_most`), naming the length found."""
+    op = "<" if strict else "<="
+
+    def check(v: list[float]) -> list[float]:
+        n = math.hypot(*v)
+        if not (n < limit if strict else n <= limit):
+            raise ValueError(
+                f"its length {n:.4g} {unit} must be {op} {limit:.6g} {unit}" + (f" ({why})" if why else "")
+            )
+        return v
+
+    return AfterValidator(check)
+
+
+#: a free angle (deg): two turns either way at most (fracas.config.fields.MAX_ANGLE_DEG)
+AngleDeg = Annotated[float, at_most(MAX_ANGLE_DEG, "deg", "two turns")]
+#: a time from the epoch or a duration (days): ~2,700 years at most
+Days = Annotated[float, at_most(MAX_DAYS, "d", "about 2,700 years")]
+#: a distance from a centre (km, > 0): ~6,700 AU at most
+DistanceKm = Annotated[float, Field(gt=0), at_most(MAX_DISTANCE_KM, "km", "about 6,700 AU")]
+#: a position (km): within ~6,700 AU of its centre
+PositionKm = Annotated[list[float], PlainValidator(_vector3), norm_at_most(MAX_DISTANCE_KM, "km", "about 6,700 AU")]
+#: a velocity (km/s): below the speed of light
+VelocityKmS = Annotated[
+    list[float], PlainValidator(_vector3), norm_at_most(MAX_SPEED_KM_S, "km/s", "the speed of light", strict=True)
+]
+#: a speed (km/s, >= 0): below the speed of light
+SpeedKmS = Annotated[float, Field(ge=0), at_most(MAX_SPEED_KM_S, "km/s", "the speed of light", strict=True)]
+#: a mass (kg, > 0): a million tonnes at most
+MassKg = Annotated[float, Field(gt=0), at_most(MAX_MASS_KG, "kg", "a million tonnes")]
+#: a specific impulse (s, > 0): an exhaust below the speed of light
+IspS = Annotated[float, Field(gt=0), at_most(MAX_ISP_S, "s", "an exhaust at the speed of light", strict=True)]
 
 _LABEL_RE = re.compile(r"^[a-z][a-z0-9_]*(\[[A-Za-z0-9_]+(,[A-Za-z0-9_]+)*\])?$")
 

@@ -109,8 +109,22 @@ def seal(path: str | os.PathLike, kind: str = "") -> str:
     return sha
 
 
+class _Newer(str):
+    """Why a header is refused that is not damaged: a later version of it (a newer fracas)."""
+
+
+_VERSION_RE = re.compile(rb"fracas-hdf5-integrity ([0-9]{1,9})\n")
+
+
 def _parse_header(block: bytes) -> tuple[str, int, str] | str:
-    """(kind, length, sha256) from a user block, or why it is not a valid header."""
+    """(kind, length, sha256) from a user block, or why it is not a valid header (a
+    :class:`_Newer` when it is a later version's header, written by a newer fracas)."""
+    version = _VERSION_RE.match(block)
+    if version is not None and int(version.group(1)) > 1:
+        return _Newer(
+            f"integrity header version {int(version.group(1))}: written by a newer fracas (this one reads "
+            "version 1); read it with that version of fracas or a later one"
+        )
     text = block.rstrip(b"\0")
     if b"\0" in text:
         return "NUL bytes inside the integrity header"
@@ -233,9 +247,15 @@ def _check(p: Path, what: str, checksum: bool = True) -> tuple[str | None, str]:
             st = os.fstat(fh.fileno())
             size = st.st_size
             block = fh.read(USERBLOCK_SIZE)
-            if block.startswith(MAGIC) or (block[:8] != HDF5_SIGNATURE and _signature_at(fh, size) == USERBLOCK_SIZE):
+            if (
+                block.startswith(MAGIC)
+                or _VERSION_RE.match(block)
+                or (block[:8] != HDF5_SIGNATURE and _signature_at(fh, size) == USERBLOCK_SIZE)
+            ):
                 parsed = _parse_header(block)
-                if isinstance(parsed, str):
+                if isinstance(parsed, _Newer):
+                    damage = str(parsed)
+                elif isinstance(parsed, str):
                     damage = f"damaged file: {parsed} (the file was changed after fracas wrote it)"
                 else:
                     kind, length, sha = parsed

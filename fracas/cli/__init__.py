@@ -20,6 +20,7 @@ import click
 
 from fracas import __version__
 from fracas.cli.console import (
+    FracasGroup,
     InputFile,
     OutputFile,
     TerminalConsole,
@@ -53,7 +54,7 @@ def _host_devices(ctx: click.Context, _param, value: int | None) -> int | None:
     return value
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=FracasGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, "--version", prog_name="fracas", message="%(prog)s %(version)s")
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
 @click.option(
@@ -73,7 +74,7 @@ def main(ctx: click.Context, debug: bool) -> None:
 
 
 @main.command()
-@click.argument("deck", type=click.Path(dir_okay=True, path_type=Path))
+@click.argument("deck", type=InputFile())
 @click.option(
     "-o",
     "--output",
@@ -104,7 +105,7 @@ def stm() -> None:
 
 
 @stm.command("build")
-@click.argument("deck", type=click.Path(dir_okay=True, path_type=Path))
+@click.argument("deck", type=InputFile())
 @click.option(
     "-o",
     "--output",
@@ -205,7 +206,7 @@ def _run_only_options(f: Any) -> Any:
 
 
 @main.command()
-@click.argument("deck", type=click.Path(dir_okay=True, path_type=Path))
+@click.argument("deck", type=InputFile())
 @_run_only_options
 @click.option(
     "-o",
@@ -293,7 +294,7 @@ def report(
 
 
 @main.command()
-@click.argument("deck", type=click.Path(dir_okay=True, path_type=Path))
+@click.argument("deck", type=InputFile())
 @click.option(
     "--vary",
     multiple=True,
@@ -336,7 +337,7 @@ def sweep(
 
 
 @main.command()
-@click.argument("decks", nargs=-1, required=True, type=click.Path(dir_okay=True, path_type=Path))
+@click.argument("decks", nargs=-1, required=True, type=InputFile())
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
 @click.pass_context
 def validate(ctx: click.Context, decks: tuple[Path, ...], debug: bool) -> None:

@@ -124,6 +124,30 @@ def _quiet_shutdown() -> None:
         logging.getLogger(name).setLevel(logging.CRITICAL + 1)
 
 
+def _early_interrupt(signum: int, frame: Any) -> None:
+    """SIGINT before a command's own handling starts (imports, parsing): one line, exit 130
+    (not click's "Aborted!" and exit 1)."""
+    _interrupted()
+    raise SystemExit(130)
+
+
+class FracasGroup(click.Group):
+    """The ``fracas`` group: an interrupt while Python and click start up ends as one inside
+    a command does (:class:`_Interrupts`)."""
+
+    def main(self, *args: Any, **kwargs: Any) -> Any:
+        import signal
+        import threading
+
+        if threading.current_thread() is not threading.main_thread():
+            return super().main(*args, **kwargs)
+        previous = signal.signal(signal.SIGINT, _early_interrupt)
+        try:
+            return super().main(*args, **kwargs)
+        finally:
+            signal.signal(signal.SIGINT, previous)
+
+
 class _Interrupts:
     """While a command runs: the first SIGINT raises KeyboardInterrupt (as Python's default
     handler does) and is remembered; later ones are only remembered (the clean-up the first
@@ -233,6 +257,19 @@ class _OneLineError(click.ClickException):
         _error_line(f"fracas: error: {self.message}")
 
 
+def _utf8_name(text: str) -> None:
+    """A file name that is not UTF-8 (``good\\xff.toml``) refused up front, in one line:
+    results, provenance and reference decks record file names as UTF-8 text, and a run
+    should not end in a file it cannot write."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        shown = _one_line(text)
+        raise _OneLineError(
+            f"{shown}: the file name is not UTF-8 text; expected a UTF-8 name (rename the file or its folder)"
+        ) from None
+
+
 class OutputFile(click.ParamType):
     """An output file option (``-o``, ``--plot``, ...): the value as the user wrote it is
     checked before click's Path would drop a trailing ``/`` or turn ``''`` into ``.``; an
@@ -250,6 +287,7 @@ class OutputFile(click.ParamType):
         if isinstance(value, Path):
             return value
         text = str(value)
+        _utf8_name(text)
         if text.strip() in ("", ".", "..") or text.endswith("/") or Path(text).is_dir():
             from fracas.errors import OutputPathError
             from fracas.io.atomic import check_output_path
@@ -262,14 +300,18 @@ class OutputFile(click.ParamType):
 
 
 class InputFile(click.ParamType):
-    """A file to read: a Path; whether it can be read is the reader's one-line check."""
+    """A file to read (a deck, --stm, a results file): a Path with a UTF-8 name; whether it
+    can be read is the reader's one-line check."""
 
     name = "file"
 
     def convert(self, value: Any, param: Any, ctx: Any) -> Any:
         from pathlib import Path
 
-        return value if isinstance(value, Path) else Path(value)
+        if isinstance(value, Path):
+            return value
+        _utf8_name(str(value))
+        return Path(value)
 
 
 def _duration(seconds: float) -> str:

@@ -208,7 +208,7 @@ def compare_oem(ctx: click.Context, trajectory: Path, oem_file: Path, as_json: b
 
 
 @click.command("import-namelist")
-@click.argument("namelist", type=click.Path(dir_okay=True, path_type=Path))
+@click.argument("namelist", type=InputFile())
 @click.option(
     "-o",
     "--output",

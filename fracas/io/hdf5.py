@@ -55,6 +55,7 @@ from fracas.io.hdf5_integrity import (
     seal,
     verify_file,
 )
+from fracas.io.inputs import path_text
 
 __all__ = [
     "CHECKSUM_ATTR",
@@ -151,13 +152,18 @@ def kind_attr(f: h5py.File) -> str:
 
 def read_kind(path: str | os.PathLike, error: ErrorType = ResultsFileError, what: str = "results file") -> str:
     """The kind of a fracas file (its ``file_kind``, ``format`` or ``kind`` root attribute),
-    read from the integrity header when the file has one, else from the attributes after
-    :func:`verify_file`'s probe; "" when it names none."""
+    read after :func:`verify_file`'s checks; "" when it names none.  A sealed file's integrity
+    header names its kind too; one that names another (a header rewritten after fracas wrote
+    the file: forged) is refused, so that no file is called what only its header claims."""
     tag = verify_file(path, error, what)
-    if tag:
-        return tag
     with _opened(Path(path), error, what) as f:
-        return kind_attr(f)
+        kind = kind_attr(f)
+    if tag and tag != "".join(c if " " <= c <= "~" else "?" for c in kind)[:100]:
+        raise error(
+            f"{path}: its integrity header says kind {tag!r} but the file itself says {kind or 'none'!r} "
+            f"(the header was rewritten after fracas wrote the file); not a {what} fracas can read"
+        )
+    return kind
 
 
 EPOCH_MEANING = "epoch of t = 0, TDB seconds past J2000 (2000-01-01T12:00:00 TDB)"
@@ -247,9 +253,9 @@ def provenance(deck_text: str | None, deck_path: str | None = None) -> dict[str,
     return {
         "fracas_version": __version__,
         "created_utc": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
-        "command": " ".join(sys.argv),
+        "command": " ".join(path_text(a) for a in sys.argv),  # a file name need not be UTF-8
         "platform": platform.platform(),
-        "deck_path": deck_path or "",
+        "deck_path": path_text(deck_path) if deck_path else "",
         "deck_sha256": hashlib.sha256(text.encode("utf-8")).hexdigest(),
         "deck_text": text,
         "libraries": library_versions(),

@@ -13,15 +13,28 @@ from __future__ import annotations
 import csv
 import io
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import h5py
 import numpy as np
 
 from fracas.errors import ResultsFileError
 from fracas.io.atomic import atomic_path
-from fracas.io.hdf5 import atomic_h5, attr_int, attr_strs, one_line, open_h5, read_str, set_attr, write, write_strings
+from fracas.io.hdf5 import (
+    Checked,
+    atomic_h5,
+    attr_int,
+    attr_strs,
+    attr_text,
+    one_line,
+    open_h5,
+    set_attr,
+    write,
+    write_strings,
+)
 
 __all__ = ["SweepTable", "write_sweep_table", "read_sweep_table", "csv_path", "KIND", "VERSION"]
 
@@ -128,50 +141,78 @@ def _write_csv(path: Path, rows, inputs, outputs, units) -> None:
 
 
 def read_sweep_table(path: str | os.PathLike) -> SweepTable:
-    """Read a table written by :func:`write_sweep_table`; a one-line ResultsFileError if it
-    is missing, damaged (integrity header, :func:`fracas.io.hdf5.verify_file`), unreadable,
-    not a sweep table or incomplete."""
+    """Read a table written by :func:`write_sweep_table` through the checked reader that
+    ``--resume`` uses (:class:`fracas.io.hdf5.Checked`: the integrity header, then the dtype,
+    shape and SHA-256 of every dataset); a one-line ResultsFileError if it is missing,
+    damaged, unreadable, not a sweep table, incomplete, or holds rows that are not a sweep's
+    (a status other than ok/failed, a malformed key, a repeated index)."""
     p = Path(path)
     try:
         with open_h5(p, ResultsFileError, "sweep table") as f:
-            kind = f.attrs.get("kind")
-            kind = kind.decode() if isinstance(kind, bytes) else kind
-            if kind != KIND:
-                raise ResultsFileError(f"{p}: not a fracas sweep table (kind = {kind!r}, expected {KIND!r})")
-            version = attr_int(f, "version")
-            if version is None or not 1 <= version <= VERSION:
-                raise ResultsFileError(
-                    f"{p}: sweep table version = {version if version is not None else f.attrs.get('version')!r}, "
-                    f"this fracas reads 1 to {VERSION}"
-                )
-            ins, outs = attr_strs(f, "input_columns"), attr_strs(f, "output_columns")
-            units: dict[str, str] = {}
-            inputs: dict[str, np.ndarray] = {}
-            for n in ins:
-                ds = f["inputs"][n]
-                inputs[n] = np.array(read_str(ds), dtype=object) if ds.dtype.kind in "OS" else ds[()]
-                units[n] = ds.attrs["units"]
-            outputs = {}
-            for n in outs:
-                outputs[n] = f["outputs"][n][()]
-                units[n] = f["outputs"][n].attrs["units"]
-            attrs = {}
-            for k in ("title", "base_hash", "study", "combine"):
-                if k in f.attrs:
-                    v = f.attrs[k]
-                    attrs[k] = v.decode() if isinstance(v, bytes) else (str(v) if isinstance(v, str) else v)
-            n = f["index"].shape[0]
-            strs = lambda name: read_str(f[name]) if n else []  # noqa: E731
-            return SweepTable(
-                index=f["index"][()],
-                key=list(strs("key")),
-                inputs=inputs,
-                outputs=outputs,
-                status=list(strs("status")),
-                error=list(strs("error")),
-                wall_s=f["wall_s"][()],
-                units={k: (v.decode() if isinstance(v, bytes) else str(v)) for k, v in units.items()},
-                attrs=attrs,
-            )
-    except (OSError, KeyError) as exc:
+            table = _read_checked(f, p)
+    except ResultsFileError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - whatever a damaged file makes h5py or numpy raise
         raise ResultsFileError(f"{p}: cannot read the sweep table ({type(exc).__name__}: {one_line(exc)})") from None
+    _check_rows(table, p)
+    return table
+
+
+def _read_checked(f: Any, p: Path) -> SweepTable:
+    kind = attr_text(f, "kind")
+    if kind != KIND:
+        raise ResultsFileError(f"{p}: not a fracas sweep table (kind = {kind!r}, expected {KIND!r})")
+    version = attr_int(f, "version")
+    if version is None or not 1 <= version <= VERSION:
+        raise ResultsFileError(
+            f"{p}: sweep table version = {version if version is not None else f.attrs.get('version')!r}, "
+            f"this fracas reads 1 to {VERSION}"
+        )
+    c = Checked(f, str(p), ResultsFileError)
+    ins, outs = attr_strs(f, "input_columns"), attr_strs(f, "output_columns")
+    index = c.num("index", (None,), integer=True)
+    n = int(index.shape[0])
+    units: dict[str, str] = {}
+    inputs: dict[str, np.ndarray] = {}
+    for name in ins:
+        ds = c.dataset(f"inputs/{name}")
+        strings = h5py.check_string_dtype(ds.dtype) is not None
+        inputs[name] = np.array(c.strs(ds.name, n), dtype=object) if strings else c.num(ds.name, (n,))
+        units[name] = attr_text(ds, "units") or "none"
+    outputs = {}
+    for name in outs:
+        outputs[name] = c.num(f"outputs/{name}", (n,))
+        units[name] = attr_text(f[f"outputs/{name}"], "units") or "none"
+    attrs = {}
+    for k in ("title", "base_hash", "study", "combine"):
+        if k in f.attrs:
+            v = f.attrs[k]
+            attrs[k] = v.decode() if isinstance(v, bytes) else v
+    return SweepTable(
+        index=index,
+        key=c.strs("key", n),
+        inputs=inputs,
+        outputs=outputs,
+        status=c.strs("status", n),
+        error=c.strs("error", n),
+        wall_s=c.num("wall_s", (n,)),
+        units=units,
+        attrs=attrs,
+    )
+
+
+_KEY = re.compile(r"^[0-9a-f]{16}$")
+
+
+def _check_rows(t: SweepTable, p: Path) -> None:
+    """Rows a sweep writes: status ok or failed, a key of 16 hex digits, distinct indices."""
+    n = len(t)
+    bad = next((k for k, s in enumerate(t.status) if s not in ("ok", "failed")), None)
+    if bad is None:
+        bad = next((k for k, s in enumerate(t.key) if not _KEY.match(s)), None)
+    if bad is not None or len(set(t.index.tolist())) != n:
+        row = bad if bad is not None else n - 1
+        raise ResultsFileError(
+            f"{p}: row {row}: status {t.status[row]!r}, key {t.key[row]!r} or a repeated index: expected a "
+            "sweep's rows (ok/failed, 16 hex digits, distinct indices)"
+        )

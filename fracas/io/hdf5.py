@@ -55,6 +55,7 @@ from fracas.io.hdf5_integrity import (
     seal,
     verify_file,
 )
+from fracas.io.inputs import path_text
 
 __all__ = [
     "CHECKSUM_ATTR",
@@ -252,9 +253,9 @@ def provenance(deck_text: str | None, deck_path: str | None = None) -> dict[str,
     return {
         "fracas_version": __version__,
         "created_utc": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
-        "command": " ".join(sys.argv),
+        "command": " ".join(path_text(a) for a in sys.argv),  # a file name need not be UTF-8
         "platform": platform.platform(),
-        "deck_path": deck_path or "",
+        "deck_path": path_text(deck_path) if deck_path else "",
         "deck_sha256": hashlib.sha256(text.encode("utf-8")).hexdigest(),
         "deck_text": text,
         "libraries": library_versions(),

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import importlib
 import types
+from collections.abc import Iterable
 from pathlib import Path
 
 from fracas.build.trajectory import model_bodies
@@ -42,7 +43,7 @@ from fracas.io.atomic import check_output_path
 from fracas.measurements.kinds import check_measurement_label, is_measurement_label
 from fracas.params import parse_label
 
-__all__ = ["trajectory_problems", "team_problems"]
+__all__ = ["trajectory_problems", "team_problems", "output_problems"]
 
 _BUILTIN_STATIONS = ("goldstone", "madrid", "canberra")
 
@@ -126,6 +127,21 @@ def _output_problem(path: Path, src: str, field: str, rel: str) -> str | None:
     except OutputPathError as exc:
         return _line(src, field, rel, exc.reason)
     return None
+
+
+def output_problems(deck, fields: Iterable[tuple[str, str | None]]) -> list[str]:
+    """The files a run writes that the deck names (``(field, path as written)``; None: not
+    named), each checked as the run checks it (:func:`fracas.io.atomic.check_output_path`),
+    so that ``fracas validate`` refuses what the run would (a plot named ``"."``, a folder,
+    an unwritable place), one line each naming the field."""
+    src = deck.source_path or "<deck>"
+    out = []
+    for field, rel in fields:
+        if rel:
+            problem = _output_problem(deck.resolve(rel), src, field, rel)
+            if problem:
+                out.append(problem)
+    return out
 
 
 def _h5_attrs(path: Path, group: str | None = None) -> dict | str:

@@ -170,6 +170,15 @@ def report(file: Path, opts: ReportOptions, console: Console) -> None:
     )
 
 
+def rendezvous_deck_problems(deck: Any) -> list[str]:
+    """``fracas validate`` on a rendezvous deck: :func:`fracas.config.rendezvous.
+    rendezvous_problems`, then the files the run writes that the deck names."""
+    from fracas.validate import output_problems
+
+    named = [("output.results", deck.output.results), ("output.plot", deck.output.plot)]
+    return rendezvous_problems(deck) + output_problems(deck, named)
+
+
 MODE = Mode(
     name="rendezvous",
     noun="rendezvous",
@@ -179,5 +188,5 @@ MODE = Mode(
     command=command,
     results_kinds=("fracas-rendezvous-results",),
     report=report,
-    problems=rendezvous_problems,
+    problems=rendezvous_deck_problems,
 )

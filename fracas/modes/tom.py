@@ -286,6 +286,18 @@ def report(file: Path, opts: ReportOptions, console: Console) -> None:
     )
 
 
+def tom_deck_problems(deck: Any) -> list[str]:
+    """``fracas validate`` on a TOM deck: :func:`fracas.config.tom.tom_problems`, then the
+    files the run writes that the deck names (as :func:`run_tom` checks them)."""
+    from fracas.validate import output_problems
+
+    t = deck.tom
+    named = [("tom.results", t.results), ("tom.plot", t.plot), ("tom.stm_file", t.stm_file)]
+    if t.submode != "grid":
+        named.insert(1, ("tom.reference_deck", t.reference_deck))
+    return tom_problems(deck) + output_problems(deck, named)
+
+
 MODE = Mode(
     name="tom",
     noun="TOM",
@@ -295,6 +307,6 @@ MODE = Mode(
     command=command,
     results_kinds=("fracas-tom-results",),
     report=report,
-    problems=tom_problems,
+    problems=tom_deck_problems,
     run_options=frozenset({"reference_deck"}),
 )

@@ -98,10 +98,39 @@ def _structural_problems(deck: Any, base: Any, seen: set[str]) -> list[str]:
     return out
 
 
+def _output_problems(deck: Any) -> list[str]:
+    """The files the sweep writes that its deck names (the table, the plot, the results
+    folder), checked as :func:`fracas.modes.sweep.run.run_sweep` checks them."""
+    from pathlib import Path
+
+    from fracas.errors import OutputPathError
+    from fracas.io.atomic import check_output_path
+    from fracas.validate import output_problems
+
+    out = output_problems(deck, [("output.table", deck.output.table), ("output.plot", deck.output.plot)])
+    folder = deck.sweep.results_folder
+    if deck.sweep.keep_results and folder:
+        where = deck.resolve(folder)
+        src = deck.source_path or "<deck>"
+        try:
+            if where.exists() and not where.is_dir():
+                raise OutputPathError("", reason=f"is a file ({where}); expected a folder")
+            check_output_path(Path(where) / "study_00000.h5", "results file")
+        except OutputPathError as exc:
+            out.append(f'{src}: sweep.results_folder = "{cut(folder)}": {exc.reason}')
+    return out
+
+
 def sweep_problems(deck: Any) -> list[str]:
     """A sweep deck: its study deck (every check of a TEAM deck), then what the sweep refuses
     before any work (:func:`fracas.config.sweep.sweep_problems`: every generated study
-    against TeamDeck's schema), then the checks that depend on the swept values."""
+    against TeamDeck's schema), then the checks that depend on the swept values, and the
+    files it writes (as the run checks them)."""
+    return _study_problems(deck) + _output_problems(deck)
+
+
+def _study_problems(deck: Any) -> list[str]:
+    """:func:`sweep_problems` but the outputs."""
     from fracas.config.sweep import sweep_problems as refused
     from fracas.config.team import load_team_deck
     from fracas.errors import FracasError

@@ -75,11 +75,15 @@ def report(file: Path, opts: ReportOptions, console: Console) -> None:
 
 
 def tsim_problems(deck: Any) -> list[str]:
-    """``fracas validate`` on a TSIM deck: its own checks, then the TEAM deck it stands on."""
+    """``fracas validate`` on a TSIM deck: its own checks, then the TEAM deck it stands on,
+    and the files the run writes that the deck names (as :func:`run_tsim` checks them)."""
     from fracas.config.tsim import tsim_problems as problems
     from fracas.modes import check_path
+    from fracas.validate import output_problems
 
-    return problems(deck) or check_path(deck.resolve(deck.insim.team_deck))[1]
+    named = [("output.results", deck.output.results), ("output.plot", deck.output.plot)]
+    outputs = output_problems(deck, named)
+    return (problems(deck) or check_path(deck.resolve(deck.insim.team_deck))[1]) + outputs
 
 
 MODE = Mode(

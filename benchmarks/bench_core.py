@@ -69,6 +69,7 @@ T_START = time.perf_counter()
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from runs import FailedFigure, RunFailed, failure, heyoka_failure, main_guard, require  # noqa: E402
 
 import tests.reference as ref  # noqa: E402
 from fracas import _jax  # noqa: E402,F401
@@ -124,7 +125,9 @@ def fs(t: float) -> str:
 
 
 def fm(e_km: float) -> str:
-    """Error in m (given km)."""
+    """Error in m (given km); the FAILED text for the figure of a failed run (runs.FailedFigure)."""
+    if isinstance(e_km, FailedFigure):
+        return e_km.text
     if e_km is None or not math.isfinite(e_km):
         return "nan"
     m = e_km * 1e3
@@ -301,6 +304,13 @@ def _cowell(model: ForceModel, params, ephem, epoch_et, x0, t_end, c_nom, dt_max
     return jnp.concatenate([r, v, m[None]]), n
 
 
+def cowell_failure(xe, n, max_steps=2_000_000) -> str | None:
+    """The plain Cowell loop has no status: a lane that used every step or went non-finite failed."""
+    n, xe = np.atleast_1d(np.asarray(n)), np.atleast_2d(np.asarray(xe))
+    codes = np.where(~np.all(np.isfinite(xe), axis=1), 3, np.where(n >= max_steps, 2, 0))
+    return failure(codes, ok=(0,))
+
+
 cowell_single = jax.jit(_cowell, static_argnums=(0,))
 cowell_many = jax.jit(jax.vmap(_cowell, in_axes=(None, None, None, None, 0, None, None, None)), static_argnums=(0,))
 
@@ -446,7 +456,11 @@ def main() -> None:  # noqa: C901 - a linear script
             if key not in singles:
                 _, tc = first_call(lambda: propagate(model, params, eph, epoch, x, t))
                 singles[key] = (tc, model.integrator)
-            out.append(np.asarray(propagate(model, params, eph, epoch, x, t).x_final))
+            tr = propagate(model, params, eph, epoch, x, t)
+            f = failure(tr, ok=(0,))
+            if f:  # no distance to an abort point: the setting fails the target
+                return FailedFigure(f)
+            out.append(np.asarray(tr.x_final))
         return pos_err(np.array(out), yref)
 
     leo_err = lambda c: encke_err(leo_model(c), LEO_P, None, 0.0, x_leo_big[:n_ref_leo], LEO_T, y_leo)  # noqa: E731
@@ -475,13 +489,16 @@ def main() -> None:  # noqa: C901 - a linear script
     rows = []
     x0l, x0c = x_leo_big[0], x_cr_big[0]
     tr, best, med, _ = timed(lambda: propagate(m_leo, LEO_P, None, 0.0, x0l, LEO_T), REPEAT)
+    require(tr, f"LEO 1 d, c_nom {c_leo:g}", ok=(0,))
     n = int(tr.n_steps)
     rows.append(["LEO 1 d, propagate", fs(singles[m_leo.bodies][0]), fs(best), fs(med), n, f"{best / n * 1e6:.1f}"])
     if not QUICK:
         _, tc = first_call(lambda: propagate_with_sensitivities(m_leo, LEO_P, None, 0.0, x0l, LEO_T))
-        _, best, med, _ = timed(lambda: propagate_with_sensitivities(m_leo, LEO_P, None, 0.0, x0l, LEO_T), REPEAT)
+        out, best, med, _ = timed(lambda: propagate_with_sensitivities(m_leo, LEO_P, None, 0.0, x0l, LEO_T), REPEAT)
+        require(out, f"LEO 1 d + STM, c_nom {c_leo:g}", ok=(0,))
         rows.append(["LEO 1 d, + 7x7 STM (jacfwd)", fs(tc), fs(best), fs(med), n, f"{best / n * 1e6:.1f}"])
     tr, best, med, _ = timed(lambda: propagate(m_cr, CR_P, CR_EPH, CR_ET0, x0c, CR_T), REPEAT)
+    require(tr, f"cruise 300 d, dt_max {d_cr:g} d", ok=(0,))
     n = int(tr.n_steps)
     rows.append(["cruise 300 d, propagate", fs(singles[m_cr.bodies][0]), fs(best), fs(med), n, f"{best / n * 1e6:.1f}"])
     table(
@@ -512,8 +529,10 @@ def main() -> None:  # noqa: C901 - a linear script
         steps = tr.n_steps.astype(float)
         rows_c = [steps[i : i + chunk] for i in range(0, n, chunk)]
         eff = sum(r.sum() for r in rows_c) / sum(len(r) * r.max() for r in rows_c)
-        err = pos_err(tr.x_final[:n_ref], yref)
+        fail = failure(tr, ok=(0,))  # any lane short of the final time: no time, rate or error for the row
+        err = FailedFigure(fail) if fail else pos_err(tr.x_final[:n_ref], yref)
         res = {
+            "fail": fail,
             "label": label,
             "n": n,
             "chunk": chunk,
@@ -535,6 +554,8 @@ def main() -> None:  # noqa: C901 - a linear script
         scale = 1.0 if extrapolate_to is None else extrapolate_to / r["n"]
         n = r["n"] if extrapolate_to is None else extrapolate_to
         best, med = r["best"] * scale, r["med"] * scale
+        if r["fail"]:
+            return [r["label"], f"{n:,}", f"{r['chunk']}x{r['ndev']}", r["fail"]] + [""] * 7
         return [
             r["label"] + (" (extrapolated)" if extrapolate_to else ""),
             f"{n:,}",
@@ -648,7 +669,8 @@ def main() -> None:  # noqa: C901 - a linear script
         "reference states, which are the first rows of each batch; cpu/wall = process CPU time / wall time.\n"
         "STM = 7x7 state transition matrix by jacfwd through the integrator (propagate_with_sensitivities).",
     )
-    stm_leo = np.asarray(batch_results[("LEO + STM", 1, leo_stm_n)]["out"][1].stm[:, -1])
+    stm_run = batch_results[("LEO + STM", 1, leo_stm_n)]
+    stm_leo = None if stm_run["fail"] else np.asarray(stm_run["out"][1].stm[:, -1])
 
     # ------------------------------------------------------------------- 5. sharded
     banner(f"5. Sharded batches: the same chunks split over {len(devs)} host devices (shard_map)")
@@ -673,6 +695,8 @@ def main() -> None:  # noqa: C901 - a linear script
             r = run_batch(label, *a[:7], a[7], devs, base["repeat"], a[8], a[9])
             rows.append(batch_row(base) + [""])
             rows.append(batch_row(r) + [f"{base['best'] / r['best']:.2f}x"])
+            if r["fail"] or base["fail"]:
+                continue
             same = np.max(
                 np.abs(r["out"][0].x_final - base["out"][0].x_final)
                 if a[7]
@@ -756,8 +780,10 @@ def main() -> None:  # noqa: C901 - a linear script
         B = 8
 
         def hy_run(ta, xs, var0=None):
-            """Propagate rows of xs (N, 7) in groups of B; returns (final states (N, nstate), steps)."""
+            """Propagate rows of xs (N, 7) in groups of B; returns (final states (N, nstate), steps, the
+            FAILED text of the first group whose taylor_outcome is not time_limit, or None)."""
             n = xs.shape[0]
+            fail = None
             nb = -(-n // B)
             pad = np.concatenate([xs, np.repeat(xs[-1:], nb * B - n, 0)])[:, :6]
             out = np.empty((nb * B, ta.state.shape[0]))
@@ -768,9 +794,11 @@ def main() -> None:  # noqa: C901 - a linear script
                     ta.state[6:] = var0
                 ta.set_time(0.0)
                 ta.propagate_until(DAY)
-                steps += sum(r[3] for r in ta.propagate_res[: min(B, n - g * B)])
+                res = ta.propagate_res[: min(B, n - g * B)]
+                fail = fail or heyoka_failure(list(res), hy.taylor_outcome.time_limit)
+                steps += sum(r[3] for r in res)
                 out[g * B : (g + 1) * B] = ta.state.T
-            return out[:n], steps
+            return out[:n], steps, fail
 
         st0 = np.tile(LEO_X0[:6, None], (1, B))
         comp = {}
@@ -783,13 +811,17 @@ def main() -> None:  # noqa: C901 - a linear script
             ta = hy.taylor_adaptive_batch(odes, st0, tol=tol)
             comp[tol] = (time.perf_counter() - t0, ta)
             comp.setdefault("first", comp[tol][0])
-            return pos_err(hy_run(ta, x_leo_big[:n_ref_leo])[0], y_leo)
+            final, _, fail = hy_run(ta, x_leo_big[:n_ref_leo])
+            return FailedFigure(fail) if fail else pos_err(final, y_leo)
 
         htols = [1e-8, 3e-9, 1e-9, 3e-10, 1e-10, 3e-11, 1e-11, 3e-12, 1e-12, 1e-13, 1e-14, 1e-15]
         (tol_h, e_h), tried_h = tune_tol(hy_err, htols, TARGET_M * 1e-3)
         tcomp, ta = comp[tol_h]
         for n in leo_sizes:
-            (_, st), best, med, _ = timed(lambda: hy_run(ta, x_leo_big[:n]), 3 if n <= 1000 else 1)
+            (_, st, fail), best, med, _ = timed(lambda: hy_run(ta, x_leo_big[:n]), 3 if n <= 1000 else 1)
+            if fail:
+                rows.append([f"heyoka batch {B} LEO (tol {tol_h:g})", f"{n:,}", fail] + [""] * 5)
+                continue
             rows.append(
                 [
                     f"heyoka batch {B} LEO (tol {tol_h:g}, order {ta.order})",
@@ -808,7 +840,11 @@ def main() -> None:  # noqa: C901 - a linear script
         tcv = time.perf_counter() - t0
         var0 = tv.state[6:].copy()  # identity, set up by heyoka
         for n in (leo_stm_n,) if QUICK else (leo_stm_n, 10_000):
-            (outv, st), best, med, _ = timed(lambda: hy_run(tv, x_leo_big[:n], var0), 1)
+            (outv, st, fail), best, med, _ = timed(lambda: hy_run(tv, x_leo_big[:n], var0), 1)
+            if fail:
+                rows.append([f"heyoka var_ode_sys batch {B} LEO + 6x6 STM", f"{n:,}", fail] + [""] * 5)
+                outv = None
+                continue
             ev = pos_err(outv[:n_ref_leo], y_leo)
             rows.append(
                 [
@@ -822,19 +858,24 @@ def main() -> None:  # noqa: C901 - a linear script
                     "",
                 ]
             )
-        # STM agreement with fracas (6x6 block), rows 0..n_ref-1
-        phi_h = outv[:n_ref_leo, 6:42].reshape(n_ref_leo, 6, 6)
-        phi_f = stm_leo[:n_ref_leo, :6, :6]
-        rel = np.max(np.linalg.norm(phi_h - phi_f, axis=(1, 2)) / np.linalg.norm(phi_f, axis=(1, 2)))
+        # STM agreement with fracas (6x6 block), rows 0..n_ref-1 (only when both runs succeeded)
+        if outv is not None and stm_leo is not None:
+            phi_h = outv[:n_ref_leo, 6:42].reshape(n_ref_leo, 6, 6)
+            phi_f = stm_leo[:n_ref_leo, :6, :6]
+            rel = f"{np.max(np.linalg.norm(phi_h - phi_f, axis=(1, 2)) / np.linalg.norm(phi_f, axis=(1, 2))):.1e}"
+        else:
+            rel = "not compared (a run FAILED)"
         stm_note = (
             f"\nSTM check: max ||Phi_heyoka - Phi_fracas|| / ||Phi_fracas|| over the reference states = "
-            f"{rel:.1e} (6x6 block).\nheyoka tolerances tried: " + ", ".join(f"{t:g}: {fm(e)}" for t, e in tried_h)
+            f"{rel} (6x6 block).\nheyoka tolerances tried: " + ", ".join(f"{t:g}: {fm(e)}" for t, e in tried_h)
         )
     fr = batch_results
     for n in leo_sizes:
         for nd in sorted({1, len(devs)}):
             r = fr.get(("LEO", nd, n))
-            if r:
+            if r and r["fail"]:
+                rows.append([f"fracas Encke LEO (c_nom {c_leo:g}), {nd} device(s)", f"{n:,}", r["fail"]] + [""] * 5)
+            elif r:
                 rows.append(
                     [
                         f"fracas Encke LEO (c_nom {c_leo:g}), {nd} device(s)",
@@ -849,7 +890,9 @@ def main() -> None:  # noqa: C901 - a linear script
                 )
     r = fr.get(("LEO + STM", 1, leo_stm_n))
     rows.append(
-        [
+        ["fracas Encke LEO + 7x7 STM, 1 device", f"{leo_stm_n:,}", r["fail"]] + [""] * 5
+        if r["fail"]
+        else [
             "fracas Encke LEO + 7x7 STM, 1 device",
             f"{leo_stm_n:,}",
             fs(r["tcomp"]),
@@ -902,8 +945,9 @@ def main() -> None:  # noqa: C901 - a linear script
 
         def cow_err(h, _m=base_model, _p=params, _e=eph, _ep=epoch, _x=xs, _y=yref, _k=knob, _te=t_end):
             c_nom, dtm = (h, 4000.0) if _k == "c_nom" else (0.05, h * DAY)
-            xe, _ = cowell_many(_m, _p, _e, _ep, jnp.asarray(_x), _te, c_nom, dtm)
-            return pos_err(np.asarray(xe), _y)
+            xe, n = cowell_many(_m, _p, _e, _ep, jnp.asarray(_x), _te, c_nom, dtm)
+            f = cowell_failure(xe, n)
+            return FailedFigure(f) if f else pos_err(np.asarray(xe), _y)
 
         enc_err = leo_err if knob == "c_nom" else cr_err
         for target_m in targets:
@@ -920,6 +964,7 @@ def main() -> None:  # noqa: C901 - a linear script
                     model = mk(h)
                     fn = lambda: propagate(model, params, eph, epoch, xs[0], t)  # noqa: E731
                     tr, best, med, _ = timed(fn, REPEAT)
+                    require(tr, f"{label} Encke {h:g}", ok=(0,))
                     nst = int(tr.n_steps)
                     fb = lambda: propagate_batch(
                         model,
@@ -932,7 +977,8 @@ def main() -> None:  # noqa: C901 - a linear script
                         devices=one_dev,
                     )
                     first_call(fb)  # same executable as section 4 (integrator constants are traced)
-                    _, tb, _, _ = timed(fb, 2)
+                    out_b, tb, _, _ = timed(fb, 2)
+                    require(out_b, f"{label} Encke {h:g}, batch of {nb}", ok=(0,))
                 else:
                     h0 = (c_leo / 8 if knob == "c_nom" else d_cr / 2) * (target_m / TARGET_M) ** 0.25
                     (h, e), _ = tune_step(cow_err, h0, tgt)
@@ -949,6 +995,9 @@ def main() -> None:  # noqa: C901 - a linear script
                     )
                     first_call(fn)
                     (xe, nst), best, med, _ = timed(fn, REPEAT)
+                    f = cowell_failure(xe, nst)
+                    if f:
+                        raise RunFailed(f"{label} Cowell {h:g}: {f}")
                     nst = int(nst)
                     fb = lambda: cowell_many(
                         base_model,
@@ -961,7 +1010,10 @@ def main() -> None:  # noqa: C901 - a linear script
                         dtm,
                     )
                     first_call(fb)
-                    _, tb, _, _ = timed(fb, 2)
+                    (xe_b, n_b), tb, _, _ = timed(fb, 2)
+                    f = cowell_failure(xe_b, n_b)
+                    if f:
+                        raise RunFailed(f"{label} Cowell {h:g}, batch of {nb}: {f}")
                 setting = f"c_nom {h:g}" if knob == "c_nom" else f"dt_max {h:g} d"
                 rows.append(
                     [
@@ -1005,4 +1057,4 @@ def main() -> None:  # noqa: C901 - a linear script
 
 
 if __name__ == "__main__":
-    main()
+    main_guard(main)

@@ -23,6 +23,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from runs import main_guard, require  # noqa: E402
 
 from fracas.config.team import load_team_deck  # noqa: E402
 from fracas.modes.stm import build_stm  # noqa: E402
@@ -33,13 +36,14 @@ DECK = ROOT / "namelists" / "mercury_approach_guidance.toml"
 
 def _time(deck, repeat: int) -> tuple[float, float]:
     t0 = time.perf_counter()
-    run_team(deck, write_results=False)
+    require(run_team(deck, write_results=False)[0], "TEAM (cold)", ok=(0,))
     cold = time.perf_counter() - t0
     ts = []
     for _ in range(repeat):
         t0 = time.perf_counter()
-        run_team(deck, write_results=False)
+        product = run_team(deck, write_results=False)[0]
         ts.append(time.perf_counter() - t0)
+        require(product, "TEAM (warm)", ok=(0,))
     return cold, statistics.median(ts)
 
 
@@ -63,9 +67,9 @@ def main() -> None:
     print(f"{'row':28s} {'cold s':>8s} {'warm s':>8s} {'warm / row 1':>13s}")
     for name, cold, warm in out:
         print(f"{name:28s} {cold:8.2f} {warm:8.3f} {warm / w0:13.2f}")
-    n_src = len(run_team(base, write_results=False)[0].budget.sources)
+    n_src = len(require(run_team(base, write_results=False)[0], "TEAM with budget", ok=(0,)).budget.sources)
     print(f"(error budget: {n_src} sources)")
 
 
 if __name__ == "__main__":
-    main()
+    main_guard(main)

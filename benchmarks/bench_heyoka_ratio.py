@@ -92,6 +92,7 @@ import fracas_cases  # noqa: E402
 import heyoka as hy  # noqa: E402
 import heyoka_cases as hc  # noqa: E402
 import numpy as np  # noqa: E402
+from runs import failure, main_guard, require  # noqa: E402
 from tables import emit, si, table  # noqa: E402
 
 from fracas.integrate.batch import auto_chunk_size, host_devices, propagate_batch  # noqa: E402
@@ -168,7 +169,7 @@ def fracas_side(case, method, stm, pool, truth_ref, ladder, target_cpu_s, repeat
     def err_at(t):
         m, p = fracas_problem(case, method, t)
         tr = _traj(_fracas_call(case, m, p, ref, stm))
-        return hc.pos_err_m(tr.x[:, -1, :6], truth_ref) if np.all(tr.status == 0) else np.inf
+        return np.inf if failure(tr, ok=(0,)) else hc.pos_err_m(tr.x[:, -1, :6], truth_ref)  # failed: too large
 
     tol, tried = loosest(ladder, err_at)
     if tol is None:
@@ -191,9 +192,7 @@ def fracas_side(case, method, stm, pool, truth_ref, ladder, target_cpu_s, repeat
         cpu, wall = time.process_time() - c0, time.perf_counter() - w0
         if best is None or cpu < best[0]:
             best = (cpu, wall)
-    tr = _traj(out)
-    if not np.all(tr.status == 0):
-        raise RuntimeError(f"fracas {case.name} {method}: status {np.unique(tr.status)}")
+    tr = require(_traj(out), f"fracas {case.name} {method} tol {tol:g}", ok=(0,))  # every timed lane
     res = {
         "tol": tol,
         "tried": tried,
@@ -492,4 +491,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    main_guard(main)

@@ -85,6 +85,8 @@ def run_batch(m, p, x0s, t_final, devices, sens=None, repeat=2, chunk=None, grou
         t0 = time.perf_counter()
         out = propagate_batch(m, p, None, 0.0, x0s, t_out, **kw)
         best = min(best, time.perf_counter() - t0)
+    st = m.integrator
+    require(out, f"fracas {st.formulation} {st.method} ({x0s.shape[0]} lanes, {t_final / DAY:g} d)", ok=(0,))
     return out, best, first
 
 
@@ -94,6 +96,7 @@ def final_states(out):
 
 
 # ----------------------------------------------------------------------------- output
+from runs import failure, main_guard, require  # noqa: E402
 from tables import emit, si, table  # noqa: E402
 
 
@@ -107,7 +110,7 @@ def loosest_fracas_tol(case, method, formulation, x_ref, truth_ref, devices):
         m, p = fracas_problem(case, method, formulation, tol, c_nom=tol if method == "rkn4" else None)
         out = propagate_batch(m, p, None, 0.0, x_ref, np.array([0.0, case.t_final_s]), devices=devices)
         xf, tr = final_states(out)
-        err = hc.pos_err_m(xf[:, :6], truth_ref[:, :6]) if np.all(tr.status == 0) else np.inf
+        err = np.inf if failure(tr, ok=(0,)) else hc.pos_err_m(xf[:, :6], truth_ref[:, :6])  # failed: too large
         tried.append((tol, err))
         if err <= TARGET_M:
             return tol, err, tried
@@ -259,6 +262,7 @@ def cruise_section(n, n_scipy, devs_all):
                 ),
             )
             out = propagate_batch(m, cc.CR_P, cc.CR_EPH, cc.CR_ET0, x0s[:n_scipy], cc.CR_T, devices=devs_all[:1])
+            require(out, f"cruise fracas {formulation} {method} tol {tol:g}", ok=(0,))
             err = np.max(np.linalg.norm(out.x[:, -1, :3] - ref[:, :3], axis=1))
             dm = np.max(np.abs(out.x[:, -1, 6] - ref[:, 6]))
             if err * 1e3 <= TARGET_M:
@@ -270,6 +274,7 @@ def cruise_section(n, n_scipy, devs_all):
             t0 = time.perf_counter()
             out = propagate_batch(m, cc.CR_P, cc.CR_EPH, cc.CR_ET0, x0s, t_out, **kw)
             sec = time.perf_counter() - t0
+            require(out, f"cruise fracas {formulation} {method} tol {tol:g}, {n} lanes", ok=(0,))
             rate = n / sec
             rows.append(
                 [
@@ -340,7 +345,8 @@ def compile_probe(key):
     if sens:
         kw.update(with_sensitivities=True, sensitivity_method=sens)
     t0 = time.perf_counter()
-    propagate_batch(m, p, None, 0.0, x0s, np.array([0.0, 3600.0]), **kw)
+    out = propagate_batch(m, p, None, 0.0, x0s, np.array([0.0, 3600.0]), **kw)
+    require(out, f"compile probe {key}", ok=(0,))
     print(json.dumps({"first_s": time.perf_counter() - t0}))
 
 
@@ -486,4 +492,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    main_guard(main)

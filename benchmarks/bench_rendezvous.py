@@ -24,6 +24,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(__file__))
+from runs import main_guard, require  # noqa: E402
 from tables import emit, table  # noqa: E402
 
 DECK = "namelists/apollo12_rendezvous.toml"
@@ -111,6 +112,9 @@ def main() -> None:
     t_cold = time.perf_counter() - t0
     t_warm, _ = _t(lambda: run_rendezvous_study(study))
     t_np, ref = _t(lambda: _numpy_scan(study, None), repeat=1 if args.quick else 3)
+    # the references and maneuvers are checked by build_rendezvous (it refuses a failed one);
+    # the covariance run: status 7 (non-finite covariance) makes no timing or difference
+    require(0 if np.all(np.isfinite(run.P_true)) else 7, "rendezvous covariance analysis", ok=(0,))
     dev = max(float(np.max(np.abs(run.P_true[r, -1] - ref[r])) / np.max(np.abs(ref[r]))) for r in range(3))
     rows = [
         ["numpy loop (baseline)", f"{t_np * 1e3:.1f}", "1.00"],
@@ -157,4 +161,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    main_guard(main)

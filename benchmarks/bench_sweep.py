@@ -31,7 +31,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from runs import RunFailed, main_guard, require, sweep_failure  # noqa: E402
 
 from fracas.config.sweep import parse_sweep_deck  # noqa: E402
 from fracas.config.team import load_team_deck  # noqa: E402
@@ -92,7 +94,9 @@ def timed_sweep(cfg, n_workers: int, folder: Path, tag: str):
     finally:
         cl.close()
         c.close()
-    assert all(r["status"] == "ok" for r in res.rows), [r["error"] for r in res.rows if r["status"] != "ok"][:3]
+    failed = sweep_failure(res.rows)
+    if failed:
+        raise RunFailed(f"sweep {tag}, {n_workers} worker(s): {failed}")
     return t_start + cold, t_start, warm, res.rows
 
 
@@ -126,6 +130,7 @@ def main() -> None:
         one = []
         for k, v in enumerate(studies[:nb]):
             product, _, _ = team_mode.run_team(study_deck(base, cfg_a.fields, v), stm=str(stm), write_results=False)
+            require(product, f"baseline study {k}", ok=(0,))
             one.append(outputs_of(product, OUTPUTS)[0])
             if k == 0:
                 first = time.perf_counter() - t0
@@ -136,6 +141,9 @@ def main() -> None:
         t0 = time.perf_counter()
         res0 = run_sweep(cfg_a, workers=0, resume=False, table=folder / "inproc.h5")
         t_in = time.perf_counter() - t0
+        failed = sweep_failure(res0.rows)
+        if failed:
+            raise RunFailed(f"sweep in process: {failed}")
         cold_a, start_a, warm_a, rows_a = timed_sweep(cfg_a, 2, folder, "a")
         n = len(studies)
         worst = 0.0
@@ -186,4 +194,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    main_guard(main)

@@ -29,6 +29,9 @@ import tomllib
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from runs import main_guard, require  # noqa: E402
 
 from fracas.build.team import build_study  # noqa: E402
 from fracas.config.team import TeamDeck, load_team_deck  # noqa: E402
@@ -57,6 +60,9 @@ def one(deck_fn, stm_path=None):
     t2 = time.perf_counter()
     res = run_study(st, ref)
     t3 = time.perf_counter()
+    # the reference (integrated or read) and the covariance history must be sound: no timing or
+    # difference from a run that ran off its trajectory or lost its covariance
+    require(res, f"TEAM {'through the STM file' if stm_path else 'in line'}", ok=(0,))
     return {"setup": t1 - t0, "reference": t2 - t1, "analysis": t3 - t2, "total": t3 - t0, "res": res}
 
 
@@ -123,4 +129,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    main_guard(main)

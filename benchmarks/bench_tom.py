@@ -61,6 +61,7 @@ GOAL = 5.0
 
 
 # ----------------------------------------------------------------------------- output
+from runs import RunFailed, main_guard, tom_failure  # noqa: E402
 from tables import emit, si, table  # noqa: E402
 
 
@@ -162,7 +163,7 @@ def section_ad_fegs(names):
                     c["core_trajectories"],
                     c["ad_runs"],
                     "yes" if c["converged"] else "NO",
-                    f"{c['final_mass_kg']:.4f}",
+                    tom_failure(c["converged"], c["stop_reason"]) or f"{c['final_mass_kg']:.4f}",
                 ]
             )
             times.append(
@@ -263,6 +264,8 @@ def section_one_sens(names):
         prob = case.problem
         u0 = np.asarray(case.u0, float)
         scale = np.where(np.abs(u0) > 0, np.abs(u0), 1.0)
+        if not prob.evaluate(u0).ok:  # the timed trajectory must reach its end (status checked by the problem)
+            raise RunFailed(f"{name}: FAILED (the trajectory at the starting controls did not end as asked)")
         t_ev = med_time(prob.evaluate, u0, scale)
         t_ad = med_time(prob.exact_sensitivities, u0, scale)
         t_fd = med_time(prob.fegs, u0, scale)
@@ -386,4 +389,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    main_guard(main)

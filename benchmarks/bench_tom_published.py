@@ -30,6 +30,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.runs import tom_failure  # noqa: E402
 from benchmarks.tables import emit, table  # noqa: E402
 
 DECKS = {"bryson_ho_tom": "Bryson & Ho r_f (r0)", "earth_mars_rendezvous_tom": "Earth-Mars m_f (kg)"}
@@ -71,6 +72,7 @@ def _run(deck: str, optimizer: str, cache: str, tmp: Path) -> dict:
         "cpu": cpu,
         "value": value,
         "converged": bool(int(res["attrs"]["converged"])),
+        "stop_reason": reason,
         "iterations": f"{first.group(1) if first else '-'}+{targeted.group(1) if targeted else '-'}"
         f"+{len(set(res['iteration'].tolist()))}",
     }
@@ -116,6 +118,11 @@ def main() -> None:
                 warm = _run(deck, opt, cache, tmp)
                 if not cold["ok"]:
                     rows.append([label, opt, "failed", "", "", "", f"{cold['wall']:.0f}", "", "", cold["error"][:40]])
+                    continue
+                failed = tom_failure(cold["converged"], cold["stop_reason"])
+                if failed:  # no optimum, no ratio to the published one
+                    rows.append([label, opt, failed[:60], "", "", "no", cold["iterations"], f"{cold['wall']:.0f}"])
+                    rows[-1] += [""] * 2
                     continue
                 v = cold["value"]
                 rows.append(

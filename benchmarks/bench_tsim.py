@@ -44,6 +44,7 @@ ARGS = _args()
 os.environ.setdefault("FRACAS_HOST_DEVICES", "1")
 
 import numpy as np  # noqa: E402
+from runs import TSIM_TEXT, main_guard, require  # noqa: E402
 from tables import emit, table  # noqa: E402
 
 DECK = ROOT / "namelists" / "earth_mars_tsim_noise.toml"
@@ -90,6 +91,7 @@ def loop_mission(plan, i, propagate_one):
             tr = propagate_one(
                 model, pc, plan.ephem, plan.epoch_et_s, x, np.array([plan.grid_s[c], plan.grid_s[c + 1]])
             )
+            require(tr, f"loop mission {i}, hold cell {c}", ok=(0,))  # no state from an abort point
             x = np.array(tr.x_final)
         return x
 
@@ -142,9 +144,11 @@ def main():
     first = engine.simulate_block(plan, 0)
     t_first = time.perf_counter() - t0
     t0 = time.perf_counter()
-    for b in range(1, plan.n_blocks):
-        engine.simulate_block(plan, b)
+    rest = [engine.simulate_block(plan, b) for b in range(1, plan.n_blocks)]
     t_rest = time.perf_counter() - t0
+    # TSIM counts hopeless missions (2) as outcomes; an integration failure (3) makes no rate
+    for b, blk in enumerate([first, *rest]):
+        require(blk["status"], f"engine block {b}", ok=(0, 1, 2), texts=TSIM_TEXT)
     eng_rate = (plan.n_blocks - 1) * plan.block / t_rest
 
     # plain loop (warm: one mission first to compile the single propagate)
@@ -154,6 +158,7 @@ def main():
     t_loop = time.perf_counter() - t0
     loop_rate = ARGS.loop_missions / t_loop
     # agreement: the loop's final states against the engine's (target error + reference)
+    require(first["status"][: ARGS.loop_missions], "engine missions compared with the loop", texts=TSIM_TEXT)
     te = first["target_error"][: ARGS.loop_missions]
     x_eng = plan.x_ref[-1][None, :3] + te  # x, y, z targets are the heliocentric position
     rel = np.max(np.abs(np.array(xs)[:, :3] - x_eng) / np.linalg.norm(plan.x_ref[-1][:3]))
@@ -175,6 +180,7 @@ def main():
                     batch_missions=512, progress=lambda d, n: stamps.append((time.perf_counter(), d)),
                 )  # fmt: skip
                 wall = time.perf_counter() - t0
+            require(prod.table["status"], f"Dask run, {w} worker(s)", ok=(0, 1, 2), texts=TSIM_TEXT)
             ms = prod.timing["missions_s"]
             (ta, da), (tb, db) = stamps[1], stamps[-1]  # first task done -> last: warm workers
             warm = (db - da) / (tb - ta)
@@ -205,4 +211,4 @@ def _with_missions(cfg, n):
 
 
 if __name__ == "__main__":
-    main()
+    main_guard(main)

@@ -38,6 +38,7 @@ sys.path.insert(0, str(ROOT))
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from runs import RunFailed, failure, main_guard  # noqa: E402  (benchmarks/runs.py)
 
 import fracas.dynamics.kepler as K  # noqa: E402
 import fracas.integrate.encke as E  # noqa: E402
@@ -158,6 +159,7 @@ def prepare_variant(pr, model, params, eph, epoch, xs, t_out, sens=False):
     tr1 = o1[0] if sens else o1
     trb = ob[0] if sens else ob
     return {
+        "fail": failure(tr1, ok=(0,)) or failure(trb, ok=(0,)),  # no timing or |dx| from a failed run
         "single": lambda: single(x0),
         "many": lambda: many(xb),
         "it1": int(tr1.n_steps),
@@ -266,6 +268,10 @@ def main():
             if not isinstance(r, dict):
                 rows.append((label, name, "n/a", "n/a", "", "", r))
                 continue
+            if r["fail"] or base["fail"]:
+                rows.append((label, name, r["fail"] or f"baseline {base['fail']}", "", "", r["it"], ""))
+                print(*rows[-1], sep="  |  ", flush=True)
+                continue
             dx = np.max(
                 np.linalg.norm(np.asarray(r["out"].x_final)[:, :3] - np.asarray(base["out"].x_final)[:, :3], axis=1)
             )
@@ -287,6 +293,9 @@ def main():
     ):
         base = prepare_variant(PR, model, params, eph, epoch, xs, t, sens=True)
         ng = prepare_variant(stm_nograd_variant(), model, params, eph, epoch, xs, t, sens=True)
+        for r, what in ((base, "STM jacfwd"), (ng, "STM dt no-grad")):
+            if r["fail"]:  # no timing or STM difference from a failed run
+                raise RunFailed(f"{label} {what}: {r['fail']}")
         round_robin({"base": base, "ng": ng}, max(2, rep // 2), single_reps=1)
         s0 = np.asarray(base["out"][1].stm[:, -1])
         s1 = np.asarray(ng["out"][1].stm[:, -1])
@@ -359,4 +368,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    main_guard(main)

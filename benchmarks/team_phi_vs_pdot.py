@@ -25,6 +25,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from runs import main_guard, require  # noqa: E402
 
 from fracas.build.team import build_study  # noqa: E402
 from fracas.config.team import parse_team_deck  # noqa: E402
@@ -44,7 +47,7 @@ def run(text: str):
     ref = integrate_reference(st)
     t0 = time.perf_counter()
     res = run_study(st, ref)
-    return res, time.perf_counter() - t0
+    return require(res, "TEAM study", ok=(0,)), time.perf_counter() - t0
 
 
 def table(title, P, labels):
@@ -88,7 +91,7 @@ def study_from_dict(d: dict):
 def run_dict(d: dict):
     st = study_from_dict(d)
     ref = integrate_reference(st)
-    return run_study(st, ref)
+    return require(run_study(st, ref), "TEAM study", ok=(0,))
 
 
 def effective_bias(days: float):
@@ -132,4 +135,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    main_guard(main)

@@ -33,6 +33,9 @@ import h5py
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+from benchmarks.runs import failure  # noqa: E402  (one shared run-status check)
+
 ROOT_FILE = "tree_root.txt"
 TMP_NAME = re.compile(r"/tmp[a-z0-9_]{8}/")
 SKIP = re.compile(r"(^|/)provenance(/|$)")
@@ -143,10 +146,29 @@ def _same_bits(x, y) -> bool:
     return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
 
 
+def run_failures(items: dict[str, object]) -> list[str]:
+    """FAILED lines for a results file's own run status: every scalar dataset or attribute
+    named ``status`` (a trajectory's, a TEAM run's) must be 0 or 1 (:mod:`fracas.status`); a
+    file from a failed run is never "the same" as another (per-event or per-mission status
+    arrays are outputs, compared like any other)."""
+    out = []
+    for k, v in items.items():
+        if k.rsplit("@", 1)[-1].rsplit("/", 1)[-1] != "status":
+            continue
+        x = _numeric(v)
+        if x is None or x.size != 1:
+            continue
+        f = failure(int(x.ravel()[0]))
+        if f:
+            out.append(f"{k}: {f}")
+    return out
+
+
 def compare_file(a: Path, b: Path, rtol: float, exact: bool = False) -> list[str]:
     with h5py.File(a, "r") as fa, h5py.File(b, "r") as fb:
         ia, ib = _items(fa), _items(fb)
-    bad = [f"{k}: only in the old file" for k in sorted(set(ia) - set(ib))]
+    bad = [f"old {line}" for line in run_failures(ia)] + [f"new {line}" for line in run_failures(ib)]
+    bad += [f"{k}: only in the old file" for k in sorted(set(ia) - set(ib))]
     added = sorted(set(ib) - set(ia))  # new datasets and attributes are reported, not failures
     worst = 0.0
     for k in sorted(set(ia) & set(ib)):

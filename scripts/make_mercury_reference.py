@@ -9,6 +9,9 @@ Mercury's neighbourhood).  Prints the initial state of the forward deck.  Run:
     .venv/bin/python scripts/make_mercury_reference.py
 """
 
+import sys
+from pathlib import Path
+
 import numpy as np
 
 from fracas import _jax  # noqa: F401
@@ -18,6 +21,9 @@ from fracas.constants import DAY_S
 from fracas.dynamics.ephemeris import body_states, build_ephemeris
 from fracas.dynamics.parameters import set_values
 from fracas.integrate.propagate import propagate
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from benchmarks.runs import exit_if_failed  # noqa: E402  (one shared run-status check)
 
 ARRIVAL = "1985-06-20T00:00:00"
 DECK = f"""
@@ -66,6 +72,7 @@ def main():
     x0 = np.concatenate([r_sc, v_sc, [1500.0]])
     params = set_values(prob.params, ["arc_t_on[0]", "arc_t_off[0]"], np.array([-40 * DAY_S, 0.0]), prob.model)
     traj = propagate(prob.model, params, ephem, et, x0, np.array([0.0, -40 * DAY_S]))
+    exit_if_failed(traj, "backward propagation", ok=(0,))  # no reference state from an abort point
     x = np.asarray(traj.x[-1])
     print("status", int(traj.status), "; propellant used over the 40 days (kg):", round(float(x[6]) - 1500.0, 4))
     print("r_km =", [round(float(v), 3) for v in x[:3]])

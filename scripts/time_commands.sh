@@ -46,7 +46,11 @@ for pass in cold warm; do
       COLD["$c"]="$t $rc"
     else
       read -r tc rcc <<< "${COLD[$c]}"
-      printf '| `%s` | %.0f | %.1f | %s |\n' "${c#"$F "}" "$tc" "$t" "$rcc/$rc"
+      if [ "$rcc" != 0 ] || [ "$rc" != 0 ]; then  # no time for a failed run (a propagation short of its end exits non-zero)
+        printf '| `%s` | FAILED (exit %s) | FAILED (exit %s) | %s |\n' "${c#"$F "}" "$rcc" "$rc" "$rcc/$rc"
+      else
+        printf '| `%s` | %.0f | %.1f | %s |\n' "${c#"$F "}" "$tc" "$t" "$rcc/$rc"
+      fi
     fi
   done
 done | { echo "| command | cold (s) | warm (s) | exit cold/warm |"; echo "|---|---|---|---|"; cat; }

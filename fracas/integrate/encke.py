@@ -90,6 +90,7 @@ __all__ = [
     "advance",
     "state_of",
     "restart_from_state",
+    "saltation_matrix",
 ]
 # private names that callers and benchmarks read through this module
 _REEXPORTED = (_INACTIVE, _n_events, _initial_step)
@@ -398,7 +399,23 @@ def _flip_yaw(seg: _Segment, c: Carry, k_yaw: int) -> Carry:
 
 
 def _saltation(seg: _Segment, c: Carry, new_sign: jax.Array) -> jax.Array:
-    """The saltation matrix (7, 7) of a yaw flip at the carry's state x = (r, v, m):
+    """:func:`saltation_matrix` at the carry's state (a located flip to ``new_sign``)."""
+    x = jnp.concatenate([c.rc + c.delta, c.vc + c.nu, c.m[None]])
+    return saltation_matrix(seg.model, seg.params, seg.ephem, seg.epoch_et, c.t, x, c.primary, -new_sign)
+
+
+def saltation_matrix(
+    model: ForceModel,
+    params: Params,
+    ephem: EphemerisTable | None,
+    epoch_et: ArrayLike,
+    t: ArrayLike,
+    x: jax.Array,
+    primary: ArrayLike,
+    old_sign: ArrayLike,
+) -> jax.Array:
+    """The saltation matrix (7, 7) of a yaw flip at state x = (r km, v km/s, m kg) (t s from
+    the epoch, about body index ``primary``), from the held sign ``old_sign`` to its opposite:
 
         S = I + (f+ - f-) g_x^T / (g_x . f-)
 
@@ -409,19 +426,19 @@ def _saltation(seg: _Segment, c: Carry, new_sign: jax.Array) -> jax.Array:
     parameter matrix alike (the flip's surface does not depend on the parameters)
     (Aizerman & Gantmacher, Q. J. Mech. Appl. Math. 11, 1958; Mueller, Chaos Solitons
     Fractals 5, 1995).  Zero jump (S = I) when no switching arc is on."""
-    model, params = seg.model, seg.params
-    r, v, m = c.rc + c.delta, c.vc + c.nu, c.m
-    pos, _ = body_states(model, params, seg.ephem, seg.epoch_et + c.t)
-    ctl = step_controls(model, params, c.t)
+    r, v, m = x[:3], x[3:6], x[6]
+    pos, _ = body_states(model, params, ephem, epoch_et + t)
+    ctl = step_controls(model, params, t)
 
     def xdot(sign):
         cc = ctl._replace(yaw_sign=sign)
-        a_free, force, mdot = perturbation(model, params, c.t, r, v, c.primary, pos, cc)
-        acc = forces.point_mass_accel(r, params.mu[c.primary]) + a_free + force / m
+        a_free, force, mdot = perturbation(model, params, t, r, v, primary, pos, cc)
+        acc = forces.point_mass_accel(r, params.mu[primary]) + a_free + force / m
         return jnp.concatenate([v, acc, jnp.reshape(mdot, (1,))])
 
-    f_minus, f_plus = xdot(c.yaw_sign), xdot(new_sign)
-    g_r, g_v = jax.grad(lambda rr, vv: yaw_event_function(rr, vv, c.yaw_sign), argnums=(0, 1))(r, v)
+    old_sign = jnp.asarray(old_sign, jnp.float64)
+    f_minus, f_plus = xdot(old_sign), xdot(-old_sign)
+    g_r, g_v = jax.grad(lambda rr, vv: yaw_event_function(rr, vv, old_sign), argnums=(0, 1))(r, v)
     g_x = jnp.concatenate([g_r, g_v, jnp.zeros(1)])
     g_dot = jnp.sum(g_x * f_minus)
     g_dot = jnp.where(g_dot == 0.0, 1e-300, g_dot)

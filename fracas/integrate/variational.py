@@ -45,6 +45,7 @@ from fracas.params import THRUST_NOISE_LABELS
 __all__ = [
     "THRUST_NOISE_LABELS",
     "jacobians_at",
+    "saltation_at",
     "state_derivative",
     "state_jacobians",
 ]
@@ -117,3 +118,24 @@ def jacobians_at(
     x_nodes = jnp.asarray(x_nodes, jnp.float64)
     primary_nodes = jnp.asarray(primary_nodes, jnp.int32)
     return _jacobians_at(static, params, ephem, epoch_et_s, t_nodes, x_nodes, primary_nodes, tuple(labels))
+
+
+@partial(jax.jit, static_argnums=(0,))
+def _saltation_at(static: ForceModel, params, ephem, epoch_et_s, t, x, primary, old_sign):
+    return encke.saltation_matrix(static, params, ephem, epoch_et_s, t, x, primary, old_sign)
+
+
+def saltation_at(model: ForceModel, params: Params, ephem, epoch_et_s, t, x, primary) -> jax.Array:
+    """The saltation matrix (7, 7) of the yaw flip at (t s, x (7,) about body index
+    ``primary``): ``encke.saltation_matrix`` with the sign held before the flip taken from the
+    state's velocity just before it (x - xdot 1e-3 s: g is ~1e-8 there, its sign clear), the
+    jump that maps a covariance across the flip, P+ = S P- S^T (PDOT)."""
+    static = dataclasses.replace(model, integrator=IntegratorSettings())
+    x = jnp.asarray(x, jnp.float64)
+    xd = state_derivative(static, params, ephem, epoch_et_s, t, x, primary)
+    before = x - 1e-3 * xd
+    h = jnp.cross(before[:3], before[3:6])
+    old = jnp.where(h[0] * before[1] - h[1] * before[0] >= 0.0, 1.0, -1.0)
+    return _saltation_at(
+        static, params, ephem, epoch_et_s, jnp.asarray(t, jnp.float64), x, jnp.asarray(primary, jnp.int32), old
+    )

@@ -28,7 +28,7 @@ from fracas.constants import body_names_at
 from fracas.filters.covariance import Layout
 from fracas.filters.process_noise import pdot_propagate, white_direction, white_Qc
 from fracas.integrate.propagate import propagate
-from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at
+from fracas.integrate.variational import THRUST_NOISE_LABELS, jacobians_at, saltation_at
 from fracas.team.measure import MeasurementSet
 from fracas.team.noise_base import EPS_T, bucket, primary_index
 from fracas.team.pdot_step import PDOT_OMEGA_STEP, PDOT_TAU_STEP, pdot_step_bounds, pdot_steps
@@ -36,6 +36,7 @@ from fracas.team.reference import Reference
 from fracas.team.result import NOISE_STATE_LABELS, TeamResult, finish
 from fracas.team.scan import _scan
 from fracas.team.study import Study
+from fracas.team.white_acceleration import yaw_flip_times
 
 __all__ = ["run_pdot", "pdot_step_bounds", "pdot_steps", "PDOT_OMEGA_STEP", "PDOT_TAU_STEP", "NOISE_STATE_LABELS"]
 
@@ -58,20 +59,45 @@ def _expand(P: np.ndarray, sig: np.ndarray) -> np.ndarray:
     return out
 
 
-def _interval_nodes(t: np.ndarray, h_cap: np.ndarray) -> tuple[list[int], list[np.ndarray]]:
-    """For each interval, its step count N and its 2N+1 equally spaced nodes (ends nudged
-    ``EPS_T`` inside the interval, at most a quarter of it)."""
-    Ns, nodes = [], []
+def _interval_pieces(t: np.ndarray, h_cap: np.ndarray, flips: np.ndarray) -> list[list[tuple[int, float, np.ndarray]]]:
+    """For each interval, its pieces (the interval cut at the yaw flips inside it): each
+    piece's step count N, length (s) and 2N+1 equally spaced nodes (ends nudged ``EPS_T``
+    inside the piece, at most a quarter of it, so the thrust direction at an end node is
+    the piece's own side of a switch or a flip)."""
+    out = []
     for k in range(1, len(t)):
-        dt = t[k] - t[k - 1]
-        N = max(1, int(math.ceil(dt / h_cap[k - 1] - 1e-9)))
-        tt = t[k - 1] + dt * np.arange(2 * N + 1) / (2 * N)
-        e = min(EPS_T, dt / 4)
-        tt[0] += e
-        tt[-1] -= e
-        Ns.append(N)
-        nodes.append(tt)
-    return Ns, nodes
+        cuts = [float(t[k - 1]), *(float(f) for f in flips if t[k - 1] < f < t[k]), float(t[k])]
+        pieces = []
+        for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+            dt = b - a
+            N = max(1, int(math.ceil(dt / h_cap[k - 1] - 1e-9)))
+            tt = a + dt * np.arange(2 * N + 1) / (2 * N)
+            e = min(EPS_T, dt / 4)
+            tt[0] += e
+            tt[-1] -= e
+            pieces.append((N, dt, tt))
+        out.append(pieces)
+    return out
+
+
+def _flip_jumps(study: Study, ref: Reference, flips: np.ndarray) -> list[np.ndarray]:
+    """The covariance jump at each yaw flip: the saltation matrix S of the state
+    (``fracas.integrate.variational.saltation_at``) on the state block of the n + 3 augmented
+    states (parameters and noise states do not jump), so P+ = S P- S^T."""
+    if flips.size == 0:
+        return []
+    pr = study.problem
+    nx, n = study.layout.nx, study.layout.n
+    traj = propagate(
+        pr.model, pr.params, pr.ephem, pr.epoch_et_s, ref.states[0], np.concatenate([[ref.times_s[0]], flips])
+    )
+    jumps = []
+    for x, p, tf in zip(np.asarray(traj.x)[1:], np.asarray(traj.primary)[1:], flips, strict=True):
+        S = np.asarray(saltation_at(pr.model, pr.params, pr.ephem, pr.epoch_et_s, tf, x, int(p)))
+        J = np.eye(n + 3)
+        J[:nx, :nx] = S[:nx, :nx]
+        jumps.append(J)
+    return jumps
 
 
 def _node_states(study: Study, ref: Reference, all_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -183,10 +209,14 @@ def run_pdot(study: Study, ref: Reference, meas: MeasurementSet) -> TeamResult:
     lay = Layout(L.nx, L.ns, L.nu, L.nv, L.nw + 3)
     K = study.schedule.n
     t = ref.times_s
-    # nodes: for each interval, 2N+1 equally spaced points (ends nudged inside the interval)
-    Ns, nodes = _interval_nodes(t, pdot_step_bounds(study, ref))
+    # nodes: for each interval, 2N+1 equally spaced points (ends nudged inside the interval),
+    # on pieces cut at the yaw flips, where the covariance jumps (P+ = S P- S^T)
+    flips = yaw_flip_times(study, np.asarray(ref.states[0]), np.asarray(t, np.float64))
+    pieces = _interval_pieces(t, pdot_step_bounds(study, ref), flips)
     t0 = time.perf_counter()
+    nodes = [tt for piece in pieces for _, _, tt in piece]
     all_t = np.concatenate(nodes) if nodes else np.zeros(0)
+    jumps = iter(_flip_jumps(study, ref, flips))
     xs, prim_names = _node_states(study, ref, all_t)
     Fs, Qcs = _noise_models(study, _node_jacobian(study, all_t, xs, prim_names), xs)
     t_nodes = time.perf_counter() - t0
@@ -198,11 +228,13 @@ def run_pdot(study: Study, ref: Reference, meas: MeasurementSet) -> TeamResult:
     out = {k: [] for k in ("am", "ap", "tm", "tp", "sig")}
     start = 0
     for k in range(K):
-        if k > 0:
-            N = Ns[k - 1]
+        for j, (N, dt_piece, _) in enumerate(pieces[k - 1] if k > 0 else []):
+            if j > 0:  # a yaw flip between this piece and the last
+                J = jnp.asarray(next(jumps))
+                Pa, Pt = J @ Pa @ J.T, J @ Pt @ J.T
             seg = slice(start, start + 2 * N + 1)
             start += 2 * N + 1
-            Pa, Pt = _propagate_interval(study, Pa, Pt, N, t[k] - t[k - 1], seg, Fs, Qcs)
+            Pa, Pt = _propagate_interval(study, Pa, Pt, N, dt_piece, seg, Fs, Qcs)
         am, ap, tm, tp, sg = _scan(
             Pa,
             Pt,

@@ -38,6 +38,10 @@ __all__ = [
     "DEFAULT_LIMITS",
     "HARD_LIMITS",
     "count_text",
+    "MEMORY_FRACTION",
+    "MAX_GRID_TRAJECTORIES",
+    "grid_count",
+    "machine_memory_bytes",
     "range_count",
     "tracking_count",
     "event_count",
@@ -81,6 +85,31 @@ class Limits(BaseModel):
     ]
     max_stm_times: Annotated[int, Field(ge=1, le=HARD_LIMITS["max_stm_times"])] = DEFAULT_LIMITS["max_stm_times"]
     max_events: Annotated[int, Field(ge=1, le=HARD_LIMITS["max_events"])] = DEFAULT_LIMITS["max_events"]
+
+
+#: the most trajectories TOM's GRID may fly (one batch: every lane's state and outputs in
+#: memory; the bundled GRID cases fly a few hundred)
+MAX_GRID_TRAJECTORIES = 100_000
+
+#: the most of the machine's memory a run's result table may take (TSIM's per-mission table)
+MEMORY_FRACTION = 0.25
+
+
+def grid_count(controls: int, steps: int, pairs: bool) -> int:
+    """Trajectories of TOM's GRID: each control alone over -steps..steps increments, and
+    (``pairs``) every pair over the square of them (fracas.modes.tom_search.grid_tables)."""
+    g = 2 * steps + 1
+    return controls * g + (controls * (controls - 1) // 2 * g * g if pairs else 0)
+
+
+def machine_memory_bytes() -> int | None:
+    """The machine's physical memory (bytes), or None where the platform does not say."""
+    import os
+
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return None
 
 
 def count_text(n: float) -> str:
@@ -154,6 +183,14 @@ def team_size_problems(deck: Any, traj: Any) -> list[str]:
             f"{src}: stm.grid_hours = {_echo(deck.stm.grid_hours)}: gives {count_text(sched + grid)} STM times "
             f"with the schedule (limit {lim.max_stm_times}, [limits] max_stm_times); use a longer grid"
         )
+    if deck.errcon.process_noise == "grid":
+        cells = range_count(0.0, dur * DAY_S, deck.errcon.noise_step_hours * 3600.0)
+        if cells > lim.max_schedule_times:
+            out.append(
+                f"{src}: errcon.noise_step_hours = {_echo(deck.errcon.noise_step_hours)}: gives {count_text(cells)} "
+                f"noise cells over 0-{dur:g} d (limit {lim.max_schedule_times}, [limits] max_schedule_times); "
+                "use a longer step"
+            )
     if deck.errcon.propagation == "pdot":
         steps = range_count(0.0, dur * DAY_S, deck.ertraj.pdot_step_hours * 3600.0)
         if steps > lim.max_schedule_times:

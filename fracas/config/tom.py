@@ -43,6 +43,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, PositiveFloat, PositiveInt, PrivateAttr, ValidationError, model_validator
 
+from fracas.config.limits import MAX_GRID_TRAJECTORIES, count_text, grid_count
 from fracas.config.trajectory import (
     BodyName,
     FieldProblem,
@@ -279,6 +280,16 @@ class TomDeck(SourcedDeck):
             raise FieldProblem(
                 ("grid", "increments"), f"{len(self.grid.increments)} entries", f"{m} entries (one per control)"
             )
+        if self.grid is not None:
+            n_grid = grid_count(m, self.grid.steps, self.grid.pairs)
+            if n_grid > MAX_GRID_TRAJECTORIES:
+                raise FieldProblem(
+                    ("grid", "steps"),
+                    self.grid.steps,
+                    f"gives {count_text(n_grid)} trajectories for {m} controls"
+                    f"{' and their pairs' if self.grid.pairs else ''} (limit {MAX_GRID_TRAJECTORIES}, one batch); "
+                    "use fewer steps",
+                )
         if self.tom.submode in ("target", "target_optimize", "auto") and not self.target:
             raise FieldProblem("target", [], f'at least one [[target]] for submode = "{self.tom.submode}"')
         return self

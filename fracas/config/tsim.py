@@ -204,4 +204,71 @@ def tsim_problems(deck: TsimDeck) -> list[str]:
     for j, f in enumerate(deck.insim.a_priori_statistics):
         if not deck.resolve(f).exists():
             out.append(f"{src}: insim.a_priori_statistics[{j}] = {f!r}: no such TSIM results file")
+    size = _table_size_problem(deck, team)
+    if size:
+        out.append(size)
+    grid = _noise_grid_problem(deck, team)
+    if grid:
+        out.append(grid)
     return out
+
+
+def _noise_grid_problem(deck: TsimDeck, team: Any) -> str | None:
+    """The line naming insim.noise_step_days when the Gauss-Markov hold grid over the TEAM
+    deck's trajectory would exceed its ``[limits] max_schedule_times`` (a typo such as 1e-9
+    would build a grid of billions of points before any mission flies)."""
+    from fracas.config.limits import count_text, range_count
+    from fracas.config.trajectory import load_deck
+
+    step = deck.insim.noise_step_days
+    if step is None:
+        return None
+    try:
+        dur = load_deck(team.resolve(team.ertraj.deck)).duration_days
+    except DeckError:
+        return None  # the TEAM deck's own checks name it
+    n = range_count(0.0, abs(dur), step)
+    if n <= team.limits.max_schedule_times:
+        return None
+    return (
+        f"{deck.source_path or '<deck>'}: insim.noise_step_days = {step:g}: gives {count_text(n)} noise-grid "
+        f"points over 0-{dur:g} d (limit {team.limits.max_schedule_times}, the TEAM deck's [limits] "
+        "max_schedule_times); use a longer step"
+    )
+
+
+#: TSIM flies missions in blocks of this many (fracas.tsim.plan)
+_BLOCK = 32
+
+
+def table_bytes_floor(deck: TsimDeck, team: Any) -> int:
+    """A lower bound of the bytes of the per-mission table a run holds and writes (the fields
+    of :func:`fracas.tsim.engine.block_fields`, with the state at its smallest: the
+    spacecraft state and the TEAM deck's parameters), from the decks alone."""
+    n_events = len(team.guidance)
+    thrust = 7  # a state row of state_deviation is always 7 wide
+    n = 6 + len(team.parameter)
+    controls = max([len(g.controls) if g.type in ("primary", "vernier") else 3 for g in team.guidance] + [3])
+    targets = max([len(g.targets) for g in team.guidance] + [1])
+    per = 8 + 4 + 4 + 8 + 8  # mission, status, failed maneuver, total dv, final mass
+    per += n_events * (4 + 4 + 8)  # iterations, maneuver status, dv
+    per += 8 * (n + n_events * (thrust + n + 2 * controls + 2 * targets) + targets)
+    missions = -(-deck.insim.missions // _BLOCK) * _BLOCK
+    return per * missions
+
+
+def _table_size_problem(deck: TsimDeck, team: Any) -> str | None:
+    """The line naming insim.missions when the table would take more than
+    :data:`fracas.config.limits.MEMORY_FRACTION` of this machine's memory (checked before any
+    work; the run checks the exact size again once its plan is built)."""
+    from fracas.config.limits import MEMORY_FRACTION, machine_memory_bytes
+
+    mem = machine_memory_bytes()
+    need = table_bytes_floor(deck, team)
+    if mem is None or need <= mem * MEMORY_FRACTION:
+        return None
+    return (
+        f"{deck.source_path or '<deck>'}: insim.missions = {deck.insim.missions}: the per-mission table would take "
+        f"at least {need / 2**30:.1f} GiB of this machine's {mem / 2**30:.1f} GiB (expected at most "
+        f"{MEMORY_FRACTION:.0%}); split the run (first_mission, a_priori_statistics)"
+    )

@@ -63,6 +63,8 @@ def _speed(deck: TrajectoryDeck, r: float, mu: float) -> tuple[tuple, Any, float
     if st.oem is not None:
         return (("initial_state", "oem", "path"), st.oem.path, math.hypot(*st.oem.v_km_s)) if st.oem.v_km_s else None
     el = st.elements
+    if el is None:
+        return None
     v2 = mu * (2.0 / r - 1.0 / el.a_km) if el.a_km != 0.0 else math.inf
     return (("initial_state", "elements", "a_km"), el.a_km, math.sqrt(v2)) if 0.0 < v2 < math.inf else None
 
@@ -75,7 +77,7 @@ def _radius_field(deck: TrajectoryDeck) -> tuple[tuple, Any]:
         return ("initial_state", "spherical", "r_km"), st.spherical.r_km
     if st.oem is not None:
         return ("initial_state", "oem", "path"), st.oem.path
-    return ("initial_state", "elements", "a_km"), st.elements.a_km
+    return ("initial_state", "elements", "a_km"), st.elements.a_km if st.elements is not None else None
 
 
 def _line(src: str, loc: tuple, value: Any, text: str) -> str:

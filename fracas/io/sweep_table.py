@@ -13,7 +13,6 @@ from __future__ import annotations
 import csv
 import io
 import os
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -145,7 +144,7 @@ def read_sweep_table(path: str | os.PathLike) -> SweepTable:
     ``--resume`` uses (:class:`fracas.io.hdf5.Checked`: the integrity header, then the dtype,
     shape and SHA-256 of every dataset); a one-line ResultsFileError if it is missing,
     damaged, unreadable, not a sweep table, incomplete, or holds rows that are not a sweep's
-    (a status other than ok/failed, a malformed key, a repeated index)."""
+    (a status other than ok/failed, a repeated index)."""
     p = Path(path)
     try:
         with open_h5(p, ResultsFileError, "sweep table") as f:
@@ -201,18 +200,13 @@ def _read_checked(f: Any, p: Path) -> SweepTable:
     )
 
 
-_KEY = re.compile(r"^[0-9a-f]{16}$")
-
-
 def _check_rows(t: SweepTable, p: Path) -> None:
-    """Rows a sweep writes: status ok or failed, a key of 16 hex digits, distinct indices."""
+    """Rows a sweep writes: status ok or failed, distinct indices."""
     n = len(t)
     bad = next((k for k, s in enumerate(t.status) if s not in ("ok", "failed")), None)
-    if bad is None:
-        bad = next((k for k, s in enumerate(t.key) if not _KEY.match(s)), None)
     if bad is not None or len(set(t.index.tolist())) != n:
         row = bad if bad is not None else n - 1
         raise ResultsFileError(
-            f"{p}: row {row}: status {t.status[row]!r}, key {t.key[row]!r} or a repeated index: expected a "
-            "sweep's rows (ok/failed, 16 hex digits, distinct indices)"
+            f"{p}: row {row}: status {t.status[row]!r} or a repeated index: expected a sweep's rows "
+            "(ok/failed, distinct indices)"
         )

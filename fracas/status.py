@@ -10,7 +10,9 @@ the standard library, so a reader, a report or a scheduler can use it without ja
     0     ``OK``                     reached the final time
     1     ``STOPPED``                the stop condition was met (located to eps_t)
     2     ``MAX_STEPS``              ``integrator.max_steps`` reached before the final time
-    3     ``NONFINITE``              the state became NaN/inf (or started so)
+    3     ``NONFINITE``              the state became NaN/inf (or started so), or the step
+                                     controller asked for a step below eps_t (a collision, a
+                                     singularity: the tolerance cannot be met)
     5     ``OUTSIDE_TRAJECTORY``     a requested time lies beyond the end of the reference
     6     ``NOT_POSITIVE_DEFINITE``  a covariance lost positive-definiteness
     7     ``NONFINITE_COVARIANCE``   a covariance became NaN/inf
@@ -69,7 +71,7 @@ _TEXT = {
     RunStatus.OK: "reached the final time",
     RunStatus.STOPPED: "stop condition met",
     RunStatus.MAX_STEPS: "maximum number of steps reached",
-    RunStatus.NONFINITE: "non-finite state",
+    RunStatus.NONFINITE: "non-finite state or step below eps_t",
     RunStatus.OUTSIDE_TRAJECTORY: "a requested time lies beyond where the reference trajectory ended",
     RunStatus.NOT_POSITIVE_DEFINITE: "a covariance lost positive-definiteness",
     RunStatus.NONFINITE_COVARIANCE: "non-finite covariance",

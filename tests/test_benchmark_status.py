@@ -26,10 +26,12 @@ def test_ok_runs_pass():
 
 
 def test_nonfinite_run_refused():
-    assert runs.failure(fake(3)) == "FAILED (status 3: non-finite state)"
-    with pytest.raises(runs.RunFailed, match=r"^spiral tol 1e-14: FAILED \(status 3: non-finite state\)$"):
+    assert runs.failure(fake(3)) == "FAILED (status 3: non-finite state or step below eps_t)"
+    with pytest.raises(
+        runs.RunFailed, match=r"^spiral tol 1e-14: FAILED \(status 3: non-finite state or step below eps_t\)$"
+    ):
         runs.require(fake(3), "spiral tol 1e-14")
-    assert runs.status_cell(fake(3)) == "FAILED (status 3: non-finite state)"
+    assert runs.status_cell(fake(3)) == "FAILED (status 3: non-finite state or step below eps_t)"
 
 
 def test_max_steps_and_stop_when_final_time_required():
@@ -39,15 +41,18 @@ def test_max_steps_and_stop_when_final_time_required():
 
 def test_batch_counts_failed_members():
     f = runs.failure(fake([0, 3, 0, 2, 3]))
-    assert f == "FAILED (3 of 5: status 2: maximum number of steps reached; status 3: non-finite state)"
+    assert (
+        f
+        == "FAILED (3 of 5: status 2: maximum number of steps reached; status 3: non-finite state or step below eps_t)"
+    )
     # a (Trajectory, Sensitivities) pair is read through its trajectory
-    assert runs.failure((fake([0, 3]), object())) == "FAILED (1 of 2: status 3: non-finite state)"
+    assert runs.failure((fake([0, 3]), object())) == "FAILED (1 of 2: status 3: non-finite state or step below eps_t)"
 
 
 def test_exit_and_main_guard_are_one_line(capsys):
     with pytest.raises(SystemExit) as e:
         runs.exit_if_failed(fake(3), "reference")
-    assert e.value.code == "error: reference: FAILED (status 3: non-finite state)"
+    assert e.value.code == "error: reference: FAILED (status 3: non-finite state or step below eps_t)"
 
     def main():
         runs.require(fake(2), "deck")
@@ -59,10 +64,10 @@ def test_exit_and_main_guard_are_one_line(capsys):
 
 
 def test_failed_figure_prints_as_text_and_loses_comparisons():
-    v = runs.FailedFigure("FAILED (status 3: non-finite state)")
+    v = runs.FailedFigure("FAILED (status 3: non-finite state or step below eps_t)")
     assert math.isinf(v) and not v <= 1e-3
-    assert f"{v:.3g}" == "FAILED (status 3: non-finite state)"
-    assert runs.fmt(v, lambda x: f"{x:.3g} m") == "FAILED (status 3: non-finite state)"
+    assert f"{v:.3g}" == "FAILED (status 3: non-finite state or step below eps_t)"
+    assert runs.fmt(v, lambda x: f"{x:.3g} m") == "FAILED (status 3: non-finite state or step below eps_t)"
     assert runs.fmt(0.5, lambda x: f"{x:.3g} m") == "0.5 m"
 
 

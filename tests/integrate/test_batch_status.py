@@ -172,7 +172,7 @@ def test_run_status_codes_and_texts():
     assert STATUS_TEXT[0] == "reached the final time"
     assert STATUS_TEXT[1] == "stop condition met"
     assert STATUS_TEXT[2] == "maximum number of steps reached"
-    assert STATUS_TEXT[3] == "non-finite state"
+    assert STATUS_TEXT[3] == "non-finite state or step below eps_t"
     assert STATUS_TEXT == {int(s): s.text for s in RunStatus} and FILE_STATUS_TEXT is STATUS_TEXT
     assert all(type(k) is int for k in STATUS_TEXT)
     assert [s for s in RunStatus if s.ok] == [RunStatus.OK, RunStatus.STOPPED]
@@ -182,7 +182,10 @@ def test_run_status_codes_and_texts():
     summary = batch_status_summary(np.array([3, 0, 0, 9, 0]))
     assert summary == {RunStatus.OK: 3, RunStatus.NONFINITE: 1, 9: 1}
     assert list(summary) == [0, 3, 9] and type(list(summary)[2]) is int
-    assert format_status_summary(summary) == "3 reached the final time, 1 non-finite state, 1 unknown status 9"
+    assert (
+        format_status_summary(summary)
+        == "3 reached the final time, 1 non-finite state or step below eps_t, 1 unknown status 9"
+    )
 
 
 @pytest.mark.parametrize("code", [int(s) for s in RunStatus] + [4])
@@ -201,5 +204,5 @@ def test_run_status_texts_are_what_the_trajectory_file_writes(tmp_path, code):
     # "0 reached the final time; 1 stop condition met; ..." : the propagation codes, unchanged
     assert meaning == "; ".join(f"{int(s)} {s.text}" for s in PROPAGATION_STATUSES)
     assert meaning == (
-        "0 reached the final time; 1 stop condition met; 2 maximum number of steps reached; 3 non-finite state"
+        "0 reached the final time; 1 stop condition met; 2 maximum number of steps reached; 3 non-finite state or step below eps_t"
     )

@@ -103,4 +103,4 @@ def yaw_event_function(r: jax.Array, v: jax.Array, yaw_sign: ArrayLike) -> jax.A
     function (:func:`event_functions`), s = ``yaw_sign``."""
     h = jnp.cross(r, v)
     scale = jnp.sqrt(forces.dot3(h, h) * forces.dot3(r, r))
-    return yaw_sign * (h[0] * r[1] - h[1] * r[0]) / jnp.where(scale > 0.0, scale, 1.0)
+    return jnp.asarray(yaw_sign) * (h[0] * r[1] - h[1] * r[0]) / jnp.where(scale > 0.0, scale, 1.0)

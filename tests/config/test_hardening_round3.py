@@ -295,6 +295,28 @@ def test_a_sweep_on_a_truncated_study_is_refused_by_validate(tmp_path):
     assert any("filter.stop_days = 10" in p and "0-5 d" in p for p in problems), problems
 
 
+@pytest.mark.parametrize("command", ["validate", "sweep"])
+def test_a_sweep_that_varies_a_study_past_its_trajectory_is_refused_before_work(tmp_path, command):
+    """A sweep whose varied ``filter.stop_days`` takes one study past the trajectory's end is
+    refused by validate and by the run alike (exit 2, no table), naming the study."""
+    team = _truncated(tmp_path)
+    text = team.read_text(encoding="utf-8").replace("stop_days = 10.0\n[a_priori]", "stop_days = 4.0\n[a_priori]")
+    team.write_text(text.replace("start_days = 0.0\nstop_days = 10.0", "start_days = 0.0\nstop_days = 4.0"))
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(
+        f'mode = "sweep"\n[sweep]\nstudy = "{team.name}"\n[[sweep.vary]]\nfield = "filter.stop_days"\n'
+        "values = [4.0, 10.0]\n",
+        encoding="utf-8",
+    )
+    args = [command, str(sweep)] + (["--workers", "0"] if command == "sweep" else [])
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 2, res.output
+    err = res.stderr
+    assert "filter.stop_days = 10" in err and "0-5 d" in err, err
+    assert "filter.stop_days = 4" not in err.replace("filter.stop_days = 4.0\n", "")
+    assert not list(tmp_path.glob("*.h5"))
+
+
 # ----------------------------------------------------------------------------- 1e: implausible states
 def _leo(tmp_path: Path, r: str, v: str, name: str = "leo.toml") -> Path:
     deck = tmp_path / name

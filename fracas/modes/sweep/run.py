@@ -361,6 +361,34 @@ def _run_tasks(todo: list[int], ctx: _Context, table: _Table, workers: int | Non
 
 
 @reading_inputs
+def span_problems(cfg: SweepDeck, base: TeamDeck) -> list[str]:
+    """Every study's times against its reference trajectory's span, before any work, as
+    ``fracas validate`` checks each study (:func:`fracas.config.team.span.team_span_problems`):
+    a varied ``stop_days`` past the trajectory's end is refused here, not left to fail as a
+    row.  At most :data:`MAX_LISTED_STUDIES` studies are named.  A trajectory deck that does
+    not load is left to the run's own build, which says why."""
+    from fracas.config.sweep import MAX_LISTED_STUDIES, varied_deck
+    from fracas.config.team.span import team_span_problems
+    from fracas.config.trajectory import load_deck
+
+    try:
+        tdeck = load_deck(base.resolve(base.ertraj.deck))
+    except (FracasError, OSError):
+        return []
+    src = cfg.source_path or "<deck>"
+    out: list[str] = []
+    failing = 0
+    for i, values in enumerate(cfg.studies()):
+        found = team_span_problems(varied_deck(base, dict(zip(cfg.fields, values)), base.source_path), tdeck)
+        if found:
+            failing += 1
+            if failing <= MAX_LISTED_STUDIES:
+                out += [f"{src}: {study_label(i, cfg.fields, values)}: {p}" for p in found]
+    if failing > MAX_LISTED_STUDIES:
+        out.append(f"{src}: and {failing - MAX_LISTED_STUDIES} more studies past the end of the trajectory")
+    return out
+
+
 def run_sweep(
     cfg: SweepDeck,
     *,
@@ -400,6 +428,7 @@ def run_sweep(
     sw = cfg.sweep
     base = base if base is not None else load_team_deck(cfg.resolve(sw.study))
     problems = sweep_problems(cfg, base)  # every study against the schema, before any work
+    problems = problems or span_problems(cfg, base)
     if problems:
         raise deck_error(problems)
     fields = cfg.fields

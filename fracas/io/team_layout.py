@@ -26,11 +26,14 @@ _MEASUREMENT_FIELDS = (
 _GUIDANCE_MATRICES = (
     ("psi", "targets x labels/units", "target variation matrix at the cutoff (TARMAT)"),
     ("gamma", "controls x labels/units", "guidance law: correction = -gamma @ estimated deviation"),
-    ("target_cov_before", "target units^2", "target covariance of the dispersion before the correction"),
-    ("target_cov_after", "target units^2", "target covariance after the correction"),
-    ("target_cov_knowledge", "target units^2", "knowledge covariance mapped to the target"),
+    ("target_cov_before", "target units^2", "dispersion at the target time without the correction (noise included)"),
+    ("target_cov_after", "target units^2", "dispersion at the target time after the correction (noise included)"),
+    ("target_cov_knowledge", "target units^2", "knowledge covariance at the event mapped to the target"),
+    ("target_noise_cov", "target units^2", "process noise from the cutoff to the target time, at the targets"),
     ("correction_cov", "control units^2", "covariance of the correction (dV km^2/s^2, or controls)"),
     ("execution_cov", "control units^2", "execution-error covariance"),
 )
+#: guidance datasets a file may lack (written before they existed): read as None
+_GUIDANCE_OPTIONAL = ("target_noise_cov",)
 _GUIDANCE_SCALARS = ("dv_mean_km_s", "dv_99_km_s", "dv_rms_km_s", "propellant_sigma_kg", "dv_variance_km2_s2")
 _SCALAR_UNITS = {"propellant_sigma_kg": "kg", "dv_variance_km2_s2": "km^2/s^2"}

@@ -19,6 +19,7 @@ from fracas.io.hdf5 import Checked, attr_text, one_line, open_h5, schema_version
 from fracas.io.inputs import note_input
 from fracas.io.team_layout import (
     _GUIDANCE_MATRICES,
+    _GUIDANCE_OPTIONAL,
     _GUIDANCE_SCALARS,
     _MEASUREMENT_FIELDS,
     _TEAM_GROUPS,
@@ -45,10 +46,14 @@ def _read_guidance(c: Checked, g: h5py.Group, n: int) -> list[dict[str, Any]]:
             "target_cov_before": (m, m),
             "target_cov_after": (m, m),
             "target_cov_knowledge": (m, m),
+            "target_noise_cov": (m, m),
             "correction_cov": (mc, mc),
             "execution_cov": (mc, mc),
         }
         for k, _, _ in _GUIDANCE_MATRICES:
+            if k in _GUIDANCE_OPTIONAL and f"{base}/{k}" not in c.f:
+                d[k] = None  # an older file: its before/after lack the noise after the cutoff
+                continue
             d[k] = c.num(f"{base}/{k}", shapes[k])
         for k in _GUIDANCE_SCALARS:
             d[k] = c.scalar(f"{base}/{k}", finite=False)

@@ -46,11 +46,13 @@ Results layout (every dataset carries ``units`` and ``data_sha256``)::
         time_s, target_time_s (s); control_labels, control_units, target_names, target_units
         team_correction_cov (M, M)   TEAM's covariance of the commanded correction
         team_dv_mean_km_s, team_dv_99_km_s   TEAM's exact mean and 99 % |dV| (km/s)
-        team_target_cov_after (m, m) TEAM's target dispersion after the event
+        team_target_cov_after (m, m) TEAM's target dispersion after the event, at the target
+                             time (the process noise from the cutoff on included)
         failures, near        int: missions it ended (hopeless), near successes
       statistics/<name>       attrs name (exact), order, count (int); mean (p,), covariance (p, p)
       percentiles/<name>      attrs name (exact), order; q (k,) (percent), value (k,)
-      final/target_names, target_units, time_s (s), team_target_cov (m, m)
+      final/target_names, target_units, time_s (s), team_target_cov (m, m) (the last
+                              maneuver's team_target_cov_after: what the final errors are judged by)
 
 (the checkpoint file, :mod:`fracas.io.tsim_checkpoint`, is re-exported here; a "/" in a name
 becomes "|" in a group's key; the exact name is the group's ``name`` attr)

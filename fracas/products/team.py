@@ -101,10 +101,16 @@ class GuidanceEvent:
     index: schedule index of time_s (guidance epoch or initiation, s); cutoff_s, target_time_s
     (s); target_body; estimate_model: the P̃ model; rank: of the targeting matrix; targets
     (m) and controls (M) with units (impulsive: dv_x, dv_y, dv_z in km/s); psi (m, n): Ψ at
-    the cutoff; gamma (M, n): the guidance law δU = −Γ δX̂; target_cov_before / after /
-    knowledge (m, m): the dispersion before and after the correction and the knowledge
-    mapped to the target; correction_cov, execution_cov (M, M); mean, 99 % and RMS |ΔV| km/s
-    (low thrust: of the arc's ΔV change); propellant_sigma_kg (low thrust); status;
+    the cutoff; gamma (M, n): the guidance law δU = −Γ δX̂; target_cov_before / after
+    (m, m): the dispersion AT THE TARGET TIME without and with the correction: the control
+    covariance at the cutoff mapped by Ψ plus the process noise from the cutoff to the
+    target time (``target_noise_cov``), what the spacecraft arrives with;
+    target_cov_knowledge (m, m): the knowledge at the event mapped by Ψ (no noise after
+    it); target_noise_cov (m, m): A_T Q(t_c → t_f) A_Tᵀ, the true process noise from the
+    cutoff to the target time mapped to the targets (included in before and after; None
+    in files written before it existed, whose before/after lack it); correction_cov,
+    execution_cov (M, M); mean, 99 % and RMS |ΔV| km/s (low thrust: of the arc's ΔV
+    change); propellant_sigma_kg (low thrust); status;
     dv_jacobian (M,): the arc's ΔV change per unit of each control (low thrust; TSIM's |ΔV|);
     control_matrix (m, M): K = Ψ(t_c) S, the targets' change per unit of each control (low thrust)."""
 
@@ -136,6 +142,7 @@ class GuidanceEvent:
     dv_variance_km2_s2: float = float("nan")  # E|ΔV|² unclipped (linear in the error sources)
     dv_jacobian: np.ndarray | None = None  # (M,) low thrust: the arc's ΔV change per control (km/s per unit)
     control_matrix: np.ndarray | None = None  # (m, M) low thrust: K = Ψ(t_c) S, targets per control
+    target_noise_cov: np.ndarray | None = None  # (m, m) process noise cutoff -> target time, at the targets
 
 
 @dataclass

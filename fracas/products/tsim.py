@@ -22,7 +22,8 @@ class TsimManeuver:
     covariance of the commanded correction (P_ΔV or P_U); team_dv_mean_km_s, team_dv_99_km_s:
     TEAM's exact mean and 99 % |ΔV| (the Hoffman-Young stand-in, digest (G-9); low thrust:
     of the arc's ΔV change, Gaussian); team_target_cov_after (m, m): TEAM's target
-    dispersion after this event; failures: missions it ended (hopeless); near: designs
+    dispersion after this event at its target time, with the process noise from the cutoff
+    to the target time (fracas.team.guidance_events); failures: missions it ended (hopeless); near: designs
     accepted within near_success_factor × tolerance."""
 
     name: str

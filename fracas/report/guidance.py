@@ -127,21 +127,27 @@ def guidance_table(r: dict, dv_unit: str = "m/s") -> Any:
 
 
 def target_table(g: dict, velocity_unit: str = "mm/s") -> Any:
-    """Target 1σ of one guidance event: before the correction (actual dispersion), after it,
-    and the knowledge mapped to the target, each in the target's unit."""
+    """Target 1σ of one guidance event at the target time: the actual dispersion without
+    the correction and after it (both with the process noise from the cutoff to the target
+    time), the knowledge at the event mapped to the target, and that noise alone ("noise";
+    blank for a file written before it existed, whose before/after lack it), each in the
+    target's unit."""
     from rich.markup import escape
 
-    t = _table(escape(f"{g['name']}: target 1σ"), boxed=False)
+    t = _table(escape(f"{g['name']}: target 1σ at the target time"), boxed=False)
     _text_col(t, "target")
     _text_col(t, "unit")
     _num_col(t, "before")
     _num_col(t, "after")
     _num_col(t, "knowledge")
+    _num_col(t, "noise")
     m = len(g.get("target_names", []))
-    sb, sa, sk = (_sigmas(g.get(k), m) for k in ("target_cov_before", "target_cov_after", "target_cov_knowledge"))
+    keys = ("target_cov_before", "target_cov_after", "target_cov_knowledge", "target_noise_cov")
+    sb, sa, sk, sn = (_sigmas(g.get(k), m) for k in keys)
     for i, name in enumerate(g.get("target_names", [])):
         f, u = _unit(g["target_units"][i], velocity_unit)
-        t.add_row(escape(str(name)), escape(u), _fmt(sb[i] * f), _fmt(sa[i] * f), _fmt(sk[i] * f))
+        noise = _fmt(sn[i] * f) if np.isfinite(sn[i]) else ""
+        t.add_row(escape(str(name)), escape(u), _fmt(sb[i] * f), _fmt(sa[i] * f), _fmt(sk[i] * f), noise)
     return t
 
 

@@ -17,8 +17,9 @@ resolution``.  The proportionality and pointing execution errors scale with the 
 ΔV, so they are counted with the source whose ΔV they scale (they vanish with it).
 
 Outputs (variances, in the unit² of their names): each guidance event's ΔV RMS and each of
-its targets after the correction; the true knowledge's position and velocity RSS at the
-study's end and at ``Study.budget_at_s``.
+its targets after the correction (at the target time: the process noise after the cutoff,
+:mod:`fracas.team.guidance_events`, is the process-noise source's); the true knowledge's
+position and velocity RSS at the study's end and at ``Study.budget_at_s``.
 """
 
 from __future__ import annotations
@@ -156,6 +157,10 @@ def error_budget(
     names, units, total = budget_outputs(study, pt_full, outcomes)
     sig_t = study.noise_sigma_true if study.gencov else study.noise_sigma_assumed
     tau_t = study.noise_tau_true if study.gencov else study.noise_tau_assumed
+    # the white acceleration noise belongs to the process-noise source too: the guidance
+    # events' noise to cutoff and to the target time read the study's true level
+    wq_t = study.white_q_true if study.gencov else study.white_q_assumed
+    wd_t = study.white_direction_true if study.gencov else study.white_direction_assumed
     sources = budget_sources(study, meas)
     cols = []
     for src in sources:
@@ -170,6 +175,8 @@ def error_budget(
             P0_control=src["P0c"],
             noise_sigma_true=sig_t if src["thrust"] else np.zeros_like(sig_t),
             noise_tau_true=tau_t,
+            white_q_true=wq_t if src["thrust"] else 0.0,
+            white_direction_true=wd_t,
             guidance=guid,
         )
         qt = Qt if src["thrust"] else np.zeros_like(Qt)

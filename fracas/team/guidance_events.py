@@ -1,7 +1,15 @@
 """The TEAM guidance events' corrections (FRACAS GUIDM §5.3.6, XGUID §5.3.25; digest
 ``tom-tsim-guidance.md`` Part B; :mod:`fracas.team.guidance`): one handler per event type
 (impulsive, primary/vernier low thrust, none), each giving the event's outcome, the control
-covariance after it and its execution errors."""
+covariance after it and its execution errors.
+
+The target covariances before and after the correction are the dispersions AT THE TARGET
+TIME: the control covariance at the cutoff mapped by Ψ (GUIDM's P_T = Ψ P_c Ψᵀ, digest
+(G-8)) plus the true process noise from the cutoff to the target time mapped by A_T
+(``target_noise_cov``, :func:`fracas.team.guidance_span._target_noise`); GUIDM's mapping
+alone leaves out every unmodeled acceleration after the last correction.  The knowledge
+mapped to the target (``target_cov_knowledge``) stays Ψ P_k Ψᵀ: the navigation error the
+correction is designed from."""
 
 from __future__ import annotations
 
@@ -18,6 +26,8 @@ from fracas.team.guidance_span import (
     ReferenceSpan,
     _embed,
     _noise_between,
+    _noise_settings,
+    _target_noise,
     _target_psi,
     _thrust_ends,
     _transition,
@@ -98,6 +108,7 @@ def _impulsive(
     )
     b = np.asarray(imp.velocity_selector(study.layout.n))
     p_plus = _sym(_post(p_c, p_k, b @ gamma, mode, nx, _reset(study)) + b @ sig_ex @ b.T)
+    q_t = _target_noise(study, span, g, g.time_s)
     x_exec = np.zeros((nx, nx))
     x_exec[_VEL, _VEL] = sig_ex
     out = GuidanceOutcome(
@@ -107,8 +118,8 @@ def _impulsive(
         control_units=["km/s"] * 3,
         psi=psi,
         gamma=gamma,
-        target_cov_before=_sym(psi @ p_c @ psi.T),
-        target_cov_after=_sym(psi @ p_plus @ psi.T),
+        target_cov_before=_sym(psi @ p_c @ psi.T) + q_t,
+        target_cov_after=_sym(psi @ p_plus @ psi.T) + q_t,
         target_cov_knowledge=_sym(psi @ p_k @ psi.T),
         correction_cov=p_dv,
         execution_cov=sig_ex,
@@ -116,6 +127,7 @@ def _impulsive(
         dv_99_km_s=dvstats.dv_magnitude_quantile(p_dv, 0.99) if summary else float("nan"),
         dv_rms_km_s=dvstats.rms_dv_magnitude(p_dv),
         dv_variance_km2_s2=float(np.trace(p_dv)),
+        target_noise_cov=q_t,
     )
     return out, p_plus, [(g.time_s, x_exec)]
 
@@ -148,13 +160,14 @@ def _low_thrust(
     s_aug[:nx] = s7[:nx]
     g_mat = np.linalg.solve(phi_aug, s_aug @ gamma_u)
     p_reset = _sym(_post(p_c, p_k, g_mat, mode, nx, _reset(study)))
-    key = ("noise", t_i, t_c, tuple(study.noise_sigma_true), study.gencov)
+    key = ("noise", t_i, t_c, *_noise_settings(study))
     if key not in span.memo:
         span.memo[key] = _noise_between(study, span, t_i, t_c)
     q_ic = _embed(study, span.memo[key])
     x_exec_full = s_aug @ sig_u @ s_aug.T
     pc_cutoff = _sym(phi_aug @ p_reset @ phi_aug.T + q_ic + x_exec_full)
-    before = _sym(psi_c @ (phi_aug @ p_c @ phi_aug.T + q_ic) @ psi_c.T)
+    q_t = _target_noise(study, span, g, t_c)
+    before = _sym(psi_c @ (phi_aug @ p_c @ phi_aug.T + q_ic) @ psi_c.T) + q_t
     know = _sym(psi_c @ (phi_aug @ p_k @ phi_aug.T) @ psi_c.T)
     x_i, x_c, (a_i, thr_i), (a_c, thr_c) = _thrust_ends(study, span, t_i, t_c)
     c = float(np.asarray(get_values(study.problem.params, ["exhaust_velocity_km_s"], study.problem.model))[0])
@@ -171,7 +184,7 @@ def _low_thrust(
         psi=psi_c,
         gamma=gamma_u,
         target_cov_before=before,
-        target_cov_after=_sym(psi_c @ pc_cutoff @ psi_c.T),
+        target_cov_after=_sym(psi_c @ pc_cutoff @ psi_c.T) + q_t,
         target_cov_knowledge=know,
         correction_cov=p_u,
         execution_cov=sig_u,
@@ -182,6 +195,7 @@ def _low_thrust(
         dv_variance_km2_s2=var_dv,
         dv_jacobian=j_dv,
         control_matrix=np.asarray(k_mat),
+        target_noise_cov=q_t,
     )
     return out, p_reset, [(t_c, x_exec_full[:nx, :nx])]
 
@@ -190,7 +204,8 @@ def _none(
     study: Study, span: ReferenceSpan, g: GuidanceSpec, k: int, p_c: np.ndarray, p_k: np.ndarray, summary: bool = True
 ) -> Outcome:
     psi, body = _target_psi(study, span, g, g.time_s)
-    before = _sym(psi @ p_c @ psi.T)
+    q_t = _target_noise(study, span, g, g.time_s)
+    before = _sym(psi @ p_c @ psi.T) + q_t
     out = GuidanceOutcome(
         **_common(study, g, k, body, g.time_s, g.time_s),
         rank=0,
@@ -203,6 +218,7 @@ def _none(
         target_cov_knowledge=_sym(psi @ p_k @ psi.T),
         correction_cov=np.zeros((0, 0)),
         execution_cov=np.zeros((0, 0)),
+        target_noise_cov=q_t,
     )
     return out, p_c, []
 

@@ -147,22 +147,67 @@ def _target_psi(study: Study, span: ReferenceSpan, g: GuidanceSpec, t_s: float) 
     """Ψ (m, n) of g's targets with respect to the augmented state at t_s; the body used."""
     key = ("psi", g.name, g.target_time_s, t_s, tuple(g.targets), g.target_body)
     if key not in span.memo:
-        span.memo[key] = _target_psi_uncached(study, span, g, t_s)
+        a_t, body = _target_jacobian(study, span, g)
+        span.memo[key] = (a_t @ _transition(study, span, g.target_time_s, t_s)[: study.nx, :], body)
     return span.memo[key]
 
 
-def _target_psi_uncached(study: Study, span: ReferenceSpan, g: GuidanceSpec, t_s: float) -> tuple[np.ndarray, str]:
+def _target_jacobian(study: Study, span: ReferenceSpan, g: GuidanceSpec) -> tuple[np.ndarray, str]:
+    """A_T = ∂T/∂X_f (m, nx) of g's targets at its target time (TARMAT, digest (G-2)) and the
+    target body, memoized on the span."""
     from fracas.guidance.targets import target_jacobian
 
-    x_f, body_f = span.state(g.target_time_s)
-    body = g.target_body or body_f
-    x_rel = np.array(x_f[:6], dtype=np.float64)
-    if body != body_f:  # the target body's state relative to the central body (DE421)
-        x_rel = x_rel - _relative_body_state(study, body, body_f, g.target_time_s)
-    mu = float(np.asarray(get_values(study.problem.params, [f"mu[{body}]"], study.problem.model))[0])
-    a_t = np.asarray(target_jacobian(tuple(g.targets), x_rel, float(g.target_time_s), mu))
-    nx = study.nx
-    return a_t[:, :nx] @ _transition(study, span, g.target_time_s, t_s)[:nx, :], body
+    key = ("a_t", g.name, g.target_time_s, tuple(g.targets), g.target_body)
+    if key not in span.memo:
+        x_f, body_f = span.state(g.target_time_s)
+        body = g.target_body or body_f
+        x_rel = np.array(x_f[:6], dtype=np.float64)
+        if body != body_f:  # the target body's state relative to the central body (DE421)
+            x_rel = x_rel - _relative_body_state(study, body, body_f, g.target_time_s)
+        mu = float(np.asarray(get_values(study.problem.params, [f"mu[{body}]"], study.problem.model))[0])
+        a_t = np.asarray(target_jacobian(tuple(g.targets), x_rel, float(g.target_time_s), mu))
+        span.memo[key] = (np.asarray(a_t[:, : study.nx], dtype=np.float64), body)
+    return span.memo[key]
+
+
+def _target_noise(study: Study, span: ReferenceSpan, g: GuidanceSpec, t_s: float) -> np.ndarray:
+    """The true process noise from t_s (the event's cutoff) to g's target time mapped to its
+    targets: A_T Q(t_s → t_f) A_Tᵀ (m, m), Q the state block of :func:`_noise_between` (the
+    same noise model as the control covariance's).  Zero without process noise or when the
+    target time is not after t_s.
+
+    GUIDM maps the control covariance at the cutoff to the target (P_T = Ψ P_c Ψᵀ, digest
+    (G-8)), which leaves out every unmodeled acceleration after the cutoff; the dispersion
+    the spacecraft actually arrives with is Ψ P_c Ψᵀ + A_T Q(t_c → t_f) A_Tᵀ, the control
+    covariance propagated to the target time with its noise (what TSIM flies)."""
+    a_t, _ = _target_jacobian(study, span, g)
+    t_f = float(g.target_time_s)
+    if not study.has_process_noise or t_f <= t_s + EPS_T:
+        return np.zeros((a_t.shape[0], a_t.shape[0]))
+    key = ("noise", float(t_s), t_f, *_noise_settings(study))
+    if key not in span.memo:
+        span.memo[key] = _noise_between(study, span, float(t_s), t_f)
+    q = np.asarray(span.memo[key])[: study.nx, : study.nx]
+    out = a_t @ q @ a_t.T
+    return 0.5 * (out + out.T)
+
+
+def _noise_settings(study: Study) -> tuple:
+    """What :func:`_noise_between` depends on besides the times (a memo key: the error
+    budget's single-source runs change the true noise levels)."""
+    return (
+        study.noise_model,
+        study.gencov,
+        study.gm_states,
+        tuple(np.ravel(study.noise_sigma_true)),
+        tuple(np.ravel(study.noise_tau_true)),
+        tuple(np.ravel(study.noise_sigma_assumed)),
+        tuple(np.ravel(study.noise_tau_assumed)),
+        float(study.white_q_true),
+        float(study.white_q_assumed),
+        study.white_direction_true,
+        study.white_direction_assumed,
+    )
 
 
 def _relative_body_state(study: Study, body: str, centre: str, t_s: float) -> np.ndarray:
@@ -211,9 +256,12 @@ def _thrust_ends(study: Study, span: ReferenceSpan, t_i: float, t_c: float) -> t
 
 
 def _noise_between(study: Study, span: ReferenceSpan, t_a: float, t_b: float) -> np.ndarray:
-    """True DYNO Q̃ (nx, nx) accumulated from t_a to t_b, split at the thrust switches; with
-    the exact model's noise states (``study.gm_states``) the exact Q (n, n) on the state and
-    noise-state blocks, plus the white noise."""
+    """The true process noise accumulated from t_a to t_b, at t_b, by the study's noise model
+    (the control covariance's): with the exact model's noise states (``study.gm_states``)
+    the exact Q (n, n) on the state and noise-state blocks; the fixed cells
+    (``noise_model = "grid"``) Q (nx, nx) of the cells between t_a and t_b
+    (:func:`fracas.team.transitions.grid_noise`, the cell that straddles t_a cut there);
+    otherwise DYNO's Q̃ (nx, nx) split at the thrust switches; each plus the white noise."""
     nx = study.nx
     if study.gm_states:
         n = study.layout.n
@@ -231,6 +279,12 @@ def _noise_between(study: Study, span: ReferenceSpan, t_a: float, t_b: float) ->
         return out
     if not study.has_process_noise or t_b <= t_a:
         return np.zeros((nx, nx))
+    if study.noise_model == "grid":
+        from fracas.team.transitions import grid_noise
+
+        x_a, _ = span.state(t_a)
+        _, qt = grid_noise(study, np.array([t_a, t_b]), x_a, span.product)  # the control's Qt
+        return np.asarray(qt)[1]
     cuts = [t_a] + [s for s in study.thrust_switches_s if t_a + EPS_T < s < t_b - EPS_T] + [t_b]
     t = np.array(cuts)
     states, prim, phis = [], [], [np.eye(7)]

@@ -52,7 +52,8 @@ class ManeuverPlan:
     change per control (low thrust, km/s per unit); sigma_p, sigma_pointing_rad,
     sigma_res_km_s: execution errors (Gates; low thrust: sigma_p fraction of each control);
     team: TEAM's prediction for this event (correction_cov, dv_mean_km_s, dv_99_km_s,
-    target_cov_before, target_cov_after)."""
+    target_cov_before, target_cov_after: the target dispersion at the target time, the
+    process noise after the cutoff included, fracas.team.guidance_events)."""
 
     name: str
     type: str

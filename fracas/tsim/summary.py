@@ -9,7 +9,10 @@ a-priori statistics of earlier runs merge in last (exact in count, mean and co-m
 order of a merge changes only rounding).
 
 Consistency (one row per compared output): TSIM's sample covariance against TEAM's
-prediction.
+prediction.  The final target errors are judged against the last maneuver's
+``target_cov_after``: the dispersion at the target time, with the execution errors and the
+process noise from the maneuver's cutoff to the target time (the thrust noise TSIM flies
+after the last maneuver), not the control covariance mapped from the cutoff alone.
 
 * ``ratio``: σ_TSIM/σ_TEAM per axis, with its standard error ≈ 1/√(2(N−1)) (P-C7);
 * ``chi2``/``p_value``: the likelihood-ratio test of the whole matrix (Box-corrected);

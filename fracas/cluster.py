@@ -74,6 +74,27 @@ class _WorkerSetup:
         from fracas._jax import worker_setup
 
         worker_setup(1)
+        _ignore_interrupts()
+
+
+def _quiet_logs() -> None:
+    """Dask's and Tornado's loggers off in this process (a worker about to be closed)."""
+    import logging
+
+    for name in ("distributed", "tornado", "asyncio"):
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+
+def _ignore_interrupts() -> None:
+    """A worker process ignores SIGINT: Ctrl-C reaches every process of the terminal's group,
+    and the command (which closes the cluster) says "interrupted" once; a worker interrupted
+    on its own would log pages of warnings and tracebacks as its tasks are cancelled."""
+    import signal
+
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the worker process's main thread: leave it
+        pass
 
 
 def worker_plugin() -> Any:
@@ -200,8 +221,20 @@ class Pool:
     def __enter__(self) -> Pool:
         return self
 
-    def __exit__(self, *exc: object) -> None:
+    def __exit__(self, exc_type: object, *exc: object) -> None:
+        if isinstance(exc_type, type) and issubclass(exc_type, KeyboardInterrupt):
+            self._quiet_workers()
         self.close()
+
+    def _quiet_workers(self) -> None:
+        """Interrupted: every worker's Dask logging off before the cluster closes under its
+        running tasks (cancelled tasks and lost heartbeats would each log a warning)."""
+        if self.client is None:
+            return
+        try:
+            self.client.run(_quiet_logs, wait=True)
+        except Exception:  # noqa: BLE001 - a worker already gone: nothing to quiet
+            pass
 
 
 def _done(index: int, result: Callable[[], Any], catch: bool) -> Done:

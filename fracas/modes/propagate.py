@@ -75,8 +75,7 @@ def _ended_early(deck: Path, data: TrajectoryData, path: Path) -> None:
     hint = (
         " (raise integrator.max_steps, or loosen integrator.tolerance / raise c_nom)"
         if data.status == RunStatus.MAX_STEPS
-        else " (a collision or a singularity, or integrator.tolerance tighter than the trajectory allows:"
-        " loosen it)"
+        else " (a collision or a singularity, or integrator.tolerance tighter than this trajectory allows)"
     )
     raise NumericalError(
         f"{deck}: propagation ended early at t = {data.t_final_s / DAY_S:.6g} days with status "

@@ -204,5 +204,6 @@ def test_run_status_texts_are_what_the_trajectory_file_writes(tmp_path, code):
     # "0 reached the final time; 1 stop condition met; ..." : the propagation codes, unchanged
     assert meaning == "; ".join(f"{int(s)} {s.text}" for s in PROPAGATION_STATUSES)
     assert meaning == (
-        "0 reached the final time; 1 stop condition met; 2 maximum number of steps reached; 3 non-finite state or step below eps_t"
+        "0 reached the final time; 1 stop condition met; 2 maximum number of steps reached; "
+        "3 non-finite state or step below eps_t"
     )

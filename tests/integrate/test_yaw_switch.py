@@ -73,7 +73,7 @@ def _scipy_reference(pr, t_end):
     node.terminal = True
     y0 = np.asarray(pr.x0, float)
     s0 = 1.0 if node(0.0, y0, 1.0) >= 0 else -1.0
-    kw = dict(method="DOP853", rtol=1e-13, atol=1e-12 * np.abs(y0).max())
+    kw = {"method": "DOP853", "rtol": 1e-13, "atol": 1e-12 * np.abs(y0).max()}
     a = solve_ivp(f, (0.0, t_end), y0, args=(s0,), events=node, **kw)
     t_flip = float(a.t_events[0][0])
     b = solve_ivp(f, (t_flip, t_end), a.y_events[0][0], args=(-s0,), **kw)

@@ -120,7 +120,7 @@ def test_psi_against_repropagated_differences(case_ref):
 def test_impulsive_event_against_digest_formulas(case_ref):
     """P_ΔV = Γ P_c Γᵀ with Γ = Ψ_v⁻¹ Ψ_x (report model, three targets, G-3/G-5), the Gates
     average Σ_ex (G-6) and P_T⁺ = Ψ (P_k + B Σ_ex Bᵀ) Ψᵀ on the state block plus the kept
-    parameter dispersion (G-7 report form), evaluated here with numpy from the engine's own
+    parameter dispersion (G-7 report form) plus the noise after t_G, evaluated here with numpy from the engine's own
     P_c and P_k at t_G.  Tolerance 1e-9 relative (matrix products in another order)."""
     case, _, _, res = case_ref
     st = case.study
@@ -149,7 +149,9 @@ def test_impulsive_event_against_digest_formulas(case_ref):
     post[:nx, :] = p_k[:nx, :]
     post[:, :nx] = p_k[:, :nx]
     post[3:6, 3:6] += sig
-    want = psi @ post @ psi.T
+    # at the target time: plus the process noise from t_G on (issue 32; its own reference:
+    # tests/team/test_target_noise.py)
+    want = psi @ post @ psi.T + g.target_noise_cov
     np.testing.assert_allclose(g.target_cov_after, want, rtol=1e-9, atol=1e-9 * np.max(np.abs(want)))
     # the knowledge after the event carries the execution errors (the navigator does not see them)
     jump = res.Pt_plus[k] - res.Pt_minus[k]

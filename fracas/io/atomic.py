@@ -219,7 +219,26 @@ def check_output_path(path: str | os.PathLike, what: str, inputs: Iterable[str |
     shown = path_text(text)
     if text.strip() in ("", ".", ".."):
         raise OutputPathError(f"{what}: output path {shown!r} is not a file name, expected e.g. out/{_example(what)}")
+    if "\0" in text:
+        raise OutputPathError(
+            f"{shown}: {what} is not a usable path (a NUL character in the name); expected a plain file name",
+            reason="is not a usable path (a NUL character in the name)",
+        )
     dest = Path(text).expanduser()
+    try:
+        return _check_output_path(text, dest, shown, what, inputs)
+    except OSError as exc:  # a name no file system takes (too long, NUL): stat itself fails
+        why = exc.strerror or type(exc).__name__
+        raise OutputPathError(
+            f"{shown}: {what} is not a usable path ({why}); expected a shorter or plainer file name",
+            reason=f"is not a usable path ({why})",
+        ) from None
+
+
+def _check_output_path(
+    text: str, dest: Path, shown: str, what: str, inputs: Iterable[str | os.PathLike | None]
+) -> Path:
+    """:func:`check_output_path` past the empty-name check (may raise OSError from stat)."""
     if text.endswith(("/", os.sep)) or dest.is_dir():
         raise OutputPathError(
             f"{shown}: {what} is a directory, expected a file name inside it",

@@ -508,3 +508,20 @@ def test_ctrl_c_during_a_sweep_on_dask_workers(tmp_path, delay):
         return
     assert res.returncode == 130, res.stderr
     assert [ln for ln in res.stderr.splitlines() if ln.strip()] == ["fracas: interrupted"], res.stderr
+
+
+@pytest.mark.parametrize(
+    ("name", "why"),
+    [("x" * 5000 + ".h5", "File name too long"), ("a\0b.h5", "a NUL character in the name")],
+)
+def test_output_paths_no_file_system_takes_are_one_line_errors(tmp_path, name, why):
+    """A name stat() itself refuses (longer than NAME_MAX) or cannot even pass to the OS (NUL)
+    is an OutputPathError naming why, not an OSError or ValueError from deep in pathlib
+    (found by tests/config/test_fuzz_decks.py through validate's output checks)."""
+    from fracas.errors import OutputPathError
+    from fracas.io.atomic import check_output_path
+
+    with pytest.raises(OutputPathError) as exc:
+        check_output_path(str(tmp_path / name), "results file")
+    text = str(exc.value)
+    assert "\n" not in text and "results file is not a usable path" in text and why in text

@@ -269,7 +269,9 @@ def test_example_regression_numbers(example):
     study, _, res = example
     P = res.Pa_plus[-1]
     i_gam = study.nx + study.labels.index("horizon_altitude_bias_km")
-    assert math.sqrt(np.trace(P[:3, :3])) == pytest.approx(0.3847, rel=2e-3)
+    # 0.3847 before issue 32: the example flies the TOM spiral's yaw-switch arcs, whose STMs
+    # now carry the saltation jump at each flip (-0.44 %; tests/integrate/test_yaw_switch.py)
+    assert math.sqrt(np.trace(P[:3, :3])) == pytest.approx(0.3830, rel=2e-3)
     assert math.sqrt(P[i_gam, i_gam]) == pytest.approx(0.3165, rel=2e-3)
 
 

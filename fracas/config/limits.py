@@ -183,21 +183,16 @@ def team_size_problems(deck: Any, traj: Any) -> list[str]:
             f"{src}: stm.grid_hours = {_echo(deck.stm.grid_hours)}: gives {count_text(sched + grid)} STM times "
             f"with the schedule (limit {lim.max_stm_times}, [limits] max_stm_times); use a longer grid"
         )
-    if deck.errcon.process_noise == "grid":
-        cells = range_count(0.0, dur * DAY_S, deck.errcon.noise_step_hours * 3600.0)
-        if cells > lim.max_schedule_times:
+    # fixed-step grids over the whole study: the grid model's noise cells, PDOT's RK4 steps
+    for field, used, hours, what in (
+        ("errcon.noise_step_hours", deck.errcon.process_noise == "grid", deck.errcon.noise_step_hours, "noise cells"),
+        ("ertraj.pdot_step_hours", deck.errcon.propagation == "pdot", deck.ertraj.pdot_step_hours, "PDOT steps"),
+    ):
+        n = range_count(0.0, dur * DAY_S, hours * 3600.0) if used else 0
+        if n > lim.max_schedule_times:
             out.append(
-                f"{src}: errcon.noise_step_hours = {_echo(deck.errcon.noise_step_hours)}: gives {count_text(cells)} "
-                f"noise cells over 0-{dur:g} d (limit {lim.max_schedule_times}, [limits] max_schedule_times); "
-                "use a longer step"
-            )
-    if deck.errcon.propagation == "pdot":
-        steps = range_count(0.0, dur * DAY_S, deck.ertraj.pdot_step_hours * 3600.0)
-        if steps > lim.max_schedule_times:
-            out.append(
-                f"{src}: ertraj.pdot_step_hours = {_echo(deck.ertraj.pdot_step_hours)}: gives {count_text(steps)} "
-                f"PDOT steps over 0-{dur:g} d (limit {lim.max_schedule_times}, [limits] max_schedule_times); "
-                "use a longer step"
+                f"{src}: {field} = {_echo(hours)}: gives {count_text(n)} {what} over 0-{dur:g} d "
+                f"(limit {lim.max_schedule_times}, [limits] max_schedule_times); use a longer step"
             )
     return out
 

@@ -24,31 +24,12 @@ from fracas.build.team import build_study
 from fracas.config.team import load_team_deck
 from fracas.team.engine import run_study
 from fracas.team.reference import integrate_reference
+from tests.team.test_white_noise_team import LEO_TRAJ  # the two-body LEO arc of the white-noise TEAM test
 
 MU = 398600.4418  # km^3/s^2, the deck's override: the reference's two-body force
 DAY = 86400.0
 Q = 1e-10  # km^2/s^3: white acceleration noise, "full" direction (q I on the velocity)
 T_C, T_F = 0.005 * DAY, 0.03 * DAY
-
-LEO_TRAJ = """
-title = "LEO two-body arc"
-[epoch]
-iso = "2030-01-01T00:00:00"
-[initial_state]
-centre = "earth"
-frame = "EME2000"
-[initial_state.cartesian]
-r_km = [7000.0, 0.0, 0.0]
-v_km_s = [0.0, 6.5, 3.752]
-[spacecraft]
-mass_kg = 1000.0
-[forces.overrides.earth]
-mu_km3_s2 = 398600.4418
-[integrator]
-tolerance = 1e-13
-[stop]
-duration_days = 0.03
-"""
 
 LEO_TEAM = """
 mode = "team"

@@ -118,13 +118,53 @@ def join_model(static: ForceModel, dyn: Sequence[Any]) -> ForceModel:
     return dataclasses.replace(static, integrator=dataclasses.replace(static.integrator, **traced))
 
 
+#: Output-time counts are padded (the last time repeated: zero-length segments, a few
+#: microseconds each) to the first of these sizes that holds them, then to powers of two, so a
+#: run compiles each propagation program at most twice whatever its numbers of output times
+#: (issue 33: the main job compiled ``_propagate_var`` for 2, 3, 512, 1024 and 2048 outputs).
+OUTPUT_BUCKETS = (64, 4096)
+
+
+def output_bucket(n: int) -> int:
+    """The padded output count for ``n`` output times (:data:`OUTPUT_BUCKETS`)."""
+    for b in OUTPUT_BUCKETS:
+        if n <= b:
+            return b
+    return 1 << (int(n) - 1).bit_length()
+
+
+def _padded_times(t_out) -> tuple[np.ndarray | jax.Array, int]:
+    """(t_out padded to :func:`output_bucket` with its last time, its own length)."""
+    n = int(np.shape(t_out)[0])
+    nb = output_bucket(n)
+    if nb == n:
+        return t_out, n
+    if isinstance(t_out, jax.core.Tracer):
+        return jnp.concatenate([t_out, jnp.repeat(t_out[-1:], nb - n)]), n
+    t = np.asarray(t_out, np.float64)
+    return np.concatenate([t, np.repeat(t[-1:], nb - n)]), n
+
+
+#: the per-output fields (first axis: the output times) of the scans' results
+_PER_OUTPUT = {"t", "x", "primary", "n_flips", "t_flip", "stm_step", "stm", "par_step", "par"}
+
+
+def _cut(tree, n: int):
+    """A Trajectory / Sensitivities with its per-output arrays cut back to ``n`` outputs."""
+    return tree._replace(
+        **{k: v[:n] for k, v in tree._asdict().items() if k in _PER_OUTPUT and getattr(v, "ndim", 0) >= 1}
+    )
+
+
 def propagate(model: ForceModel, params: Params, ephem, epoch_et_s, x0, t_out) -> Trajectory:
     """Propagate x0 (at t_out[0], s from the epoch ``epoch_et_s`` TDB s past J2000) through t_out.
 
-    Jitted once per static model structure (integrator constants are traced).
+    Jitted once per static model structure and output bucket (:data:`OUTPUT_BUCKETS`;
+    integrator constants are traced).
     """
     static, dyn = split_model(model)
-    return _propagate(static, dyn, params, ephem, epoch_et_s, x0, t_out)
+    t_pad, n = _padded_times(t_out)
+    return _cut(_propagate(static, dyn, params, ephem, epoch_et_s, x0, t_pad), n)
 
 
 @partial(jax.jit, static_argnums=(0,))
@@ -180,9 +220,10 @@ def propagate_with_sensitivities(
             "explicit variational equations need Cowell, no impulses, no located events and no"
             " switch- or impulse-time parameters"
         )
-    if method == "variational" or (method == "auto" and supported):
-        return _propagate_var(static, dyn, params, ephem, epoch_et_s, x0, t_out, tuple(param_labels))
-    return _propagate_sens(static, dyn, params, ephem, epoch_et_s, x0, t_out, tuple(param_labels))
+    t_pad, n = _padded_times(t_out)
+    run = _propagate_var if method == "variational" or (method == "auto" and supported) else _propagate_sens
+    traj, sens = run(static, dyn, params, ephem, epoch_et_s, x0, t_pad, tuple(param_labels))
+    return _cut(traj, n), _cut(sens, n)
 
 
 def _compose(model, c1, x1, jx, jp, stm, par, t_end):

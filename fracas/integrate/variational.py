@@ -34,6 +34,7 @@ from functools import partial
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from fracas import _jax  # noqa: F401
 from fracas.dynamics import forces
@@ -105,7 +106,8 @@ def _jacobians_at(static: ForceModel, params, ephem, epoch_et_s, t_nodes, x_node
 def jacobians_at(
     model: ForceModel, params: Params, ephem, epoch_et_s, t_nodes, x_nodes, primary_nodes, labels: Sequence[str]
 ):
-    """A (k, 7, 7) and B (k, 7, np) at k nodes (t_nodes (k,) s, x_nodes (k, 7), primary_nodes (k,)).
+    """A (k, 7, 7) and B (k, 7, np) at k nodes (t_nodes (k,) s, x_nodes (k, 7), primary_nodes (k,)),
+    computed on the nodes padded to ``propagate.output_bucket(k)`` (one program for most counts).
 
     At a thrust switch time the controls of [t_on, t_off) apply (DYNO/PATH intervals should
     end at switches, where h jumps).  Vmapped and jitted once per (force model structure,
@@ -113,11 +115,27 @@ def jacobians_at(
     dropped from the cache key, so decks differing only in step control share the compiled
     function.
     """
+    from fracas.integrate.propagate import output_bucket
+
     static = dataclasses.replace(model, integrator=IntegratorSettings())
-    t_nodes = jnp.asarray(t_nodes, jnp.float64)
-    x_nodes = jnp.asarray(x_nodes, jnp.float64)
-    primary_nodes = jnp.asarray(primary_nodes, jnp.int32)
-    return _jacobians_at(static, params, ephem, epoch_et_s, t_nodes, x_nodes, primary_nodes, tuple(labels))
+    k = int(np.shape(t_nodes)[0])
+    kp = output_bucket(k)  # padded (last node repeated): one compile for most runs' node counts
+
+    def pad(a, dtype):
+        a = np.asarray(a, dtype)
+        return jnp.asarray(np.concatenate([a, np.repeat(a[-1:], kp - k, axis=0)]) if kp > k else a)
+
+    A, B = _jacobians_at(
+        static,
+        params,
+        ephem,
+        epoch_et_s,
+        pad(t_nodes, np.float64),
+        pad(x_nodes, np.float64),
+        pad(primary_nodes, np.int32),
+        tuple(labels),
+    )
+    return A[:k], B[:k]
 
 
 @partial(jax.jit, static_argnums=(0,))

@@ -16,6 +16,7 @@ batches (:mod:`fracas.modes.tsim.run`).  Every call to ``distributed`` is in thi
 
 from __future__ import annotations
 
+import contextlib
 import os
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -97,6 +98,27 @@ def _ignore_interrupts() -> None:
         pass
 
 
+@contextlib.contextmanager
+def _spawning_ignores_interrupts() -> Iterator[None]:
+    """SIGINT ignored while the LocalCluster spawns its worker processes: an ignored signal
+    stays ignored across exec (POSIX) and Python then installs no KeyboardInterrupt handler,
+    so a Ctrl-C that reaches the terminal's process group while a worker is still importing
+    Dask (before :func:`_ignore_interrupts` runs in it) prints no traceback there.  The
+    command's own handler is restored at once after; a Ctrl-C in that start-up window (a few
+    seconds) is dropped, and the next one interrupts the run as usual."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def worker_plugin() -> Any:
     """The Dask worker plugin every fracas cluster registers (:class:`_WorkerSetup`)."""
     from distributed import WorkerPlugin
@@ -123,14 +145,15 @@ def start_cluster(
     if scheduler is None:
         n = workers if workers is not None else (os.cpu_count() or 1)
         extra = {"env": env} if env else {}
-        cluster = LocalCluster(
-            n_workers=max(1, min(n, n_tasks)),
-            threads_per_worker=1,
-            processes=True,
-            host="127.0.0.1",
-            dashboard_address=None,
-            **extra,
-        )
+        with _spawning_ignores_interrupts():
+            cluster = LocalCluster(
+                n_workers=max(1, min(n, n_tasks)),
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                dashboard_address=None,
+                **extra,
+            )
     try:
         client = Client(cluster if cluster is not None else scheduler, **({"timeout": timeout} if timeout else {}))
     except Exception:
